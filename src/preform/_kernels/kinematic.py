@@ -1,0 +1,247 @@
+"""Numba kernels of the kinematic fell-point walk (DESIGN.md §3.2). Arrays and scalars only.
+
+Mesh arrays (mandrel frame, m):
+  V  (nv, 3) float64 vertices;  T (nf, 3) int64 faces (outward winding);
+  FN (nf, 3) float64 unit face normals;  CN (nf, 3, 3) float64 smooth unit normals at the corners;
+  NB (nf, 3) int64 face across edge k (corners k, k+1), -1 on a boundary.
+
+A point on the surface is a face index plus its 3D position on that face. The smooth normal
+``n(x)`` is the barycentric interpolation of the corner normals, normalised, so braid angles do not
+inherit the facets. The tangency gap of a free yarn from ``x`` to its supply point ``G`` is
+``g = (G - x) . n(x)``: ``g < 0`` means the straight yarn would cut into the mandrel, so the fell
+point wraps on along the surface until ``g = 0``.
+
+Status codes of the walk (``WALK_*``): the slow NumPy twin lives in ``tests/naive_kinematic.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+WALK_TANGENT = 0     # walked until the free yarn became tangent (g = 0)
+WALK_CONCAVE = 1     # g started to fall: a concave stretch the yarn cannot follow (bridge)
+WALK_BUDGET = 2      # walked the allowed length without reaching tangency
+WALK_DEGENERATE = 3  # the supply point is along the normal: no walking direction
+WALK_BOUNDARY = 4    # walked off an open mesh edge
+WALK_LIFTOFF = -1    # g >= 0 at the start: the yarn stays put (unilateral contact)
+
+_MAX_SUBSTEPS = 100000
+
+
+@njit(cache=True)
+def barycentric(V, T, f, x, y, z):
+    """Barycentric coordinates of the point (x, y, z) in the plane of face f."""
+    i0 = T[f, 0]
+    i1 = T[f, 1]
+    i2 = T[f, 2]
+    ax = V[i1, 0] - V[i0, 0]
+    ay = V[i1, 1] - V[i0, 1]
+    az = V[i1, 2] - V[i0, 2]
+    bx = V[i2, 0] - V[i0, 0]
+    by = V[i2, 1] - V[i0, 1]
+    bz = V[i2, 2] - V[i0, 2]
+    cx = x - V[i0, 0]
+    cy = y - V[i0, 1]
+    cz = z - V[i0, 2]
+    d00 = ax * ax + ay * ay + az * az
+    d01 = ax * bx + ay * by + az * bz
+    d11 = bx * bx + by * by + bz * bz
+    d20 = cx * ax + cy * ay + cz * az
+    d21 = cx * bx + cy * by + cz * bz
+    den = d00 * d11 - d01 * d01
+    b1 = (d11 * d20 - d01 * d21) / den
+    b2 = (d00 * d21 - d01 * d20) / den
+    return 1.0 - b1 - b2, b1, b2
+
+
+@njit(cache=True)
+def smooth_normal(V, T, CN, f, x, y, z):
+    """Unit smooth normal at (x, y, z) on face f: normalised barycentric blend of corner normals."""
+    b0, b1, b2 = barycentric(V, T, f, x, y, z)
+    nx = b0 * CN[f, 0, 0] + b1 * CN[f, 1, 0] + b2 * CN[f, 2, 0]
+    ny = b0 * CN[f, 0, 1] + b1 * CN[f, 1, 1] + b2 * CN[f, 2, 1]
+    nz = b0 * CN[f, 0, 2] + b1 * CN[f, 1, 2] + b2 * CN[f, 2, 2]
+    s = np.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx / s, ny / s, nz / s
+
+
+@njit(cache=True)
+def tangency_gap(V, T, CN, f, x, y, z, gx, gy, gz):
+    """g = (G - x) . n(x), m."""
+    nx, ny, nz = smooth_normal(V, T, CN, f, x, y, z)
+    return (gx - x) * nx + (gy - y) * ny + (gz - z) * nz
+
+
+@njit(cache=True)
+def walk_direction(FN, f, x, y, z, gx, gy, gz):
+    """Unit projection of (G - x) onto the plane of face f; zeros if degenerate."""
+    dx = gx - x
+    dy = gy - y
+    dz = gz - z
+    nx = FN[f, 0]
+    ny = FN[f, 1]
+    nz = FN[f, 2]
+    dn = dx * nx + dy * ny + dz * nz
+    dx -= dn * nx
+    dy -= dn * ny
+    dz -= dn * nz
+    s = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if s < 1e-300:
+        return 0.0, 0.0, 0.0
+    return dx / s, dy / s, dz / s
+
+
+@njit(cache=True)
+def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
+    """Distance along the in-plane unit direction d from x to the boundary of face f.
+
+    Returns (distance, k) with k the edge index (corners k, k+1) crossed; (inf, -1) if none.
+    Uses the gradients of the barycentric functions: grad b_i = n x e_i / (2A).
+    """
+    b0, b1, b2 = barycentric(V, T, f, x, y, z)
+    best = np.inf
+    edge = -1
+    nx = FN[f, 0]
+    ny = FN[f, 1]
+    nz = FN[f, 2]
+    for i in range(3):
+        j = T[f, (i + 1) % 3]
+        k = T[f, (i + 2) % 3]
+        # edge opposite corner i, oriented from corner i+1 to corner i+2
+        ex = V[k, 0] - V[j, 0]
+        ey = V[k, 1] - V[j, 1]
+        ez = V[k, 2] - V[j, 2]
+        # n x e
+        cx = ny * ez - nz * ey
+        cy = nz * ex - nx * ez
+        cz = nx * ey - ny * ex
+        # 2A from the full cross product of the face
+        p0 = T[f, 0]
+        p1 = T[f, 1]
+        p2 = T[f, 2]
+        ux = V[p1, 0] - V[p0, 0]
+        uy = V[p1, 1] - V[p0, 1]
+        uz = V[p1, 2] - V[p0, 2]
+        wx = V[p2, 0] - V[p0, 0]
+        wy = V[p2, 1] - V[p0, 1]
+        wz = V[p2, 2] - V[p0, 2]
+        qx = uy * wz - uz * wy
+        qy = uz * wx - ux * wz
+        qz = ux * wy - uy * wx
+        two_area = np.sqrt(qx * qx + qy * qy + qz * qz)
+        rate = (cx * dx + cy * dy + cz * dz) / two_area
+        if rate < -1e-14:
+            if i == 0:
+                b = b0
+            elif i == 1:
+                b = b1
+            else:
+                b = b2
+            t = b / (-rate)
+            if t < 0.0:
+                t = 0.0
+            if t < best:
+                best = t
+                edge = (i + 1) % 3
+    return best, edge
+
+
+@njit(cache=True)
+def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez, h_max, max_len):
+    """Walk the fell point over the surface until the free yarn is tangent (DESIGN.md §3.2).
+
+    The walking direction is the surface projection of the free yarn towards ``G_mid`` (the supply
+    point at the middle of the time step: midpoint rule, second order in time); tangency is tested
+    against ``G_end`` (the supply point at the end of the step). Sub-steps of at most ``h_max`` use
+    the direction at their own midpoint; the last one is cut at the root of ``g`` by bisection.
+
+    Returns (x, y, z, face, status, walked_length).
+    """
+    g_prev = tangency_gap(V, T, CN, f, x, y, z, gex, gey, gez)
+    if g_prev >= 0.0:
+        return x, y, z, f, WALK_LIFTOFF, 0.0
+    walked = 0.0
+    for _ in range(_MAX_SUBSTEPS):
+        if walked >= max_len:
+            return x, y, z, f, WALK_BUDGET, walked
+        dx, dy, dz = walk_direction(FN, f, x, y, z, gmx, gmy, gmz)
+        if dx == 0.0 and dy == 0.0 and dz == 0.0:
+            return x, y, z, f, WALK_DEGENERATE, walked
+        t_exit, edge = exit_distance(V, T, FN, f, x, y, z, dx, dy, dz)
+        h = min(h_max, t_exit, max_len - walked)
+        # midpoint direction of this sub-step
+        mx, my, mz = walk_direction(FN, f, x + 0.5 * h * dx, y + 0.5 * h * dy, z + 0.5 * h * dz,
+                                    gmx, gmy, gmz)
+        if not (mx == 0.0 and my == 0.0 and mz == 0.0):
+            dx, dy, dz = mx, my, mz
+            t_exit, edge = exit_distance(V, T, FN, f, x, y, z, dx, dy, dz)
+            h = min(h_max, t_exit, max_len - walked)
+        x1 = x + h * dx
+        y1 = y + h * dy
+        z1 = z + h * dz
+        g1 = tangency_gap(V, T, CN, f, x1, y1, z1, gex, gey, gez)
+        if g1 >= 0.0:
+            # root of g on [0, h]: g(0) < 0 <= g(h)
+            lo = 0.0
+            hi = h
+            for _it in range(60):
+                mid = 0.5 * (lo + hi)
+                gm = tangency_gap(V, T, CN, f, x + mid * dx, y + mid * dy, z + mid * dz, gex, gey, gez)
+                if gm >= 0.0:
+                    hi = mid
+                else:
+                    lo = mid
+                if hi - lo < 1e-13:
+                    break
+            return x + hi * dx, y + hi * dy, z + hi * dz, f, WALK_TANGENT, walked + hi
+        if g1 < g_prev - 1e-12 * (1.0 + abs(g_prev)) and h > 0.0:
+            return x1, y1, z1, f, WALK_CONCAVE, walked + h
+        walked += h
+        x, y, z = x1, y1, z1
+        g_prev = g1
+        if h >= t_exit and edge >= 0:
+            nf = NB[f, edge]
+            if nf < 0:
+                return x, y, z, f, WALK_BOUNDARY, walked
+            f = nf
+    return x, y, z, f, WALK_BUDGET, walked
+
+
+@njit(cache=True)
+def advance_fell_points(V, T, FN, CN, NB, F, face, G_mid, G_end, active, h_max, max_len,
+                        F_out, face_out, status_out, walked_out):
+    """One time step of every active yarn's fell point (mandrel frame).
+
+    F (ny, 3), face (ny,), G_mid / G_end (ny, 3) supply points at the middle / end of the step,
+    active (ny,) bool. Writes F_out, face_out, status_out (WALK_*), walked_out (m).
+    """
+    for k in range(F.shape[0]):
+        if not active[k]:
+            F_out[k, 0] = F[k, 0]
+            F_out[k, 1] = F[k, 1]
+            F_out[k, 2] = F[k, 2]
+            face_out[k] = face[k]
+            status_out[k] = WALK_LIFTOFF
+            walked_out[k] = 0.0
+            continue
+        x, y, z, f, status, walked = walk_to_tangency(
+            V, T, FN, CN, NB, F[k, 0], F[k, 1], F[k, 2], face[k],
+            G_mid[k, 0], G_mid[k, 1], G_mid[k, 2], G_end[k, 0], G_end[k, 1], G_end[k, 2],
+            h_max, max_len)
+        F_out[k, 0] = x
+        F_out[k, 1] = y
+        F_out[k, 2] = z
+        face_out[k] = f
+        status_out[k] = status
+        walked_out[k] = walked
+
+
+@njit(cache=True)
+def smooth_normals_batch(V, T, CN, faces, points, out):
+    """Smooth unit normals of points (m, 3) on faces (m,) into out (m, 3)."""
+    for i in range(points.shape[0]):
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
+        out[i, 0] = nx
+        out[i, 1] = ny
+        out[i, 2] = nz
