@@ -1,0 +1,77 @@
+"""Result files of a run (DESIGN.md §1): tables, VTK/PVD, plots, and the surface fields.
+
+:func:`write_results` writes everything into one folder; ``summary.json`` comes last, so its
+presence marks a complete set of results. Every file is written atomically (``io.atomic``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from .plots import plot_history, plot_yarns_3d
+from .tables import write_history, write_summary
+from .vtk_yarns import write_convergence, write_yarns_vtp
+
+SUMMARY = "summary.json"
+HISTORY = "history.csv"
+YARNS = "yarns.vtp"
+PLOTS = "plots"
+YARNS_PNG = "braided_mandrel.png"
+
+
+def _write_surface(fields, out_dir) -> list[Path]:
+    """``preform.io.surface.write_surface`` when that module exists (surface.vtu/.xdmf/.h5, PNGs)."""
+    try:
+        from .surface import write_surface
+    except ModuleNotFoundError as err:  # tolerated only while io/surface.py does not exist yet
+        if err.name != f"{__name__}.surface":
+            raise
+        return []
+
+    written = write_surface(fields, out_dir)
+    return [Path(p) for p in (written or [])]
+
+
+def _relative(path, out_dir) -> str:
+    path, out_dir = Path(path).resolve(), Path(out_dir).resolve()
+    return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
+
+
+def write_results(result, fields, out_dir) -> list[Path]:
+    """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
+
+    result : preform.result.Result
+    fields : preform.fields.SurfaceFields or None (no surface files then)
+    out_dir : str or Path, created if missing
+    returns : the paths written, summary.json last
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = out_dir / SUMMARY
+    summary.unlink(missing_ok=True)  # a summary from an earlier run would mark this one complete
+    written = [write_history(result, out_dir / HISTORY),
+               write_yarns_vtp(result.yarns, out_dir / YARNS),
+               *write_convergence(result.snapshots, out_dir)]
+    if fields is not None:
+        written += _write_surface(fields, out_dir)
+    if result.steps:
+        written += plot_history(result, out_dir / PLOTS)
+    written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
+    files = [_relative(p, out_dir) for p in [*written, summary]]
+    written.append(write_summary(result, summary, extra={"files": files}))
+    return written
+
+
+__all__ = [
+    "write_results",
+    "write_summary",
+    "write_history",
+    "write_yarns_vtp",
+    "write_convergence",
+    "plot_history",
+    "plot_yarns_3d",
+    "atomic_path",
+    "atomic_write_text",
+    "atomic_write_bytes",
+]
