@@ -1,0 +1,212 @@
+"""The ``preform`` command (DESIGN.md §1): thin argparse subcommands over the Python API.
+
+``main(argv=None) -> int`` so tests call it in-process (meshio style). Exit codes: 0 done,
+1 failed (simulation or writing), 2 bad input, 130 interrupted. A :class:`PreformError` prints
+``error: <message>`` on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import inspect
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import MandrelError, PreformError
+
+EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def _optional(module: str, name: str):
+    """``module.name`` if that module exists yet, else None (the package grows in parallel)."""
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as err:
+        if err.name is not None and module.startswith(err.name):
+            return None
+        raise
+    return getattr(mod, name, None)
+
+
+def _preflight(config, **known):
+    """Run ``preform.checks.preflight`` if it exists; passes the geometry it accepts by name.
+
+    Returns its warnings (list of str) if it returns any; problems are raised as PreformError.
+    """
+    preflight = _optional("preform.checks", "preflight")
+    if preflight is None:
+        return []
+    accepted = inspect.signature(preflight).parameters
+    kwargs = {k: v for k, v in known.items() if k in accepted and v is not None}
+    warnings = preflight(config, **kwargs)
+    return [str(w) for w in warnings] if isinstance(warnings, (list, tuple)) else []
+
+
+def _print_warnings(warnings):
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
+
+
+# ---------------------------------------------------------------- preform run
+
+def _out_dir(config, out):
+    if out is not None:
+        return Path(out).expanduser().resolve()
+    if config.output is not None:
+        return Path(config.output.dir)
+    source = Path(config.source) if config.source else Path("config.toml")
+    return source.parent / "results" / source.stem
+
+
+def _fmt(value, spec=".3f", unit=""):
+    return "n/a" if value is None else f"{value:{spec}}{unit}"
+
+
+def summary_lines(result, out_dir, n_files) -> list[str]:
+    """The three lines ``preform run`` prints at the end."""
+    from .io.tables import summary_dict
+
+    s = summary_dict(result)
+    angle = s["braid_angle_deg"]["steady"]
+    conv = s["convergence_length_m"]["final"]
+    status = s["status"] + (f" ({s['message']})" if s["message"] else "")
+    return [
+        f"results: {out_dir} ({n_files} files)",
+        f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall, "
+        f"braided length {_fmt(s['braided_length_m'])} m",
+        f"steady braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
+        f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])})",
+    ]
+
+
+def cmd_run(args) -> int:
+    from .config import load_config
+    from .io import write_results
+    from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
+
+    config = load_config(args.config)
+    _print_warnings(_preflight(config))
+    out_dir = _out_dir(config, args.out)
+    result = simulate(config, progress=not args.no_progress)
+    fields = None
+    map_to_surface = _optional("preform.fields", "map_to_surface")
+    if map_to_surface is not None and len(result.yarns.points):
+        fields = map_to_surface(result)
+    try:
+        written = write_results(result, fields, out_dir)
+    except OSError as err:
+        print(f"error: cannot write results to {out_dir}: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    for line in summary_lines(result, out_dir, len(written)):
+        print(line)
+    if result.status == "interrupted":
+        print(f"interrupted: partial results in {out_dir}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if result.status != "done":
+        print(f"error: simulation {result.status}: {result.message}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_DONE
+
+
+# ---------------------------------------------------------------- preform check
+
+def cmd_check(args) -> int:
+    from .config import load_config
+
+    config = load_config(args.config)
+    load_geometry = _optional("preform.simulate", "load_geometry")
+    mandrel = centerline = None
+    if load_geometry is not None:
+        mandrel, centerline = load_geometry(config)
+    _print_warnings(_preflight(config, mandrel=mandrel, centerline=centerline))
+    print(f"OK: {config.source or args.config}")
+    return EXIT_DONE
+
+
+# ---------------------------------------------------------------- preform mandrel info
+
+def _existing_file(path, what) -> Path:
+    path = Path(path).expanduser().resolve()
+    if not path.is_file():
+        raise MandrelError(f"{what} {path} not found")
+    return path
+
+
+def default_centerline_csv(stl: Path) -> Path:
+    """``<stem>_centerline_auto.csv`` next to the STL (never the shipped ``<stem>_centerline.csv``)."""
+    return stl.with_name(f"{stl.stem}_centerline_auto.csv")
+
+
+def cmd_mandrel_info(args) -> int:
+    stl = _existing_file(args.file, "mandrel STL")
+    auto = args.centerline == "auto"
+    centerline = "auto" if auto else _existing_file(args.centerline, "centerline CSV")
+    mandrel_info = _optional("preform.geometry.info", "mandrel_info")
+    if mandrel_info is None:
+        print("error: preform.geometry.info is not available in this build", file=sys.stderr)
+        return EXIT_FAILED
+    from .geometry import write_centerline_csv
+    from .geometry.info import format_mandrel_info
+
+    info = mandrel_info(stl, unit=args.unit, centerline=centerline)
+    print(format_mandrel_info(info))
+    csv = Path(args.csv).expanduser().resolve() if args.csv else (default_centerline_csv(stl) if auto else None)
+    if csv is not None:
+        write_centerline_csv(info.centerline, csv, unit=args.unit)
+        print(f"centerline written to {csv}")
+    return EXIT_DONE
+
+
+# ---------------------------------------------------------------- parser and main
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="preform", description="Biaxial overbraiding on CAD mandrels: simulate, map, export.")
+    parser.add_argument("--version", action="version", version=f"preform {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    run = sub.add_parser("run", help="simulate a TOML case and write its result files")
+    run.add_argument("config", metavar="CONFIG", help="case file (TOML)")
+    run.add_argument("--out", metavar="DIR", help="result folder (default: [output] dir of the config)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(func=cmd_run)
+
+    check = sub.add_parser("check", help="validate a case and its mandrel without simulating")
+    check.add_argument("config", metavar="CONFIG", help="case file (TOML)")
+    check.set_defaults(func=cmd_check)
+
+    mandrel = sub.add_parser("mandrel", help="mandrel tools")
+    msub = mandrel.add_subparsers(dest="mandrel_command", metavar="COMMAND", required=True)
+    info = msub.add_parser("info", help="watertightness, centerline, perimeter along the length")
+    info.add_argument("file", metavar="FILE.stl", help="mandrel STL")
+    info.add_argument("--unit", choices=("m", "mm"), default="m", help="the STL's length unit (default m)")
+    info.add_argument("--centerline", default="auto", metavar="auto|CSV",
+                      help="derive the centerline (auto, default) or read it from a CSV")
+    info.add_argument("--csv", metavar="OUT",
+                      help="write the centerline here (default with auto: <stem>_centerline_auto.csv "
+                           "next to the STL)")
+    info.set_defaults(func=cmd_mandrel_info)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``preform`` command; returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help, --version, usage errors (argparse exits 2)
+        return stop.code if isinstance(stop.code, int) else EXIT_BAD_INPUT
+    try:
+        return args.func(args)
+    except PreformError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
