@@ -10,8 +10,15 @@ The dataclasses below are the contract between the config and the rest of the pa
 
 from __future__ import annotations
 
+import difflib
+import json
+import math
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from .errors import ConfigError
+from .machine import PATTERN_M, carrier_count_problem
 
 
 @dataclass(frozen=True)
@@ -90,5 +97,403 @@ class Config:
     source: Path | None = None      # the TOML file this came from
 
 
-def load_config(path) -> Config:  # pragma: no cover - implemented in the config issue work
-    raise NotImplementedError
+# --------------------------------------------------------------------------------------------
+# Loading and validation
+# --------------------------------------------------------------------------------------------
+
+#: known keys per section, in the order of DESIGN.md §1
+KEYS = {
+    "mandrel": ("stl", "stl_unit", "centerline", "roll_reference"),
+    "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
+    "yarn": ("width", "thickness", "tension", "friction", "ring_friction"),
+    "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
+    "model": ("kind", "time_step", "start", "seed"),
+    "output": ("dir", "field_edge_length", "snapshots"),
+}
+GUIDE_RING_KEYS = ("radius", "offset")
+REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
+
+STL_UNITS = ("m", "mm")
+PATTERNS = tuple(PATTERN_M)  # "diamond", "regular", "hercules"
+MODEL_KINDS = ("kinematic", "interaction")
+STARTS = ("tip", "random")
+
+#: coefficients of friction must lie in [0, MAX_FRICTION)
+MAX_FRICTION = 2.0
+#: unit plausibility: above these the value was almost surely given in another unit
+MAX_TAKE_UP_SPEED = 1.0         # m/s
+MAX_ANGULAR_SPEED_DEG = 3600.0  # deg/s (10 revolutions per second)
+MAX_MACHINE_RADIUS = 10.0       # m (spool and guide ring)
+MAX_YARN_WIDTH = 0.1            # m
+MAX_YARN_THICKNESS = 0.01       # m
+
+_MISSING = object()
+
+
+def load_config(path) -> Config:
+    """Read and validate a TOML config (DESIGN.md §1); raises ConfigError naming the bad key.
+
+    Relative paths in the file (STL, centerline CSV, output dir) resolve against the file's folder
+    and are stored absolute. ``[output] dir`` defaults to ``results/<config stem>`` there.
+    """
+    path = Path(path).expanduser().resolve()
+    if not path.is_file():
+        raise ConfigError(f"config file {path} not found")
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{path}: cannot be read: {err}") from None
+    return config_from_dict(data, base_dir=path.parent, name=path.stem, source=path)
+
+
+def config_from_dict(data: dict, base_dir, name: str = "config", source=None) -> Config:
+    """Validate a parsed TOML document (nested dicts) into a :class:`Config`.
+
+    base_dir : folder that relative paths resolve against. name : stem of the default output dir.
+    """
+    base_dir = Path(base_dir).expanduser().resolve()
+    _check_layout(data)
+    machine = _machine(_Section("machine", data))
+    return Config(
+        mandrel=_mandrel(_Section("mandrel", data), base_dir),
+        machine=machine,
+        yarn=_yarn(_Section("yarn", data)),
+        process=_process(_Section("process", data)),
+        model=_model(_Section("model", data)),
+        output=_output(_Section("output", data), base_dir, name),
+        source=None if source is None else Path(source),
+    )
+
+
+# ----- messages ------------------------------------------------------------------------------
+
+
+def _fmt(value) -> str:
+    """A value written as in TOML, for messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_fmt(v)}" for k, v in value.items()) + " }"
+    return repr(value)
+
+
+def _suggest(word: str, candidates) -> str:
+    close = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
+
+
+def _home_of(key: str) -> str | None:
+    """The section a key belongs to, if any."""
+    return next((sec for sec, keys in KEYS.items() if key in keys), None)
+
+
+def _check_layout(data: dict) -> None:
+    """Unknown sections, top-level keys and unknown keys in every section, before any value."""
+    for sec, table in data.items():
+        if sec not in KEYS:
+            _unknown_top_level(sec, table)
+        if not isinstance(table, dict):
+            raise ConfigError(f"[{sec}] must be a table (a [{sec}] section), got {sec} = {_fmt(table)}")
+        for key in table:
+            if key not in KEYS[sec]:
+                _unknown_key(sec, key, table[key])
+    for sec in REQUIRED_SECTIONS:
+        if sec not in data:
+            raise ConfigError(f"section [{sec}] is missing: expected keys {', '.join(KEYS[sec])}")
+
+
+def _unknown_top_level(name, value) -> None:
+    sections = ", ".join(f"[{s}]" for s in KEYS)
+    if not isinstance(value, dict):
+        home = _home_of(name)
+        where = f"it belongs in [{home}]" if home else f"expected the sections {sections}"
+        raise ConfigError(f"{name} = {_fmt(value)} is outside any section: {where}")
+    hint = _suggest(name, KEYS)
+    raise ConfigError(f"unknown section [{name}]: {hint}expected one of {sections}")
+
+
+def _unknown_key(sec, key, value) -> None:
+    hint = _suggest(key, KEYS[sec])
+    home = _home_of(key)
+    if not hint and home:
+        hint = f"it belongs in [{home}]; "
+    raise ConfigError(f"[{sec}] {key} = {_fmt(value)}: unknown key; {hint}"
+                      f"expected one of {', '.join(KEYS[sec])}")
+
+
+# ----- typed readers -------------------------------------------------------------------------
+
+
+class _Section:
+    """One table of the document with its name, for reading keys with error messages."""
+
+    def __init__(self, name: str, data: dict, table: dict | None = None):
+        self.name = name
+        self.table = data.get(name, {}) if table is None else table
+
+    def where(self, key: str) -> str:
+        return f"[{self.name}] {key}"
+
+    def error(self, key: str, value, expected: str) -> ConfigError:
+        return ConfigError(f"{self.where(key)} = {_fmt(value)}: {expected}")
+
+    def raw(self, key: str, default=_MISSING, expected: str = "a value"):
+        if key in self.table:
+            return self.table[key]
+        if default is _MISSING:
+            raise ConfigError(f"{self.where(key)} is missing: expected {expected}")
+        return default
+
+    def number(self, key, unit, default=_MISSING, minimum=None, positive=False) -> float | None:
+        """A finite real; ``positive``: > 0; ``minimum``: >= minimum. ``unit`` for messages."""
+        what = f"a {'positive ' if positive else ''}number ({unit})"
+        if key not in self.table and default is not _MISSING:
+            return default
+        value = self.raw(key, expected=what)
+        return _real(self, key, value, what, minimum=minimum, positive=positive)
+
+    def integer(self, key, what, default=_MISSING, minimum=None) -> int:
+        value = self.raw(key, default, what)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, value, f"expected {what}, not {_type_name(value)}")
+        if minimum is not None and value < minimum:
+            raise self.error(key, value, f"expected {what}")
+        return value
+
+    def choice(self, key, options, default=_MISSING) -> str:
+        expected = "one of " + ", ".join(f'"{o}"' for o in options)
+        value = self.raw(key, default, expected)
+        if not isinstance(value, str):
+            raise self.error(key, value, f"expected {expected}, not {_type_name(value)}")
+        if value not in options:
+            raise self.error(key, value, f"{_suggest(value, options)}expected {expected}")
+        return value
+
+    def vector(self, key, size, unit, default=_MISSING) -> tuple[float, ...] | None:
+        what = f"a list of {size} numbers ({unit})"
+        if key not in self.table and default is not _MISSING:
+            return default
+        value = self.raw(key, expected=what)
+        if not isinstance(value, list) or len(value) != size:
+            raise self.error(key, value, f"expected {what}")
+        return tuple(_real(self, key, v, what, shown=value) for v in value)
+
+    def path(self, key, base_dir: Path, what="a file path (relative to the config file)") -> Path:
+        """An existing file; relative to ``base_dir``; returned absolute."""
+        value = self.raw(key, expected=what)
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(key, value, f"expected {what}, not {_type_name(value)}")
+        resolved = _resolve(value, base_dir)
+        if not resolved.is_file():
+            state = "is a folder, not a file" if resolved.is_dir() else "file not found"
+            raise self.error(key, value, f"{state}: {resolved}")
+        return resolved
+
+
+def _type_name(value) -> str:
+    names = {bool: "a boolean", str: "a string", list: "a list", dict: "a table", int: "an integer",
+             float: "a float"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _real(sec: _Section, key, value, what, minimum=None, positive=False, shown=_MISSING) -> float:
+    """Check one number read from ``sec.key``; ``shown`` is the value to print (whole list)."""
+    shown = value if shown is _MISSING else shown
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise sec.error(key, shown, f"expected {what}, not {_type_name(value)}")
+    if not math.isfinite(value):
+        raise sec.error(key, shown, f"not finite: expected {what}")
+    if positive and value <= 0:
+        raise sec.error(key, shown, f"expected {what}: must be greater than zero")
+    if minimum is not None and value < minimum:
+        raise sec.error(key, shown, f"expected {what} >= {minimum:g}: must not be negative"
+                        if minimum == 0 else f"expected {what} >= {minimum:g}")
+    return float(value)
+
+
+def _resolve(value: str, base_dir: Path) -> Path:
+    p = Path(value).expanduser()
+    return (p if p.is_absolute() else base_dir / p).resolve()
+
+
+def _implausible(sec: _Section, key, value, limit, unit, hint) -> None:
+    """Unit plausibility: a value above ``limit`` was almost surely given in another unit."""
+    if value > limit:
+        raise sec.error(key, sec.table[key],
+                        f"expected {unit}; above {limit:g} {unit} is implausible ({hint})")
+
+
+# ----- sections ------------------------------------------------------------------------------
+
+
+def _mandrel(sec: _Section, base_dir: Path) -> MandrelConfig:
+    stl = sec.path("stl", base_dir)
+    unit = sec.choice("stl_unit", STL_UNITS, default="m")
+    centerline = sec.raw("centerline", "auto")
+    if centerline != "auto":
+        centerline = sec.path("centerline", base_dir, '"auto" or the path of a CSV of x,y,z points')
+    roll = sec.vector("roll_reference", 3, "a direction in the STL frame", default=None)
+    if roll is not None and not any(roll):
+        raise sec.error("roll_reference", list(roll), "expected a non-zero direction [x, y, z]")
+    return MandrelConfig(stl=stl, stl_unit=unit, centerline=centerline, roll_reference=roll)
+
+
+def _machine(sec: _Section) -> MachineConfig:
+    pattern = sec.choice("pattern", PATTERNS, default="regular")
+    carriers = sec.integer("carriers", "an even integer number of carriers (warp + weft)")
+    problem = carrier_count_problem(carriers, pattern)
+    if problem:
+        raise sec.error("carriers", carriers, problem)
+    spool = sec.number("spool_radius", "m", positive=True)
+    _implausible(sec, "spool_radius", spool, MAX_MACHINE_RADIUS, "m", "mm? divide by 1000")
+    speed_deg = sec.number("angular_speed", "deg/s", positive=True)
+    _implausible(sec, "angular_speed", speed_deg, MAX_ANGULAR_SPEED_DEG, "deg/s",
+                 "10 revolutions per second; the carrier speed about the machine axis is in deg/s, "
+                 "1 rpm = 6 deg/s")
+    ring = _guide_ring(sec, spool)
+    return MachineConfig(carriers=carriers, spool_radius=spool, angular_speed=math.radians(speed_deg),
+                         pattern=pattern, guide_ring=ring)
+
+
+def _guide_ring(machine: _Section, spool_radius: float) -> GuideRingConfig | None:
+    table = machine.raw("guide_ring", None)
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise machine.error("guide_ring", table, "expected a table { radius = ..., offset = ... } (m)")
+    sec = _Section("machine", {}, table={f"guide_ring.{k}": v for k, v in table.items()})
+    for key in table:
+        if key not in GUIDE_RING_KEYS:
+            hint = _suggest(key, GUIDE_RING_KEYS)
+            raise sec.error(f"guide_ring.{key}", table[key],
+                            f"unknown key; {hint}expected one of {', '.join(GUIDE_RING_KEYS)}")
+    radius = sec.number("guide_ring.radius", "m", positive=True)
+    offset = sec.number("guide_ring.offset", "m, axial distance from the spool plane", default=0.0,
+                        minimum=0.0)
+    if radius >= spool_radius:
+        raise sec.error("guide_ring.radius", radius,
+                        f"expected less than [machine] spool_radius = {_fmt(spool_radius)} (m)")
+    return GuideRingConfig(radius=radius, offset=offset)
+
+
+def _yarn(sec: _Section) -> YarnConfig:
+    width = sec.number("width", "m", positive=True)
+    _implausible(sec, "width", width, MAX_YARN_WIDTH, "m", "mm? divide by 1000")
+    thickness = sec.number("thickness", "m", positive=True)
+    _implausible(sec, "thickness", thickness, MAX_YARN_THICKNESS, "m", "mm? divide by 1000")
+    tension = sec.number("tension", "N", default=YarnConfig.tension, positive=True)
+    frictions = {key: _friction(sec, key) for key in ("friction", "ring_friction")}
+    return YarnConfig(width=width, thickness=thickness, tension=tension, **frictions)
+
+
+def _friction(sec: _Section, key: str) -> float:
+    expected = f"expected a coefficient of friction in [0, {MAX_FRICTION:g})"
+    mu = sec.number(key, "coefficient of friction", default=getattr(YarnConfig, key))
+    if mu < 0:
+        raise sec.error(key, sec.table[key], f"must not be negative; {expected}")
+    if mu >= MAX_FRICTION:
+        raise sec.error(key, sec.table[key], expected)
+    return mu
+
+
+def _process(sec: _Section) -> ProcessConfig:
+    return ProcessConfig(
+        take_up_speed=_take_up_speed(sec),
+        initial_position=sec.number("initial_position", "m, mandrel tip beyond the supply plane",
+                                    minimum=0.0),
+        braid_length=sec.number("braid_length", "m of centerline", positive=True),
+        eccentricity=sec.vector("eccentricity", 2, "m, machine x and y", default=(0.0, 0.0)),
+        pose_lead=sec.number("pose_lead", "m", default=0.0, minimum=0.0),
+    )
+
+
+def _take_up_speed(sec: _Section) -> tuple[tuple[float, float], ...]:
+    """A number (m/s), or a table [[braided_length_m, speed_m_s], ...] with increasing lengths."""
+    what = "a positive number (m/s) or a table [[braided_length_m, speed_m_s], ...]"
+    value = sec.raw("take_up_speed", expected=what)
+    if isinstance(value, list):
+        table = _speed_table(sec, value, what)
+    else:
+        table = ((0.0, _real(sec, "take_up_speed", value, what, positive=True)),)
+    for _, v in table:
+        _implausible(sec, "take_up_speed", v, MAX_TAKE_UP_SPEED, "m/s", "mm/s? divide by 1000")
+    return table
+
+
+def _speed_table(sec: _Section, rows: list, what: str) -> tuple[tuple[float, float], ...]:
+    if not rows:
+        raise sec.error("take_up_speed", rows, f"expected {what}, not an empty list")
+    table = []
+    for row in rows:
+        if not isinstance(row, list) or len(row) != 2:
+            raise sec.error("take_up_speed", rows, f"expected {what}; row {_fmt(row)} is not a pair")
+        length = _real(sec, "take_up_speed", row[0], what, minimum=0.0, shown=rows)
+        speed = _real(sec, "take_up_speed", row[1], what, positive=True, shown=rows)
+        table.append((length, speed))
+    lengths = [length for length, _ in table]
+    if any(b <= a for a, b in zip(lengths, lengths[1:])):
+        raise sec.error("take_up_speed", rows, f"expected {what} with strictly increasing lengths")
+    return tuple(table)
+
+
+def _model(sec: _Section) -> ModelConfig:
+    return ModelConfig(
+        kind=sec.choice("kind", MODEL_KINDS, default=ModelConfig.kind),
+        time_step=sec.number("time_step", "s", default=None, positive=True),
+        start=sec.choice("start", STARTS, default=ModelConfig.start),
+        seed=sec.integer("seed", "a non-negative integer", default=ModelConfig.seed, minimum=0),
+    )
+
+
+def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
+    value = sec.raw("dir", f"results/{name}")
+    if not isinstance(value, str) or not value.strip():
+        raise sec.error("dir", value, "expected a folder path string (relative to the config file)")
+    return OutputConfig(
+        dir=_resolve(value, base_dir),
+        field_edge_length=sec.number("field_edge_length", "m", default=None, positive=True),
+        snapshots=sec.integer("snapshots", "a non-negative integer", default=OutputConfig.snapshots,
+                              minimum=0),
+    )
+
+
+# ----- echo ----------------------------------------------------------------------------------
+
+
+def dump_config(config: Config) -> dict:
+    """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
+
+    Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a
+    number when constant, else the table. Absent optional values are None.
+    """
+    mc, ma, y, p, mo, out = (config.mandrel, config.machine, config.yarn, config.process,
+                             config.model, config.output)
+    ring = ma.guide_ring
+    speeds = [list(row) for row in p.take_up_speed]
+    return {
+        "source": _str_or_none(config.source),
+        "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
+                    "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference)},
+        "machine": {"carriers": ma.carriers, "spool_radius": ma.spool_radius,
+                    "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
+                    "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset}},
+        "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
+                 "friction": y.friction, "ring_friction": y.ring_friction},
+        "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
+                    "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
+                    "braid_length": p.braid_length, "pose_lead": p.pose_lead},
+        "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
+        "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
+                                            "snapshots": out.snapshots},
+    }
+
+
+def _str_or_none(value) -> str | None:
+    return None if value is None else str(value)
