@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -169,3 +170,62 @@ def test_example_mandrel_files_exist_or_are_being_built():
         for line in (EXAMPLES / f"{name}.toml").read_text().splitlines():
             if "../mandrels/" in line:
                 assert (EXAMPLES / line.split('"')[1]).resolve().is_file(), line
+
+
+# ---------------------------------------------------------------- preform run, simulation stubbed
+
+@pytest.fixture
+def stubbed_run(small_result, tmp_path, monkeypatch):
+    """A valid case file, with preform.simulate / checks / fields replaced by stubs that return
+    the synthetic Result: tests the command's plumbing, not the physics."""
+    import dataclasses
+    import types
+
+    (tmp_path / "mandrel.stl").write_text("solid placeholder\nendsolid placeholder\n")
+    config = tmp_path / "case.toml"
+    config.write_text(CASE.format(machine_extra=""))
+    state = {"status": "done", "preflight": []}
+
+    def simulate(cfg, progress=True):
+        state["progress"] = progress
+        return dataclasses.replace(small_result, config=cfg, status=state["status"],
+                                   message="" if state["status"] == "done" else "stopped")
+
+    def preflight(cfg, mandrel, centerline):
+        state["preflight"].append((mandrel, centerline))
+        return ["guide ring is tight"]
+
+    monkeypatch.setitem(sys.modules, "preform.simulate", types.SimpleNamespace(
+        simulate=simulate, load_geometry=lambda cfg: ("mandrel", "centerline")))
+    monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
+    monkeypatch.setitem(sys.modules, "preform.fields", types.SimpleNamespace(map_to_surface=lambda r: None))
+    return config, state
+
+
+def test_run_writes_results_and_prints_summary(stubbed_run, tmp_path, capsys):
+    config, state = stubbed_run
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    lines = captured.out.strip().splitlines()
+    assert len(lines) == 3 and lines[0].startswith(f"results: {out}")
+    assert "warning: guide ring is tight" in captured.err
+    assert state["preflight"] == [("mandrel", "centerline")] and state["progress"] is False
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["inputs"]["machine"]["carriers"] == 16
+    assert (out / "history.csv").is_file() and (out / "convergence.pvd").is_file()
+
+
+def test_run_default_out_dir_is_next_to_config(stubbed_run, tmp_path):
+    config, _ = stubbed_run
+    assert main(["run", str(config), "--no-progress"]) == 0
+    assert (tmp_path / "results" / "case" / "summary.json").is_file()
+
+
+@pytest.mark.parametrize("status, code", [("interrupted", 130), ("failed", 1)])
+def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status, code):
+    config, state = stubbed_run
+    state["status"] = status
+    assert main(["run", str(config), "--out", str(tmp_path / "out"), "--no-progress"]) == code
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == status
+    assert status in capsys.readouterr().err

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import inspect
 import sys
 from pathlib import Path
 
@@ -30,18 +29,17 @@ def _optional(module: str, name: str):
     return getattr(mod, name, None)
 
 
-def _preflight(config, **known):
-    """Run ``preform.checks.preflight`` if it exists; passes the geometry it accepts by name.
+def _checked_geometry(config):
+    """Load the mandrel and centerline of ``config`` and run the pre-flight checks
+    (``preform.checks.preflight``, when present): impossible set-ups raise PreformError, doubtful
+    ones are printed as warnings. Returns (Mandrel, Centerline)."""
+    from .simulate import load_geometry
 
-    Returns its warnings (list of str) if it returns any; problems are raised as PreformError.
-    """
+    mandrel, centerline = load_geometry(config)
     preflight = _optional("preform.checks", "preflight")
-    if preflight is None:
-        return []
-    accepted = inspect.signature(preflight).parameters
-    kwargs = {k: v for k, v in known.items() if k in accepted and v is not None}
-    warnings = preflight(config, **kwargs)
-    return [str(w) for w in warnings] if isinstance(warnings, (list, tuple)) else []
+    if preflight is not None:
+        _print_warnings(preflight(config, mandrel, centerline))
+    return mandrel, centerline
 
 
 def _print_warnings(warnings):
@@ -87,7 +85,7 @@ def cmd_run(args) -> int:
     from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
 
     config = load_config(args.config)
-    _print_warnings(_preflight(config))
+    _checked_geometry(config)  # simulate() loads the geometry again: checks fail fast, before it
     out_dir = _out_dir(config, args.out)
     result = simulate(config, progress=not args.no_progress)
     fields = None
@@ -116,11 +114,7 @@ def cmd_check(args) -> int:
     from .config import load_config
 
     config = load_config(args.config)
-    load_geometry = _optional("preform.simulate", "load_geometry")
-    mandrel = centerline = None
-    if load_geometry is not None:
-        mandrel, centerline = load_geometry(config)
-    _print_warnings(_preflight(config, mandrel=mandrel, centerline=centerline))
+    _checked_geometry(config)
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 
