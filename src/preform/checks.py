@@ -1,0 +1,162 @@
+"""Pre-flight checks of a whole set-up, once the mandrel and centerline are loaded (DESIGN.md §1).
+
+:func:`load_config` checks every value on its own; :func:`preflight` checks them against the
+geometry: impossible set-ups raise (before any simulation starts), doubtful ones come back as
+warnings for the user to read.
+
+Only these attributes of the geometry objects are used, so any object providing them works:
+``mandrel.vertices`` ((nv, 3) float64, m, mandrel frame), ``mandrel.diagonal`` (float, m, bounding
+box), ``centerline.length`` (float, m) and ``centerline.project(points) -> (s, distance)`` ((nv,)
+arc length from the tip and distance from the centerline, m).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import analytic
+from .errors import ConfigError, MandrelError
+from .tolerances import tol
+
+#: a mandrel that does not fit the spool circle and whose bounding-box diagonal exceeds this many
+#: spool radii was read in the wrong unit (a long slender mandrel that fits is fine)
+MAX_DIAGONAL_SPOOL_RADII = 20.0
+#: ... or one smaller than this many yarn widths
+MIN_DIAGONAL_YARN_WIDTHS = 2.0
+#: warn when the gap between mandrel and supply radius is below this fraction of the supply radius
+MIN_RADIAL_CLEARANCE = 0.05
+#: warn outside this range of Ko's braid angle estimate (deg)
+BRAID_ANGLE_RANGE_DEG = (10.0, 80.0)
+#: warn above this yarn-yarn friction coefficient (measured values: 0.15-0.4, paper §1)
+HIGH_FRICTION = 1.0
+#: warn when a fixed time step turns the carriers by more than this many times the automatic bound
+TIME_STEP_FACTOR = 10.0
+#: sections (bins along the centerline) used for the braid-angle and jamming estimates
+ESTIMATE_SECTIONS = 50
+
+
+def preflight(config, mandrel, centerline) -> list[str]:
+    """Check a config against its geometry; raise for impossible set-ups, return warnings.
+
+    Raises ConfigError (or MandrelError where no config key can fix it) when the mandrel's unit is
+    implausible for the machine (much larger than the machine and not fitting it, or smaller than
+    two yarn widths), when the part of the mandrel that passes the machine
+    (``s <= initial_position + braid_length``) plus the eccentricity does not fit inside the guide
+    ring and the spool circle, or when ``initial_position + braid_length`` exceeds the centerline.
+    """
+    vertices = np.asarray(mandrel.vertices, dtype=float)
+    if vertices.ndim != 2 or len(vertices) == 0:
+        raise MandrelError(f"{config.mandrel.stl}: the mandrel has no vertices")
+    s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
+    _check_unit(config, float(mandrel.diagonal), float(distance.max()))
+    _check_length(config, float(centerline.length))
+    passing = s <= config.process.initial_position + config.process.braid_length
+    reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
+    warnings = _check_fit(config, reach)
+    warnings += _braid_angle_warnings(config, s[passing], distance[passing])
+    warnings += _value_warnings(config)
+    return warnings
+
+
+def _check_unit(config, diagonal: float, section_radius: float) -> None:
+    """The mandrel's size against the machine: mm read as m (or m read as mm).
+
+    diagonal : bounding-box diagonal (m). section_radius : largest distance from the centerline (m).
+    """
+    unit = config.mandrel.stl_unit
+    spool = config.machine.spool_radius
+    where = f'[mandrel] stl_unit = "{unit}"'
+    if diagonal > MAX_DIAGONAL_SPOOL_RADII * spool and section_radius >= spool:
+        size = (f"the mandrel's bounding-box diagonal is {diagonal:.4g} m, more than "
+                f"{MAX_DIAGONAL_SPOOL_RADII:g} x [machine] spool_radius = {spool:g} m, and its "
+                f"cross-section ({section_radius:.4g} m from the centerline) does not fit the spool circle")
+        if unit == "m":
+            raise ConfigError(f'{where}: {size}; is the STL in millimetres? expected stl_unit = "mm"')
+        raise MandrelError(f"{config.mandrel.stl}: {size}; expected a mandrel that fits the machine")
+    width = config.yarn.width
+    if diagonal < MIN_DIAGONAL_YARN_WIDTHS * width:
+        size = (f"the mandrel's bounding-box diagonal is {diagonal:.4g} m, less than "
+                f"{MIN_DIAGONAL_YARN_WIDTHS:g} x [yarn] width = {width:g} m")
+        if unit == "mm":
+            raise ConfigError(f'{where}: {size}; is the STL in metres? expected stl_unit = "m"')
+        raise MandrelError(f"{config.mandrel.stl}: {size}; expected a mandrel larger than the yarns")
+
+
+def _check_length(config, length: float) -> None:
+    p = config.process
+    need = p.initial_position + p.braid_length
+    if need > length:
+        raise ConfigError(
+            f"[process] braid_length = {p.braid_length:g} plus [process] initial_position = "
+            f"{p.initial_position:g} is {need:.4g} m: expected at most the centerline length "
+            f"{length:.4g} m of the mandrel")
+
+
+def _check_fit(config, reach: float) -> list[str]:
+    """The passing mandrel (max distance from its centerline + |eccentricity|) inside ring and spool."""
+    ma = config.machine
+    what = (f"the mandrel reaches {reach:.4g} m from the machine axis (its largest distance from the "
+            "centerline plus |[process] eccentricity|)")
+    if reach >= ma.spool_radius:
+        raise ConfigError(f"[machine] spool_radius = {ma.spool_radius:g}: {what}; expected a spool "
+                          "radius larger than that")
+    ring = ma.guide_ring
+    if ring is not None and reach >= ring.radius:
+        raise ConfigError(f"[machine] guide_ring.radius = {ring.radius:g}: {what}; expected a guide "
+                          "ring radius larger than that")
+    supply = ma.spool_radius if ring is None else ring.radius
+    if supply - reach < MIN_RADIAL_CLEARANCE * supply:
+        key = "spool_radius" if ring is None else "guide_ring.radius"
+        return [f"[machine] {key} = {supply:g}: the mandrel reaches {reach:.4g} m from the axis, "
+                f"leaving less than {MIN_RADIAL_CLEARANCE:.0%} of the radius for the yarns"]
+    return []
+
+
+def _braid_angle_warnings(config, s, distance) -> list[str]:
+    """Ko's estimate per section (radius ~ largest distance from the centerline there)."""
+    if len(s) == 0:
+        return []
+    bins = np.linspace(s.min(), s.max(), ESTIMATE_SECTIONS + 1)
+    which = np.clip(np.searchsorted(bins, s, side="right") - 1, 0, ESTIMATE_SECTIONS - 1)
+    radius = np.zeros(ESTIMATE_SECTIONS)
+    np.maximum.at(radius, which, distance)
+    centre = 0.5 * (bins[1:] + bins[:-1])
+    keep = radius > 0
+    r, centre = radius[keep], centre[keep]
+    table = np.asarray(config.process.take_up_speed, dtype=float)
+    v = np.interp(centre, table[:, 0], table[:, 1])  # braided length ~ arc length from the tip
+    ma, y = config.machine, config.yarn
+    alpha = np.degrees(analytic.ko_braid_angle(ma.angular_speed, r, v))
+    jam = np.degrees(analytic.jamming_angle(ma.carriers, y.width, r))
+    lo, hi = BRAID_ANGLE_RANGE_DEG
+    warnings = []
+    if np.any(alpha > jam):
+        k = int(np.argmax(alpha - jam))
+        warnings.append(f"the yarns will likely jam: Ko's braid angle estimate {alpha[k]:.1f} deg exceeds "
+                        f"the jamming angle {jam[k]:.1f} deg at {centre[k]:.3g} m from the tip "
+                        "(check [machine] angular_speed, [process] take_up_speed, [yarn] width)")
+    if alpha.min() < lo or alpha.max() > hi:
+        warnings.append(f"Ko's braid angle estimate spans {alpha.min():.1f}-{alpha.max():.1f} deg, outside "
+                        f"the usual {lo:g}-{hi:g} deg (check [machine] angular_speed and "
+                        "[process] take_up_speed)")
+    return warnings
+
+
+def _value_warnings(config) -> list[str]:
+    y, ma, mo = config.yarn, config.machine, config.model
+    warnings = []
+    if y.thickness > y.width:
+        warnings.append(f"[yarn] thickness = {y.thickness:g} is larger than [yarn] width = {y.width:g}: "
+                        "swapped?")
+    for key in ("friction", "ring_friction"):
+        mu = getattr(y, key)
+        if mu > HIGH_FRICTION:
+            warnings.append(f"[yarn] {key} = {mu:g} is unusually high (measured yarn values: 0.15-0.4)")
+    if mo.time_step is not None:
+        turn = ma.angular_speed * mo.time_step
+        if turn > TIME_STEP_FACTOR * tol.max_carrier_rotation:
+            warnings.append(f"[model] time_step = {mo.time_step:g} turns the carriers by "
+                            f"{math.degrees(turn):.3g} deg per step: results may be coarse")
+    return warnings
