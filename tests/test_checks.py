@@ -26,7 +26,8 @@ def cylinder(radius=0.05, length=1.6, flange_at=None, flange_radius=None, n_thet
     T, Z = np.meshgrid(th, z)
     pts = np.stack([radius * np.cos(T).ravel(), radius * np.sin(T).ravel(), Z.ravel()], axis=1)
     if flange_at is not None:
-        ring = np.stack([flange_radius * np.cos(th), flange_radius * np.sin(th), np.full_like(th, flange_at)], 1)
+        ring = np.stack([flange_radius * np.cos(th), flange_radius * np.sin(th),
+                         np.full_like(th, flange_at)], axis=1)
         pts = np.vstack([pts, ring])
 
     def project(points):
