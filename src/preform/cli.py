@@ -58,8 +58,8 @@ def _out_dir(config, out):
     return source.parent / "results" / source.stem
 
 
-def _fmt(value, spec=".3f", unit=""):
-    return "n/a" if value is None else f"{value:{spec}}{unit}"
+def _fmt(value, spec=".3f"):
+    return "n/a" if value is None else f"{value:{spec}}"
 
 
 def summary_lines(result, out_dir, n_files) -> list[str]:
@@ -81,11 +81,12 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
 
 def cmd_run(args) -> int:
     from .config import load_config
+
+    config = load_config(args.config)  # bad input fails here, before the heavy imports
+    _checked_geometry(config)  # simulate() loads the geometry again: checks fail fast, before it
     from .io import write_results
     from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
 
-    config = load_config(args.config)
-    _checked_geometry(config)  # simulate() loads the geometry again: checks fail fast, before it
     out_dir = _out_dir(config, args.out)
     result = simulate(config, progress=not args.no_progress)
     fields = None
