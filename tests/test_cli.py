@@ -229,3 +229,54 @@ def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status
     assert main(["run", str(config), "--out", str(tmp_path / "out"), "--no-progress"]) == code
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == status
     assert status in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- preform mandrel info, geometry stubbed
+
+@pytest.fixture
+def stubbed_geometry(tmp_path, monkeypatch):
+    """preform.geometry.info / write_centerline_csv replaced by stubs recording their calls."""
+    import types
+
+    import preform.geometry
+
+    calls = {}
+
+    def mandrel_info(stl, unit, centerline):
+        calls["info"] = (stl, unit, centerline)
+        return types.SimpleNamespace(centerline="the centerline")
+
+    def write_centerline_csv(centerline, path, unit):
+        calls["csv"] = (centerline, path, unit)
+        Path(path).write_text("x,y,z\n")
+
+    monkeypatch.setitem(sys.modules, "preform.geometry.info", types.SimpleNamespace(
+        mandrel_info=mandrel_info, format_mandrel_info=lambda info: "watertight: yes"))
+    monkeypatch.setattr(preform.geometry, "write_centerline_csv", write_centerline_csv, raising=False)
+    stl = tmp_path / "case_b.stl"
+    stl.write_text("solid placeholder\nendsolid placeholder\n")
+    shipped = tmp_path / "case_b_centerline.csv"
+    shipped.write_text("shipped\n")
+    return stl, shipped, calls
+
+
+def test_mandrel_info_auto_writes_beside_not_over_shipped(stubbed_geometry, tmp_path, capsys):
+    stl, shipped, calls = stubbed_geometry
+    assert main(["mandrel", "info", str(stl), "--unit", "mm"]) == 0
+    out = capsys.readouterr().out
+    assert "watertight: yes" in out and "case_b_centerline_auto.csv" in out
+    assert calls["info"] == (stl, "mm", "auto")
+    assert calls["csv"] == ("the centerline", tmp_path / "case_b_centerline_auto.csv", "mm")
+    assert shipped.read_text() == "shipped\n"
+
+
+def test_mandrel_info_given_centerline_writes_no_csv(stubbed_geometry, capsys):
+    stl, shipped, calls = stubbed_geometry
+    assert main(["mandrel", "info", str(stl), "--centerline", str(shipped)]) == 0
+    assert calls["info"] == (stl, "m", shipped) and "csv" not in calls
+
+
+def test_mandrel_info_missing_centerline_csv(stubbed_geometry, tmp_path, capsys):
+    stl, _, _ = stubbed_geometry
+    assert main(["mandrel", "info", str(stl), "--centerline", str(tmp_path / "no.csv")]) == 2
+    assert "no.csv" in capsys.readouterr().err
