@@ -1,0 +1,399 @@
+"""Deposited yarns -> per-face fields on the mandrel surface (DESIGN.md §3.4).
+
+:func:`map_to_surface` clips every deposited yarn to the faces of a *field mesh* (the mandrel
+mesh refined so no edge is longer than a target length; the input mesh is never modified), sums
+per face and group (warp 0, weft 1) the yarn length ``L`` and the direction moment
+``sum l d d^T``, pools those sums over a small neighbourhood (see :func:`map_to_surface`), and turns
+them into fields: mean fibre direction, braid angle, coverage, cover factor, thickness.
+
+Refinement: :func:`refine_to_edge_length` splits every edge longer than the target at its midpoint
+and each face by the pattern of its split edges (1, 2 or 3), repeatedly. Unlike
+``trimesh.remesh.subdivide_to_size`` (a triangle soup with hanging nodes) the result is a
+conforming mesh, which the edge-to-edge walk of the clipping needs; the new vertices lie on the
+input facets, so the surface itself does not change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ._kernels import fields as _k
+from .errors import PreformError
+from .tolerances import tol
+
+#: default field-mesh edge length, in yarn widths (issue 3: "a few yarn widths")
+DEFAULT_EDGE_WIDTHS = 3.0
+#: default pooling radius, in field-mesh edge lengths (6 yarn widths with the default mesh): wide
+#: enough to hold a few yarns of a group at usual cover factors, so coverage stops flickering
+#: between "on a yarn" and "between yarns" from face to face
+POOL_EDGES = 2.0
+#: relative margin by which the yarn width must exceed the available width to flag a face jammed
+JAM_RTOL = 1e-6
+#: below this norm the surface projection of the centerline tangent is undefined (end caps)
+TANGENT_MIN = 1e-6
+#: walk guard: at most this many face hops per yarn segment
+MAX_HOPS = 100_000
+#: refinement guard: at most this many edge-splitting passes (each halves the longest edges)
+MAX_REFINE_PASSES = 60
+
+GROUPS = ("warp", "weft")
+
+
+@dataclass(frozen=True)
+class SurfaceFields:
+    """Per-face fields on the field mesh (mandrel frame, SI; DESIGN.md §1 ``surface.vtu``).
+
+    vertices : (nv, 3) float64, m, mandrel frame
+    faces : (nf, 3) int64, outward wound like the mandrel
+    source_faces : (nf,) int64, the input (STL) face each field face lies in
+    cell_data : dict name -> (nf,) or (nf, 3) array, see :func:`map_to_surface`
+    jammed : (nf,) bool, a group's yarn width exceeds its available width here
+    unmapped_length_m : float, m, deposited yarn length that could not be put on any face
+    edge_length_m : float, m, the field mesh's maximum edge length (inf: the input mesh as is)
+    pool_radius_m : float, m, radius of the neighbourhood each face borrows from
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    source_faces: np.ndarray
+    cell_data: dict = field(default_factory=dict)
+    jammed: np.ndarray | None = None
+    unmapped_length_m: float = 0.0
+    edge_length_m: float = float("inf")
+    pool_radius_m: float = 0.0
+
+
+# ---------------------------------------------------------------------------------------- mesh
+
+def refine_to_edge_length(vertices, faces, max_edge):
+    """A conforming refinement of a triangle mesh with no edge longer than ``max_edge``.
+
+    Longest-edge bisection (Rivara): each pass bisects the longest edge of every face that has an
+    edge above ``max_edge``, plus, for conformity, the longest edge of every face sharing a split
+    edge (repeated until closed). Sliver faces are cut across their length, so a long CAD sliver
+    becomes a strip of about ``length / max_edge`` pairs of faces, not a fan of needles.
+
+    vertices : (nv, 3) float64, m;  faces : (nf, 3) int64;  max_edge : float, m (> 0)
+    returns : (vertices (nv', 3) float64, faces (nf', 3) int64, source_faces (nf',) int64), the
+        first nv vertices unchanged, winding kept, each new face inside input face source_faces.
+    Raises PreformError if ``max_edge`` is not positive and finite.
+    """
+    if not (np.isfinite(max_edge) and max_edge > 0):
+        raise PreformError(f"[output] field_edge_length = {max_edge!r}: expected a positive length in m")
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    source = np.arange(len(F), dtype=np.int64)
+    for _ in range(MAX_REFINE_PASSES):
+        edges = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1, 3)
+        edge_len = np.linalg.norm(V[unique[:, 0]] - V[unique[:, 1]], axis=1)
+        face_len = edge_len[inverse]
+        longest = inverse[np.arange(len(F)), np.argmax(face_len, axis=1)]
+        marked = np.zeros(len(unique), bool)
+        marked[longest[face_len.max(axis=1) > max_edge]] = True
+        if not marked.any():
+            break
+        while True:  # closure: a face with a split edge also splits its longest edge
+            need = marked[inverse].any(axis=1) & ~marked[longest]
+            if not need.any():
+                break
+            marked[longest[need]] = True
+        mid_index = np.full(len(unique), -1, dtype=np.int64)
+        mid_index[marked] = len(V) + np.arange(marked.sum())
+        V = np.vstack([V, 0.5 * (V[unique[marked, 0]] + V[unique[marked, 1]])])
+        F, source = _bisect_faces(F, source, mid_index[inverse], np.argmax(face_len, axis=1))
+    return V, F, source
+
+
+def _bisect_faces(F, source, mids, longest_local):
+    """Split faces whose edges are marked (mids (nf, 3): midpoint of edge j or -1); the longest
+    edge (local index longest_local) of a split face is always marked and bisected first."""
+    marked = mids >= 0
+    untouched = ~marked.any(axis=1)
+    out_f, out_s = [F[untouched]], [source[untouched]]
+    for shift in range(3):  # rotate so the longest edge is (a, b), with midpoint m0
+        rot = [(shift + i) % 3 for i in range(3)]
+        sel = ~untouched & (longest_local == shift)
+        a, b, c = (F[sel, r] for r in rot)
+        m0, m1, m2 = (mids[sel, r] for r in rot)
+        k1, k2 = marked[sel, rot[1]], marked[sel, rot[2]]
+        src = source[sel]
+        pieces = (  # (condition, triangles): left half (a, m0, c), right half (m0, b, c)
+            (~k2, [a, m0, c]), (k2, [a, m0, m2]), (k2, [m2, m0, c]),
+            (~k1, [m0, b, c]), (k1, [m0, b, m1]), (k1, [m0, m1, c]),
+        )
+        for cond, tri in pieces:
+            out_f.append(np.column_stack(tri)[cond])
+            out_s.append(src[cond])
+    return np.vstack(out_f).astype(np.int64), np.concatenate(out_s).astype(np.int64)
+
+
+def _merge_exact_duplicates(vertices, faces):
+    """Weld vertices with identical coordinates (an STL triangle soup) so faces share edges."""
+    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    if len(unique) == len(vertices):
+        return vertices, faces
+    return unique, inverse.reshape(-1)[faces]
+
+
+def face_geometry(vertices, faces):
+    """Unit normals (nf, 3), areas (nf,) m^2 and centroids (nf, 3) m; zero normal if degenerate."""
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(cross, axis=1)
+    normals = np.divide(cross, norm[:, None], out=np.zeros_like(cross), where=norm[:, None] > 0)
+    return normals, 0.5 * norm, tri.mean(axis=1)
+
+
+def edge_planes(vertices, faces, normals):
+    """Edge planes and neighbours for the clipping walk (see ``preform._kernels.fields``).
+
+    returns : plane_normal (nf, 3, 3) float64, plane_offset (nf, 3) float64 m,
+        neighbour (nf, 3) int64 (face across edge j = corners j, j + 1, or -1)
+    """
+    nf = len(faces)
+    corner_a = faces.reshape(-1)
+    corner_b = faces[:, [1, 2, 0]].reshape(-1)
+    keys = np.sort(np.column_stack([corner_a, corner_b]), axis=1)
+    _, edge_id = np.unique(keys, axis=0, return_inverse=True)
+    edge_id = edge_id.reshape(-1)
+    order = np.argsort(edge_id, kind="stable")
+    # half-edges with the same edge id are consecutive in `order`; pair the first two of each run
+    same_next = edge_id[order[:-1]] == edge_id[order[1:]]
+    first_of_run = np.concatenate([[True], ~same_next])
+    pair = same_next & first_of_run[:-1]
+    h0, h1 = order[:-1][pair], order[1:][pair]
+    neighbour = np.full(3 * nf, -1, dtype=np.int64)
+    neighbour[h0], neighbour[h1] = h1 // 3, h0 // 3
+    face_of = np.arange(3 * nf) // 3
+    other = np.where(neighbour >= 0, neighbour, face_of)
+    mean_normal = normals[face_of] + normals[other]
+    length = np.linalg.norm(mean_normal, axis=1)
+    mean_normal = np.where(length[:, None] > 1e-12, mean_normal, normals[face_of])
+    # one plane per edge: build it from the canonical (sorted) direction so both sides agree
+    pa, pb = vertices[keys[:, 0]], vertices[keys[:, 1]]
+    m = np.cross(mean_normal, pb - pa)
+    m_norm = np.linalg.norm(m, axis=1)
+    m = np.divide(m, m_norm[:, None], out=np.zeros_like(m), where=m_norm[:, None] > 0)
+    if len(h0):  # the mean normal is symmetric, so h0's plane is h1's: copy to be bit-identical
+        m[h1] = m[h0]
+    opposite = vertices[faces[:, [2, 0, 1]].reshape(-1)]
+    inward = np.einsum("ij,ij->i", m, opposite - pa) >= 0
+    m = np.where(inward[:, None], m, -m)
+    offset = np.einsum("ij,ij->i", m, pa)
+    return m.reshape(nf, 3, 3), offset.reshape(nf, 3), neighbour.reshape(nf, 3)
+
+
+def field_mesh(result, edge_length=None):
+    """The mesh the fields live on: the mandrel refined to ``edge_length`` (see map_to_surface).
+
+    returns : vertices (nv, 3), faces (nf, 3), source_faces (nf,), edge length used (m; inf if none)
+    Vertices with identical coordinates (an STL triangle soup) are welded first.
+    """
+    V = np.asarray(result.mandrel.vertices, dtype=np.float64)
+    F = np.asarray(result.mandrel.faces, dtype=np.int64)
+    V, F = _merge_exact_duplicates(V, F)
+    h = default_edge_length(result) if edge_length is None else float(edge_length)
+    if np.isinf(h):
+        return V.copy(), F.copy(), np.arange(len(F), dtype=np.int64), h
+    V, F, source = refine_to_edge_length(V, F, h)
+    return V, F, source, h
+
+
+def default_edge_length(result) -> float:
+    """``[output] field_edge_length`` if set, else DEFAULT_EDGE_WIDTHS yarn widths, m."""
+    output = getattr(result.config, "output", None)
+    h = getattr(output, "field_edge_length", None) if output is not None else None
+    return float(h) if h is not None else DEFAULT_EDGE_WIDTHS * float(result.config.yarn.width)
+
+
+# ------------------------------------------------------------------------------------ clipping
+
+def clip_yarns(yarns, vertices, faces, normals, centroids):
+    """Per-face, per-group yarn length (nf, 2) m, direction moment (nf, 2, 3, 3) m, unmapped m.
+
+    Every segment of every deposited yarn (including bridges over concave stretches, which lie
+    over the faces below them) is clipped exactly to the edge-plane wedges of the faces.
+    """
+    points = np.ascontiguousarray(yarns.points, dtype=np.float64)
+    if len(points) == 0 or len(faces) == 0:
+        return np.zeros((len(faces), 2)), np.zeros((len(faces), 2, 3, 3)), 0.0
+    plane_normal, plane_offset, neighbour = edge_planes(vertices, faces, normals)
+    _, seed = cKDTree(centroids).query(points)
+    length, m6, unmapped = _k.clip_polylines(
+        points, np.asarray(yarns.offsets, dtype=np.int64), np.asarray(yarns.group, dtype=np.int64),
+        np.asarray(seed, dtype=np.int64), np.ascontiguousarray(centroids), plane_normal,
+        plane_offset, neighbour, len(faces), MAX_HOPS)
+    xx, yy, zz, xy, xz, yz = np.moveaxis(m6, -1, 0)
+    moment = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1),
+                       np.stack([xz, yz, zz], -1)], -2)
+    return length, moment, float(unmapped)
+
+
+# ------------------------------------------------------------------------------------- pooling
+
+def default_pool_radius(edge_length, width) -> float:
+    """POOL_EDGES field edge lengths (on the unrefined mesh: of the default edge length), m."""
+    h = edge_length if np.isfinite(edge_length) else DEFAULT_EDGE_WIDTHS * width
+    return POOL_EDGES * h
+
+
+def pool(centroids, normals, radius, values):
+    """Biweight-kernel sums of per-face values over neighbourhoods (see map_to_surface).
+
+    centroids, normals : (nf, 3) float64;  radius : float or (nf,) float64, m
+    values : (nf, c) float64;  returns (nf, c) float64
+    """
+    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(centroids),))
+    cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
+    return _k.pool_sums(np.ascontiguousarray(centroids), np.ascontiguousarray(normals),
+                        np.ascontiguousarray(radius), np.ascontiguousarray(values), cos_crease)
+
+
+# ------------------------------------------------------------------------------------- fields
+
+def surface_tangent(result, centroids, normals):
+    """Unit surface projection of the centerline tangent at each centroid (nf, 3); 0 on end caps."""
+    s, _ = result.centerline.project(centroids)
+    _, T, _, _ = result.centerline.frames_at(np.asarray(s, dtype=np.float64))
+    T = np.asarray(T, dtype=np.float64)
+    Ts = T - np.einsum("ij,ij->i", T, normals)[:, None] * normals
+    norm = np.linalg.norm(Ts, axis=1)
+    return np.divide(Ts, norm[:, None], out=np.zeros_like(Ts), where=norm[:, None] > TANGENT_MIN)
+
+
+def local_frames(normals, tangent):
+    """Per-face tangent-plane frame: e1 (nf, 3), e2 = n x e1 (nf, 3), unit.
+
+    e1 is the surface projection of the centerline tangent; where that is undefined (end caps) it
+    is the projection of the global axis least aligned with the normal, so the frame still varies
+    smoothly across a cap. Zero for degenerate (zero-area) faces.
+    """
+    e1 = tangent.copy()
+    missing = np.linalg.norm(e1, axis=1) == 0
+    if missing.any():
+        n = normals[missing]
+        axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+        t = axis - np.einsum("ij,ij->i", axis, n)[:, None] * n
+        norm = np.linalg.norm(t, axis=1)
+        e1[missing] = np.divide(t, norm[:, None], out=np.zeros_like(t), where=norm[:, None] > 0.5)
+    return e1, np.cross(normals, e1)
+
+
+def planar_moments(moment, e1, e2):
+    """3D direction moments (nf, 2, 3, 3) in each face's frame: (nf, 2, 3) = (aa, ab, bb), m."""
+    ma = np.einsum("fgij,fj->fgi", moment, e1)
+    mb = np.einsum("fgij,fj->fgi", moment, e2)
+    return np.stack([np.einsum("fgi,fi->fg", ma, e1), np.einsum("fgi,fi->fg", ma, e2),
+                     np.einsum("fgi,fi->fg", mb, e2)], axis=-1)
+
+
+def principal_direction_2d(aa, ab, bb):
+    """Unit principal axis (a, b) of the 2x2 moments [[aa, ab], [ab, bb]], with a >= 0."""
+    phi = 0.5 * np.arctan2(2.0 * ab, aa - bb)  # in [-90, 90] deg, so a = cos(phi) >= 0
+    return np.cos(phi), np.sin(phi)
+
+
+def map_to_surface(result, edge_length=None, pool_radius_m=None) -> SurfaceFields:
+    """Map the deposited yarns of ``result`` onto the mandrel surface (DESIGN.md §3.4).
+
+    result : preform.result.Result (uses yarns, mandrel, centerline, config.yarn, config.output)
+    edge_length : float, m, maximum edge of the field mesh; None: ``[output] field_edge_length``,
+        else DEFAULT_EDGE_WIDTHS yarn widths; ``float("inf")``: map onto the input mesh as it is
+    pool_radius_m : float, m, radius of the neighbourhood a face borrows from; None:
+        POOL_EDGES field edge lengths; 0: no pooling (raw per-face values)
+    returns : SurfaceFields on the field mesh
+
+    Per face and group (warp, weft), from the clipped yarn pieces (lengths ``l_i``, unit
+    directions ``d_i``), pooled over the neighbourhood (below) into a length ``L``, an area ``A``
+    and a moment ``M = sum l_i d_i d_i^T``:
+
+    - ``{group}_direction`` (nf, 3): length-weighted mean fibre direction, unit, in the face
+      plane, oriented towards increasing centerline arc length: the principal axis of ``M``
+      (sign-free, so yarns walked either way average correctly). ``M`` is kept in each face's
+      tangent frame (e1 = surface projection of the centerline tangent, e2 = n x e1) before
+      pooling, so pooling round a curved surface does not tilt the mean direction;
+    - ``braid_angle_{group}_deg``: angle between that direction and the surface projection of
+      the centerline tangent at the face centroid, 0..90 deg;
+    - ``coverage_{group}`` = min(1, L w_eff / A), ``w_eff = min(w, p)``: the yarn width limited
+      to the available width ``p = A / L``, the perpendicular spacing of neighbouring yarns of
+      the group (paper §2.4.2; on a cylinder ``p = 2 pi r cos(alpha) / n``). Where ``w > p`` the
+      face is ``jammed``;
+    - ``cover_factor`` = 1 - (1 - k_warp)(1 - k_weft); ``thickness_m`` = t_n (k_warp + k_weft);
+    - ``braid_angle_deg``: mean of the braid angles of the groups present;
+    - ``reached_warp``, ``reached_weft``, ``jammed``: 0/1 (uint8); ``source_face`` (int64): the
+      input STL face each field face lies in.
+
+    Sentinels (never NaN): where no yarn of a group reached (its pooled length is 0) the group's
+    coverage is 0, its direction (0, 0, 0), its braid angle 0 and ``reached_{group}`` 0 (threshold
+    on it in ParaView); a face reached by neither group has ``braid_angle_deg`` 0. Where the
+    surface normal is parallel to the centerline tangent (end caps) the braid angle is undefined
+    and reported as 0.
+
+    Pooling (how small faces borrow from their neighbours): below the yarn spacing coverage is
+    binary (a point lies on a yarn or between two), so per-face sums flicker on faces smaller than
+    a few spacings, and refining long CAD slivers makes thin faces. Each face therefore adds to
+    its own sums those of the faces whose centroids lie within ``pool_radius_m`` of its centroid,
+    weighted by the biweight kernel ``(1 - (d / rho)^2)^2`` of the centroid distance ``d``;
+    facets turned by more than the crease angle (``tolerances.crease_angle_deg``) are left out, so
+    the far side of a thin part or an end cap never leaks in. A uniform field stays exactly
+    uniform, and the area-weighted means change only by the smoothing near the edges of the
+    braided zone. Long slivers of the input need no special care once refined: the field mesh
+    caps every edge, so no face averages along a long stretch.
+    """
+    V, F, source, h = field_mesh(result, edge_length)
+    normals, areas, centroids = face_geometry(V, F)
+    length, moment, unmapped = clip_yarns(result.yarns, V, F, normals, centroids)
+    width = float(result.config.yarn.width)
+    thickness = float(result.config.yarn.thickness)
+    tangent = surface_tangent(result, centroids, normals)
+    e1, e2 = local_frames(normals, tangent)
+    rho = default_pool_radius(h, width) if pool_radius_m is None else float(pool_radius_m)
+    sums = np.column_stack([areas, length, planar_moments(moment, e1, e2).reshape(len(F), 6)])
+    if rho > 0:
+        sums = pool(centroids, normals, rho, sums)
+    A, L, M = sums[:, 0], sums[:, 1:3], sums[:, 3:].reshape(len(F), 2, 3)
+    data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width)
+    jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
+    k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
+    hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
+    n_present = hit_warp.astype(float) + hit_weft
+    data["braid_angle_deg"] = np.divide(
+        data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
+        n_present, out=np.zeros(len(F)), where=n_present > 0)
+    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft)
+    data["thickness_m"] = thickness * (k_warp + k_weft)
+    data["jammed"] = jammed.astype(np.uint8)
+    data["source_face"] = source.copy()
+    for name, values in data.items():
+        if not np.all(np.isfinite(values)):  # a bug, not a user error
+            raise AssertionError(f"non-finite values in surface field {name}")
+    return SurfaceFields(vertices=V, faces=F, source_faces=source, cell_data=data, jammed=jammed,
+                         unmapped_length_m=unmapped, edge_length_m=h, pool_radius_m=rho)
+
+
+def _group_fields(A, L, M, e1, e2, has_tangent, width):
+    """Direction, braid angle, coverage, reached and jammed of each group from pooled sums.
+
+    A : (nf,) m^2;  L : (nf, 2) m;  M : (nf, 2, 3) m, planar moments (aa, ab, bb) in (e1, e2);
+    e1, e2 : (nf, 3) face frames;  has_tangent : (nf,) bool, e1 is the centerline direction
+    """
+    data = {}
+    for g, name in enumerate(GROUPS):
+        hit = L[:, g] > 0
+        spacing = np.divide(A, L[:, g], out=np.full_like(A, np.inf), where=hit)
+        w_eff = np.minimum(width, spacing)  # paper §2.4.2: width limited to the available width
+        k = np.minimum(1.0, np.divide(L[:, g] * w_eff, A, out=np.zeros_like(A), where=A > 0))
+        a, b = principal_direction_2d(M[:, g, 0], M[:, g, 1], M[:, g, 2])
+        d = (a[:, None] * e1 + b[:, None] * e2) * hit[:, None]
+        angle = np.degrees(np.arctan2(np.abs(b), a))
+        data[f"braid_angle_{name}_deg"] = np.where(hit & has_tangent, angle, 0.0)
+        data[f"coverage_{name}"] = k
+        data[f"{name}_direction"] = d
+        data[f"reached_{name}"] = hit.astype(np.uint8)
+        data[f"_jammed_{name}"] = hit & (width > spacing * (1.0 + JAM_RTOL))
+    return data

@@ -1,0 +1,144 @@
+"""Surface fields to files: ``surface.vtu``, ``surface.xdmf`` + ``surface.h5``, and two pictures
+(DESIGN.md §1; issue 3).
+
+Writes are atomic: everything is first written into a temporary folder inside ``out_dir`` and
+then moved into place with :func:`os.replace`, the ``.h5`` before the ``.xdmf`` that references it
+(by its bare file name, so the pair stays valid wherever the folder goes). meshio's static XDMF
+writer puts the ``.h5`` beside the ``.xdmf`` (``Path.with_suffix``), never in the working directory.
+
+Pictures are off-screen pyvista renders (EGL, no display needed). If rendering fails (no OpenGL),
+no PNG is written and a :class:`RuntimeWarning` says why; the data files are still written.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+VTU = "surface.vtu"
+XDMF = "surface.xdmf"
+H5 = "surface.h5"
+PLOTS = "plots"
+#: picture size, pixels (width, height)
+WINDOW_SIZE = (1200, 800)
+#: (file name, cell array, scalar-bar title with units)
+PICTURES = (
+    ("surface_braid_angle.png", "braid_angle_deg", "braid angle (deg)"),
+    ("surface_cover_factor.png", "cover_factor", "cover factor (-)"),
+)
+BACKGROUND = "white"
+UNREACHED_COLOR = "lightgray"
+
+
+def surface_mesh(fields):
+    """The fields as a ``meshio.Mesh`` of triangles with every cell array (float64 or int)."""
+    import meshio
+
+    cell_data = {name: [np.ascontiguousarray(values)] for name, values in fields.cell_data.items()}
+    return meshio.Mesh(np.asarray(fields.vertices, dtype=np.float64),
+                       [("triangle", np.asarray(fields.faces, dtype=np.int64))], cell_data=cell_data)
+
+
+def write_surface(fields, out_dir) -> list[Path]:
+    """Write ``surface.vtu``, ``surface.xdmf`` + ``surface.h5`` and the pictures into ``out_dir``.
+
+    fields : preform.fields.SurfaceFields
+    out_dir : str or Path, created if missing
+    returns : the paths written (pictures only if rendering worked)
+    """
+    import meshio
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh = surface_mesh(fields)
+    tmp = Path(tempfile.mkdtemp(prefix=".surface-", dir=out_dir))
+    try:
+        meshio.write(tmp / VTU, mesh, file_format="vtu")
+        meshio.write(tmp / XDMF, mesh, file_format="xdmf")
+        written = []
+        for name in (VTU, H5, XDMF):  # the .h5 before the .xdmf that points to it
+            os.replace(tmp / name, out_dir / name)
+            written.append(out_dir / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return written + write_surface_pictures(fields, out_dir / PLOTS)
+
+
+def write_surface_pictures(fields, plots_dir) -> list[Path]:
+    """Off-screen renders of the braid angle and the cover factor on the mandrel.
+
+    Faces no yarn reached are drawn grey. Returns the PNG paths written; on a rendering failure
+    returns [] and warns.
+    """
+    plots_dir = Path(plots_dir)
+    plots_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    try:
+        for file_name, array, title in PICTURES:
+            path = plots_dir / file_name
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=plots_dir)
+            os.close(fd)
+            try:
+                _render(fields, array, title, tmp)
+                os.replace(tmp, path)
+            finally:
+                Path(tmp).unlink(missing_ok=True)
+            written.append(path)
+    except Exception as error:  # noqa: BLE001 - any VTK/GL failure: pictures are optional
+        warnings.warn(f"surface pictures not written to {plots_dir}: off-screen rendering failed "
+                      f"({type(error).__name__}: {error})", RuntimeWarning, stacklevel=2)
+    return written
+
+
+def _render(fields, array, title, path):
+    """One picture: reached faces coloured by ``array``, the rest grey, whole mandrel in view.
+
+    Grey: no yarn reached the face (or, for the braid angle, the angle is undefined there).
+    """
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    import pyvista as pv
+
+    faces = np.asarray(fields.faces, dtype=np.int64)
+    cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
+    surface = pv.PolyData(np.asarray(fields.vertices, dtype=np.float64), cells)
+    values = np.asarray(fields.cell_data[array], dtype=np.float64)
+    reached = (fields.cell_data["reached_warp"] > 0) | (fields.cell_data["reached_weft"] > 0)
+    if array == "braid_angle_deg":  # 0 there means "undefined" (end caps): grey, not a colour
+        reached &= values > 0
+    surface.cell_data[title] = values
+    plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE)
+    try:
+        plotter.set_background(BACKGROUND)
+        if (~reached).any():
+            plotter.add_mesh(surface.extract_cells(np.flatnonzero(~reached)), color=UNREACHED_COLOR)
+        if reached.any():
+            lo, hi = float(values[reached].min()), float(values[reached].max())
+            if hi - lo < 1e-9 * max(1.0, abs(hi)):
+                lo, hi = lo - 0.5 * max(1e-3, abs(lo) * 1e-2), hi + 0.5 * max(1e-3, abs(hi) * 1e-2)
+            plotter.add_mesh(surface.extract_cells(np.flatnonzero(reached)), scalars=title,
+                             cmap="viridis", clim=(lo, hi),
+                             scalar_bar_args=dict(title=title, color="black", vertical=True,
+                                                  position_x=0.85, position_y=0.1))
+        _frame(plotter, np.asarray(fields.vertices))
+        plotter.screenshot(str(path))
+    finally:
+        plotter.close()
+
+
+def _frame(plotter, vertices):
+    """Look at the mandrel across its longest extent, slightly from above, all of it in view."""
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    centre, extent = 0.5 * (lo + hi), hi - lo
+    long_axis = int(np.argmax(extent))
+    side = np.eye(3)[(long_axis + 1) % 3]
+    up = np.eye(3)[(long_axis + 2) % 3]
+    view = side + 0.35 * up + 0.25 * np.eye(3)[long_axis]
+    plotter.camera_position = [tuple(centre + view * 2.0 * float(np.linalg.norm(extent))),
+                               tuple(centre), tuple(up)]
+    plotter.reset_camera()
+    plotter.camera.zoom(1.1)
