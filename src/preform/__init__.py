@@ -7,12 +7,9 @@ __version__ = "0.1.0"
 from .config import load_config  # noqa: E402
 from .errors import ConfigError, MandrelError, PreformError, SimulationError  # noqa: E402
 
-
-def simulate(config, progress=True):
-    """Run the configured model; see :func:`preform.simulate.simulate`."""
-    from .simulate import simulate as _simulate
-
-    return _simulate(config, progress=progress)
+# Imported eagerly: a lazy wrapper named like the submodule would be replaced by the module object
+# the first time ``preform.simulate`` is imported.
+from .simulate import simulate  # noqa: E402
 
 
 def map_to_surface(result, **kwargs):
