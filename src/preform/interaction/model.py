@@ -1,0 +1,268 @@
+"""The yarn-interaction convergence zone (paper §2; DESIGN.md §3.3) behind ``[model] kind =
+"interaction"``: the same interface as :class:`preform.zone.KinematicZone`.
+
+Each step (``step``):
+
+1. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
+   both yarns, at the midpoint of the closest points of the two top segments (from the yarn's
+   highest crossing, or fell point, to its ring or spool point at the step's end); over/under from
+   the horn-gear pattern; it starts sticking with the Eulerian angles of that creation geometry;
+2. the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
+   points of the step's end;
+3. a crossing that is the lowest on one of its yarns and lies closer to the mandrel than
+   ``DEPOSIT_HEIGHT`` yarn thicknesses (signed distance: inside counts) is deposited: it becomes the
+   fell point of both its yarns (``ZoneStep.deposits``) and leaves the zone; crossings below it on
+   its other yarn go with it (lowest first), so chains stay consistent on ragged rows;
+4. every yarn's free yarn runs to its lowest crossing (its yarn centerline point there), or to its
+   supply point (ring point, else spool) when it has none: ``G_end``; ``G_mid`` is the mean of the
+   previous and the new one while the lowest crossing stays the same, else ``G_end``.
+
+Guide ring: the ring point is the ring point at the carrier's azimuth (no transverse slip in this
+version) and the tension below it follows Capstan from the spool tension, ``f = f_spool exp(mu_r
+eta)`` (see ``_kernels/frontal.top_tensions``).
+
+Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..result import Snapshot
+from ..zone import ZoneStep
+from . import frontal
+from .zone_state import ZoneState
+
+#: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
+DEPOSIT_HEIGHT = 1.0
+
+
+class MandrelDistance:
+    """Signed distance (m, positive outside) of points to a mandrel, mandrel frame."""
+
+    def __init__(self, mandrel):
+        faces = np.asarray(mandrel.faces)
+        v = np.asarray(mandrel.vertices, dtype=float)
+        self.centroids = v[faces].mean(axis=1)
+        self.normals = np.asarray(mandrel.face_normals, dtype=float)
+        self.tree = cKDTree(self.centroids)
+
+    def __call__(self, points):
+        points = np.atleast_2d(points)
+        _, f = self.tree.query(points)
+        return np.einsum("ij,ij->i", points - self.centroids[f], self.normals[f])
+
+
+class InteractionZone:
+    """Crossings with stick/slip friction between the fell points and the supply side."""
+
+    def __init__(self, config, machine, mandrel=None, distance=None):
+        self.config = config
+        self.machine = machine
+        self.distance = distance if distance is not None else (
+            MandrelDistance(mandrel) if mandrel is not None else None)
+        y = config.yarn
+        self.h = 0.5 * float(y.thickness)
+        self.mu = float(y.friction)
+        self.mu_r = float(getattr(y, "ring_friction", 0.0) or 0.0)
+        self.f_spool = float(y.tension)
+        self.state = ZoneState(machine.n_yarns)
+        self.f_top = np.full(machine.n_yarns, self.f_spool)
+        self.step_index = 0
+        self.G_prev = None
+        self.lowest_uid_prev = None
+        self.last_report = None
+        self.fell = None
+        self.t = 0.0
+
+    # -- interface --------------------------------------------------------------------------
+    def start(self, t, F_machine, pose):
+        """Tie points (machine frame) at time t; the zone starts without crossings."""
+        self.t = float(t)
+        self.fell = np.array(F_machine, dtype=float)
+        self.G_prev = self.machine.supply_points(t)
+        self.lowest_uid_prev = np.full(self.machine.n_yarns, -1, dtype=np.int64)
+
+    def boundary(self, t, F_machine) -> frontal.Boundary:
+        m = self.machine
+        return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
+                                top=m.supply_points(t), spool=m.spool_points(t),
+                                f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
+                                has_ring=bool(m.has_ring), h=self.h)
+
+    def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
+        t1 = t0 + dt
+        self.step_index += 1
+        bc = self.boundary(t1, F_machine)
+        self._create_crossings(t0, t1, bc)
+        where = f"at step {self.step_index} (t = {t1:.6g} s)"
+        self.last_report = frontal.solve_zone(self.state, bc, self.f_top, where=where)
+        st = self.state
+        st.theta_ref[: st.m] = st.theta[: st.m]
+        deposits = self._deposit(pose_end)
+        G_end = self.lowest_points(bc.top)
+        uid = np.where(st.lowest >= 0, st.uid[np.maximum(st.lowest, 0)], -1)
+        same = (uid >= 0) & (uid == self.lowest_uid_prev)
+        G_mid = np.where(same[:, None], 0.5 * (self.G_prev + G_end), G_end)
+        none = st.lowest < 0
+        G_mid[none] = self.machine.supply_points(t0 + 0.5 * dt)[none]
+        self.G_prev, self.lowest_uid_prev = G_end, uid
+        self.fell = bc.fell
+        self.t = t1
+        return ZoneStep(G_mid=G_mid, G_end=G_end, deposits=deposits, contacts=st.m,
+                        iterations=self.last_report.iterations,
+                        residual=self.last_report.residual)
+
+    def snapshot(self, t, F_machine) -> Snapshot:
+        """Polyline per yarn: fell point, its crossings upwards, ring point, spool point.
+
+        The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
+        are in balance with the exported fell points."""
+        st = _copy_state(self.state)
+        bc = self.boundary(t, F_machine)
+        f_top = self.f_top.copy()
+        frontal.solve_zone(st, bc, f_top, where=f"in the snapshot at t = {t:.6g} s")
+        return _snapshot(st, bc, f_top, t, self.machine)
+
+    # -- pieces -----------------------------------------------------------------------------
+    def lowest_points(self, top) -> np.ndarray:
+        """(2n, 3): each yarn's centerline point at its lowest crossing, or its top point."""
+        st = self.state
+        out = np.array(top, dtype=float)
+        n = self.machine.n_per_group
+        for k in np.nonzero(st.lowest >= 0)[0]:
+            out[k] = st.centerline_point(st.lowest[k], 0 if k < n else 1, self.h)
+        return out
+
+    def _top_point(self, k, fell):
+        st = self.state
+        c = st.highest[k]
+        if c < 0:
+            return fell[k]
+        return st.centerline_point(c, 0 if k < self.machine.n_per_group else 1, self.h)
+
+    def _create_crossings(self, t0, t1, bc):
+        passes = self.machine.pass_times(t0, t1)
+        n = self.machine.n_per_group
+        for tp, i, j, over in zip(passes.time, passes.warp, passes.weft, passes.warp_over):
+            kx, ko = int(i), int(n + j)
+            px, po = self._top_point(kx, bc.fell), self._top_point(ko, bc.fell)
+            gx, go = bc.top[kx], bc.top[ko]
+            C, N = creation_point(px, gx, po, go)
+            sg = 1.0 if over else -1.0
+            ax = px - sg * self.h * N
+            ao = po + sg * self.h * N
+            theta = plane_angles(ax, ao, C)
+            self.state.add(kx, ko, C, N, bool(over), theta, float(tp))
+
+    def _deposit(self, pose):
+        st = self.state
+        if self.distance is None or st.m == 0:
+            return []
+        cand = np.unique(st.lowest[st.lowest >= 0])
+        d = self.distance(pose.to_mandrel(st.pos[cand]))
+        hit = cand[d < DEPOSIT_HEIGHT * 2.0 * self.h]
+        if len(hit) == 0:
+            return []
+        dead = []
+        marked = np.zeros(st.m, dtype=bool)
+
+        def take(c):
+            # everything below c on both its yarns first (lowest first)
+            for side in range(2):
+                below = st.low[c, side]
+                if below >= 0 and not marked[below]:
+                    take(below)
+            if not marked[c]:
+                marked[c] = True
+                dead.append(c)
+
+        for c in hit:
+            take(int(c))
+        deposits = []
+        for c in dead:
+            for side in range(2):
+                deposits.append((int(st.yarn[c, side]), st.pos[c].copy()))
+        st.remove(np.array(dead, dtype=np.int64))
+        return deposits
+
+
+def creation_point(px, gx, po, go):
+    """Where a new crossing starts: midpoint of the closest points of the segments px->gx and
+    po->go (m, machine frame), and the outward unit normal of the two directions."""
+    d1 = gx - px
+    d2 = go - po
+    r = px - po
+    a, e, b = d1 @ d1, d2 @ d2, d1 @ d2
+    c, f = d1 @ r, d2 @ r
+    tiny = 1e-30
+    if a <= tiny and e <= tiny:
+        s = u = 0.0
+    elif a <= tiny:
+        s, u = 0.0, float(np.clip(f / e, 0.0, 1.0))
+    elif e <= tiny:
+        s, u = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+    else:
+        den = a * e - b * b
+        s = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > tiny else 1.0
+        u = (b * s + f) / e
+        if u < 0.0:
+            s, u = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+        elif u > 1.0:
+            s, u = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
+    C = 0.5 * (px + s * d1 + po + u * d2)
+    N = np.cross(d1, d2)
+    nn = np.linalg.norm(N)
+    N = N / nn if nn > 0 else np.array([C[0], C[1], 0.0]) / max(np.hypot(C[0], C[1]), 1e-300)
+    if N[0] * C[0] + N[1] * C[1] < 0:
+        N = -N
+    return C, N
+
+
+def plane_angles(ax, ao, C):
+    """Eulerian angles (theta_X, theta_O), rad, of point C over the base A_X -> A_O."""
+    e1 = ao - ax
+    e1 = e1 / np.linalg.norm(e1)
+    vx = C - ax
+    vo = C - ao
+    tx = np.arctan2(np.linalg.norm(np.cross(e1, vx)), vx @ e1)
+    to = np.arctan2(np.linalg.norm(np.cross(-e1, vo)), -(vo @ e1))
+    eps = 1e-6
+    return np.clip([tx, to], eps, np.pi - eps)
+
+
+def _copy_state(st):
+    new = ZoneState.__new__(ZoneState)
+    for key, value in vars(st).items():
+        setattr(new, key, value.copy() if isinstance(value, np.ndarray) else value)
+    return new
+
+
+def _snapshot(st, bc, f_top, t, machine) -> Snapshot:
+    n = machine.n_per_group
+    ny = machine.n_yarns
+    ring = machine.has_ring
+    points, offsets, tension, cid, slip = [], [0], [], [], []
+    for k in range(ny):
+        side = 0 if k < n else 1
+        chain = st.chain(k)
+        pts = [bc.fell[k]] + [st.centerline_point(c, side, bc.h) for c in chain] + [bc.top[k]]
+        ten = [st.tension[c, side] for c in chain] + [f_top[k]]
+        ids = [-1] + [int(st.uid[c]) for c in chain] + [-1]
+        sl = [0] + [int(st.slip[c, side] != 0) for c in chain] + [0]
+        if ring:
+            pts.append(bc.spool[k])
+            ten.append(bc.f_spool)
+            ids.append(-1)
+            sl.append(0)
+        points.extend(pts)
+        tension.extend(ten)
+        cid.extend(ids)
+        slip.extend(sl)
+        offsets.append(len(points))
+    return Snapshot(time_s=float(t), points=np.array(points, dtype=float).reshape(-1, 3),
+                    offsets=np.array(offsets, dtype=np.int64),
+                    tension_N=np.array(tension, dtype=float),
+                    contact_id=np.array(cid, dtype=np.int64),
+                    slip=np.array(slip, dtype=np.int8), group=machine.group.copy())

@@ -1,0 +1,177 @@
+"""State of the convergence zone of the interaction model (DESIGN.md §3.3): crossings and chains.
+
+A *crossing* is where warp yarn ``X`` (yarn index ``0 .. n-1``) and weft yarn ``O`` (yarn index
+``n .. 2n-1``) touch. Crossings are stored in flat arrays **in creation order** (oldest first), so
+that on every yarn the crossings further from the mandrel (newer) come later: iterating the arrays
+backwards is a topological order from the supply side to the fell points (the force sweep), forwards
+from the fell points to the supply side (the position sweep). Deposited crossings are removed by
+compaction, which keeps that order. Rows may be ragged: nothing here assumes that the crossings
+created at one carrier pass line up.
+
+Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by doubling):
+
+- ``yarn (cap, 2) int64``: warp yarn index, weft yarn index (side 0 warp, side 1 weft);
+- ``pos (cap, 3) float64, m, machine frame``: the contact interface point ``C``;
+- ``normal (cap, 3) float64``: unit contact normal ``N`` (outward, away from the machine axis);
+- ``over (cap,) float64``: +1 if the warp is the outer (over) yarn at this crossing, else -1. The
+  yarn centerline points are ``C + over * h * N`` (warp) and ``C - over * h * N`` (weft),
+  ``h = thickness / 2`` (paper eq. 16, with one normal per crossing);
+- ``theta (cap, 2)``: Eulerian angles (theta_X, theta_O), rad, of the current solve; ``theta_ref``:
+  those of the last converged step (the stick predictor);
+- ``slip (cap, 2) int8``: 0 stick, +1 slipping with the lower tension larger, -1 the other way;
+- ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
+  mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
+  point below / the supply side above;
+- ``tension (cap, 2) float64, N``: tension of the segment below the crossing on each yarn;
+- ``resultant (cap, 3) float64, N``: the external force ``F_X^ext + F_O^ext`` of the last sweep;
+- ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
+
+Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
+-1 when it has none.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: initial capacity (crossings); the arrays double when full
+INITIAL_CAPACITY = 256
+
+_FIELDS = {
+    # name: (trailing shape, dtype, fill)
+    "yarn": ((2,), np.int64, -1),
+    "pos": ((3,), np.float64, 0.0),
+    "normal": ((3,), np.float64, 0.0),
+    "over": ((), np.float64, 1.0),
+    "theta": ((2,), np.float64, 0.0),
+    "theta_ref": ((2,), np.float64, 0.0),
+    "slip": ((2,), np.int8, 0),
+    "low": ((2,), np.int64, -1),
+    "up": ((2,), np.int64, -1),
+    "tension": ((2,), np.float64, 0.0),
+    "resultant": ((3,), np.float64, 0.0),
+    "uid": ((), np.int64, -1),
+    "t_create": ((), np.float64, 0.0),
+}
+
+
+class ZoneState:
+    """Crossings of the convergence zone plus each yarn's lowest and highest crossing."""
+
+    def __init__(self, n_yarns: int, capacity: int = INITIAL_CAPACITY):
+        self.n_yarns = int(n_yarns)
+        self.m = 0
+        self.next_uid = 0
+        for name, (shape, dtype, fill) in _FIELDS.items():
+            setattr(self, name, np.full((capacity,) + shape, fill, dtype=dtype))
+        self.lowest = np.full(self.n_yarns, -1, dtype=np.int64)
+        self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
+
+    @property
+    def capacity(self) -> int:
+        return len(self.uid)
+
+    def _grow(self, need: int):
+        cap = self.capacity
+        while cap < need:
+            cap *= 2
+        if cap == self.capacity:
+            return
+        for name, (shape, dtype, fill) in _FIELDS.items():
+            old = getattr(self, name)
+            new = np.full((cap,) + shape, fill, dtype=dtype)
+            new[: self.m] = old[: self.m]
+            setattr(self, name, new)
+
+    def add(self, warp: int, weft: int, pos, normal, over: bool, theta, t: float) -> int:
+        """Append a crossing at the top of warp yarn ``warp`` and weft yarn ``weft``; its index."""
+        self._grow(self.m + 1)
+        c = self.m
+        self.m += 1
+        self.yarn[c] = (warp, weft)
+        self.pos[c] = pos
+        self.normal[c] = normal
+        self.over[c] = 1.0 if over else -1.0
+        self.theta[c] = theta
+        self.theta_ref[c] = theta
+        self.slip[c] = 0
+        self.tension[c] = 0.0
+        self.resultant[c] = 0.0
+        self.uid[c] = self.next_uid
+        self.next_uid += 1
+        self.t_create[c] = t
+        for side, k in enumerate((warp, weft)):
+            below = self.highest[k]
+            self.low[c, side] = below
+            self.up[c, side] = -1
+            if below >= 0:
+                self.up[below, self._side(below, k)] = c
+            else:
+                self.lowest[k] = c
+            self.highest[k] = c
+        return c
+
+    def _side(self, c: int, k: int) -> int:
+        return 0 if self.yarn[c, 0] == k else 1
+
+    def chain(self, k: int) -> np.ndarray:
+        """Array indices of yarn ``k``'s crossings, lowest (mandrel side) first."""
+        out = []
+        c = self.lowest[k]
+        while c >= 0:
+            out.append(c)
+            c = self.up[c, self._side(c, k)]
+        return np.array(out, dtype=np.int64)
+
+    def centerline_point(self, c: int, side: int, half_thickness: float) -> np.ndarray:
+        """Yarn centerline point of side ``side`` at crossing ``c`` (module docstring), (3,)."""
+        s = self.over[c] if side == 0 else -self.over[c]
+        return self.pos[c] + s * half_thickness * self.normal[c]
+
+    def remove(self, dead) -> None:
+        """Remove crossings (array indices ``dead``, each the lowest on both its yarns once the
+        others below it are removed) and compact, keeping creation order and relinking chains."""
+        dead = np.asarray(dead, dtype=np.int64)
+        if len(dead) == 0:
+            return
+        m = self.m
+        keep = np.ones(m, dtype=bool)
+        keep[dead] = False
+        new_index = np.full(m + 1, -1, dtype=np.int64)   # index m + ... maps -1 -> -1 below
+        new_index[:m][keep] = np.arange(int(keep.sum()))
+        for name in _FIELDS:
+            a = getattr(self, name)
+            a[: int(keep.sum())] = a[:m][keep]
+        self.m = int(keep.sum())
+        mm = self.m
+        for links in (self.low, self.up):
+            v = links[:mm]
+            # a removed neighbour below means the fell point now; above cannot be removed
+            links[:mm] = np.where(v >= 0, new_index[np.where(v >= 0, v, m)], -1)
+        for ends in (self.lowest, self.highest):
+            ends[:] = np.where(ends >= 0, new_index[np.where(ends >= 0, ends, m)], -1)
+        # a yarn whose lowest crossing was removed: its new lowest is the first kept one above
+        for k in range(self.n_yarns):
+            if self.lowest[k] == -1 and self.highest[k] >= 0:
+                c = self.highest[k]
+                while True:
+                    below = self.low[c, self._side(c, k)]
+                    if below < 0:
+                        break
+                    c = below
+                self.lowest[k] = c
+
+    def check(self) -> None:
+        """Consistency of chains and links (for tests): raises AssertionError."""
+        seen = np.zeros(self.m, dtype=np.int64)
+        for k in range(self.n_yarns):
+            ch = self.chain(k)
+            seen[ch] += 1
+            if len(ch) == 0:
+                assert self.highest[k] == -1
+                continue
+            assert self.highest[k] == ch[-1]
+            assert np.all(np.diff(ch) > 0), "chain not in creation order"
+            for a, b in zip(ch[:-1], ch[1:]):
+                assert self.low[b, self._side(b, k)] == a
+        assert np.all(seen == 2), "every crossing sits on exactly two chains"
