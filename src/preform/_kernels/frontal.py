@@ -30,13 +30,26 @@ bound depends on ``delta`` and so on the angles: a short fixed-point loop (exact
 case 3.
 
 Frontal sweeps. The force sweep runs over the crossings newest first (supply side to fell points:
-on every yarn the upper neighbour comes first) and solves each contact with the positions of the
-current iterate, storing angles, tensions and ``S``; the position sweep runs oldest first and places
-every crossing from its (already moved) lower neighbours with those angles and ``S`` (the paper's
-two-line intersection, eqs. 14-15). One pair of sweeps is a map ``C -> G(C)``; ``frontal_solve``
-iterates it with minimum-residual (Anderson type-1) mixing, our reading of paper eq. 17: the next
-iterate is ``G_h + lambda (G_h - G_{h-1})`` with ``lambda`` minimising ``|r_h + lambda (r_h -
-r_{h-1})|^2``, ``r = G(C) - C``, until ``max |r| < eps``.
+on every yarn the upper neighbour comes first) and solves each contact with the single-contact
+kernel ``_kernels.contact.solve_crossing`` at the positions of the current iterate, storing angles,
+tensions and ``S``; the position sweep runs oldest first and places every crossing from its
+(already moved) lower neighbours with those angles and ``S`` (the paper's two-line intersection,
+eqs. 14-15). One pair of sweeps is a map ``C -> G(C)``; ``frontal_solve`` iterates it with
+minimum-residual (Anderson type-1) mixing, our reading of paper eq. 17: the next iterate is
+``G_h + lambda (G_h - G_{h-1})`` with ``lambda`` minimising ``|r_h + lambda (r_h - r_{h-1})|^2``,
+``r = G(C) - C``, until the largest undamped move ``< eps``.
+
+Two additions of ours, found necessary for convergence (plain sweeps diverge on a row just created
+at the supply side):
+
+* per-crossing under-relaxation: the position sweep moves a crossing by ``w (C_new - C)``,
+  ``w = l_up / (l_up + l_low)`` (shortest upper segment, longest lower one; floor ``RELAX_MIN``),
+  because a move of the crossing turns its short upper segments and so ``S`` by about ``|C A| /
+  |C B|`` times more;
+* return mapping along the iteration: after each force sweep the stick predictor ``theta_ref``
+  becomes the angles just solved, so a yarn that slipped sticks where it slipped to unless the
+  friction bound is exceeded again (no stick/slip cycling between sweeps; ``Psi <= 0`` holds at
+  the fixed point either way).
 """
 
 from __future__ import annotations
@@ -141,6 +154,9 @@ def _one_angle_for_tension(f_target, smag, sigma, th_other, th_near):
 @njit(cache=True)
 def _both_angles_for_tensions(fx, fo, smag, sigma):
     """Angles for given tensions of both yarns: the force triangle S = -f_X u_X - f_O u_O."""
+    fx = max(fx, 1e-150)
+    fo = max(fo, 1e-150)
+    smag = max(smag, 1e-150)
     ca = (fx * fx + fo * fo - smag * smag) / (2.0 * fx * fo)
     ca = min(1.0, max(-1.0, ca))
     a = math.acos(ca)

@@ -1,0 +1,111 @@
+"""Interaction model timing (issue 4, item 7) and frontal residual per iteration.
+
+``python benchmarks/bench_interaction.py [--full] [--png residual.png]``
+
+* default: a synthetic zone (fell points held on a 75 mm circle at z = 0.6 m, case-A machine
+  speeds, spool radius 1.382 m) for 48, 96 and 144 carriers: prints the time per crossing per
+  frontal iteration and writes the residual-vs-iteration plot of a few steps;
+* ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
+  the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
+  and ``mandrels/case_a.stl``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+from types import SimpleNamespace as NS
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class _Identity:
+    def to_mandrel(self, x):
+        return np.asarray(x)
+
+    def to_machine(self, x):
+        return np.asarray(x)
+
+
+def synthetic(carriers, steps, mu=0.25):
+    """Run a zone with fixed fell points; (wall s, crossing-iterations, residual histories)."""
+    from preform.config import MachineConfig
+    from preform.interaction import frontal
+    from preform.interaction.model import InteractionZone
+    from preform.machine import Machine
+
+    mc = MachineConfig(carriers=carriers, spool_radius=1.382, angular_speed=np.radians(13.232),
+                       pattern="regular")
+    machine = Machine.from_config(mc)
+    cfg = NS(yarn=NS(width=4e-3, thickness=2.5e-4, tension=4.7, friction=mu, ring_friction=0.0),
+             machine=mc)
+    zone = InteractionZone(cfg, machine, None, distance=lambda p: np.hypot(p[:, 0], p[:, 1]) - 0.075)
+    phi = machine.azimuths(0.0)
+    F = np.stack([0.075 * np.cos(phi), 0.075 * np.sin(phi), np.full_like(phi, 0.6)], 1)
+    zone.start(0.0, F, _Identity())
+    dt = 0.01 / machine.omega
+    t, work, wall, hist = 0.0, 0, 0.0, []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        zs = zone.step(t, dt, F, _Identity())
+        wall += time.perf_counter() - t0
+        work += zs.contacts * zs.iterations
+        if zs.contacts and len(hist) < 5 and zone.last_report.iterations > 3:
+            hist.append(zone.last_report.history)
+        t += dt
+    return wall, work, hist, zone.state.m
+
+
+def full(carriers):
+    import preform as pf
+
+    cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
+    cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
+                              machine=dataclasses.replace(cfg.machine, carriers=carriers))
+    t0 = time.perf_counter()
+    res = pf.simulate(cfg, progress=False)
+    wall = time.perf_counter() - t0
+    h = res.history
+    work = float(np.sum(h["contacts"] * h["iterations"]))
+    print(f"{carriers} carriers: {res.status}, wall {wall:.2f} s, {res.steps} steps, "
+          f"max {int(h['contacts'].max())} crossings, mean {h['iterations'].mean():.1f} iterations, "
+          f"{1e9 * wall / max(work, 1):.1f} ns per crossing-iteration (whole run)")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--full", action="store_true")
+    ap.add_argument("--steps", type=int, default=400)
+    ap.add_argument("--png", default=str(ROOT / "benchmarks" / "frontal_residual.png"))
+    args = ap.parse_args(argv)
+    if args.full:
+        for n in (48, 96, 144):
+            full(n)
+        return
+    synthetic(16, 5)   # JIT warm-up
+    hists = {}
+    for n in (48, 96, 144):
+        wall, work, hist, m = synthetic(n, args.steps)
+        hists[n] = hist
+        print(f"{n} carriers: {args.steps} steps, {m} crossings at the end, wall {wall:.2f} s, "
+              f"{1e9 * wall / max(work, 1):.1f} ns per crossing per frontal iteration")
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for h in hists[144]:
+        ax.semilogy(np.arange(1, len(h) + 1), h, marker=".")
+    ax.set_xlabel("frontal iteration")
+    ax.set_ylabel("max |Delta C| (m)")
+    ax.set_title("frontal residual, synthetic zone, 144 carriers")
+    fig.tight_layout()
+    fig.savefig(args.png, dpi=100)
+    print(f"wrote {args.png}")
+
+
+if __name__ == "__main__":
+    main()
