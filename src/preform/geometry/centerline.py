@@ -1,0 +1,301 @@
+"""The mandrel's centerline: arc length from the tip, rotation-minimising frames, sections.
+
+A centerline is a polyline in the mandrel frame, tip first. Frames are rotation-minimising
+(double reflection, Wang et al. 2008), so a curved mandrel does not twist as it is fed; the first
+normal comes from ``roll_reference`` (projected normal to the tip tangent) or, without one, from
+the world axis least aligned with the tip tangent.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MandrelError
+from .mandrel import UNITS
+
+
+@dataclass(frozen=True)
+class Centerline:
+    """points (n, 3) m, mandrel frame, tip first; s (n,) arc length from the tip, m;
+    tangents, normals, binormals (n, 3) unit (T towards increasing s, B = T x N);
+    perimeter (n,) m of the cross-section at each point, or None."""
+
+    points: np.ndarray
+    s: np.ndarray
+    tangents: np.ndarray
+    normals: np.ndarray
+    binormals: np.ndarray
+    perimeter: np.ndarray | None = None
+
+    @property
+    def length(self) -> float:
+        return float(self.s[-1])
+
+    def frames_at(self, s):
+        """(points, T, N, B), each (m, 3), at arc lengths s (m,); straight beyond the ends."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        S = self.s
+        i = np.clip(np.searchsorted(S, s, side="right") - 1, 0, len(S) - 2)
+        u = (s - S[i]) / (S[i + 1] - S[i])
+        inside = np.clip(u, 0.0, 1.0)[:, None]
+        T = (1 - inside) * self.tangents[i] + inside * self.tangents[i + 1]
+        T /= np.linalg.norm(T, axis=1)[:, None]
+        N = (1 - inside) * self.normals[i] + inside * self.normals[i + 1]
+        N -= np.einsum("ij,ij->i", N, T)[:, None] * T
+        N /= np.linalg.norm(N, axis=1)[:, None]
+        B = np.cross(T, N)
+        p = self.points[i] + u[:, None] * (self.points[i + 1] - self.points[i])
+        before = s < S[0]
+        after = s > S[-1]
+        if np.any(before):
+            p[before] = self.points[0] + (s[before] - S[0])[:, None] * self.tangents[0]
+        if np.any(after):
+            p[after] = self.points[-1] + (s[after] - S[-1])[:, None] * self.tangents[-1]
+        return p, T, N, B
+
+    def frame_at(self, s: float):
+        """(point, T, N, B), each (3,), at one arc length."""
+        p, T, N, B = self.frames_at([s])
+        return p[0], T[0], N[0], B[0]
+
+    def project(self, points, chunk: int = 4096):
+        """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        a = self.points[:-1]
+        ab = self.points[1:] - a
+        L2 = np.einsum("ij,ij->i", ab, ab)
+        out_s = np.empty(len(points))
+        out_d = np.empty(len(points))
+        for lo in range(0, len(points), chunk):
+            p = points[lo:lo + chunk]
+            u = np.einsum("mij,ij->mi", p[:, None, :] - a[None], ab) / np.where(L2 > 0, L2, 1.0)
+            u = np.clip(u, 0.0, 1.0)
+            q = a[None] + u[..., None] * ab[None]
+            d = np.linalg.norm(q - p[:, None, :], axis=2)
+            j = np.argmin(d, axis=1)
+            r = np.arange(len(p))
+            out_s[lo:lo + chunk] = self.s[j] + u[r, j] * (self.s[j + 1] - self.s[j])
+            out_d[lo:lo + chunk] = d[r, j]
+        return out_s, out_d
+
+
+def _initial_normal(T0, roll_reference):
+    if roll_reference is not None:
+        r = np.asarray(roll_reference, dtype=float)
+        n = r - (r @ T0) * T0
+        if np.linalg.norm(n) > 1e-9 * max(np.linalg.norm(r), 1e-300):
+            return n / np.linalg.norm(n)
+    axis = np.eye(3)[int(np.argmin(np.abs(T0)))]
+    n = axis - (axis @ T0) * T0
+    return n / np.linalg.norm(n)
+
+
+def rotation_minimising_frames(points, tangents, roll_reference=None):
+    """Normals (n, 3) by the double reflection method (Wang et al. 2008)."""
+    N = np.empty_like(points)
+    N[0] = _initial_normal(tangents[0], roll_reference)
+    for i in range(len(points) - 1):
+        v1 = points[i + 1] - points[i]
+        c1 = v1 @ v1
+        rL = N[i] - (2.0 / c1) * (v1 @ N[i]) * v1
+        tL = tangents[i] - (2.0 / c1) * (v1 @ tangents[i]) * v1
+        v2 = tangents[i + 1] - tL
+        c2 = v2 @ v2
+        n = rL - (2.0 / c2) * (v2 @ rL) * v2 if c2 > 1e-30 else rL
+        n -= (n @ tangents[i + 1]) * tangents[i + 1]
+        N[i + 1] = n / np.linalg.norm(n)
+    return N
+
+
+def centerline_from_points(points, roll_reference=None, perimeter=None) -> Centerline:
+    """A Centerline through points (n, 3) m, tip first (consecutive duplicates removed)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    keep = np.ones(len(points), dtype=bool)
+    keep[1:] = np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-12
+    points = points[keep]
+    if perimeter is not None:
+        perimeter = np.asarray(perimeter, dtype=float)[keep]
+    if len(points) < 2:
+        raise MandrelError("a centerline needs at least two distinct points")
+    seg = np.diff(points, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg_len)])
+    d = seg / seg_len[:, None]
+    T = np.empty_like(points)
+    T[0] = d[0]
+    T[-1] = d[-1]
+    if len(points) > 2:
+        t = d[:-1] + d[1:]
+        T[1:-1] = t / np.linalg.norm(t, axis=1)[:, None]
+    N = rotation_minimising_frames(points, T, roll_reference)
+    return Centerline(points=points, s=s, tangents=T, normals=N, binormals=np.cross(T, N),
+                      perimeter=perimeter)
+
+
+def read_centerline_csv(path, unit: str = "m", roll_reference=None) -> Centerline:
+    """x,y,z per line in the STL's unit, tip first; a header line ``x,y,z`` is allowed."""
+    path = Path(path)
+    if not path.is_file():
+        raise MandrelError(f"centerline CSV not found: {path}")
+    rows = []
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        parts = [p.strip() for p in text.replace(";", ",").split(",")]
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            if not rows and lineno == 1:
+                continue  # header
+            raise MandrelError(f"{path}, line {lineno}: expected numbers x,y,z, got {text!r}") from None
+        if len(values) < 3:
+            raise MandrelError(f"{path}, line {lineno}: expected three numbers x,y,z, got {text!r}")
+        rows.append(values[:3])
+    if len(rows) < 2:
+        raise MandrelError(f"{path}: a centerline needs at least two points, found {len(rows)}")
+    return centerline_from_points(np.array(rows) * UNITS[unit], roll_reference=roll_reference)
+
+
+def write_centerline_csv(centerline: Centerline, path, unit: str = "m") -> Path:
+    """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv."""
+    path = Path(path)
+    scale = 1.0 / UNITS[unit]
+    per = centerline.perimeter if centerline.perimeter is not None else np.full(len(centerline.s), np.nan)
+    lines = ["x,y,z,s,perimeter"]
+    for p, s, q in zip(centerline.points * scale, centerline.s * scale, per * scale):
+        lines.append(f"{p[0]:.9g},{p[1]:.9g},{p[2]:.9g},{s:.9g},{q:.9g}")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _section_loops(mesh, origin, normal):
+    """Closed section loops (list of (k, 3) arrays) of a mesh with a plane."""
+    try:
+        section = mesh.section(plane_origin=origin, plane_normal=normal)
+    except Exception:
+        return []
+    if section is None:
+        return []
+    return [np.asarray(d) for d in section.discrete if len(d) >= 4]
+
+
+def _loop_properties(loop, normal):
+    """Area centroid (3,), area and perimeter of a planar loop."""
+    u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(u) < 0.5:
+        u = np.cross(normal, [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    o = loop[0]
+    x = (loop - o) @ u
+    y = (loop - o) @ w
+    cross = x[:-1] * y[1:] - x[1:] * y[:-1]
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-300:
+        c = loop.mean(axis=0)
+    else:
+        cx = ((x[:-1] + x[1:]) * cross).sum() / (6 * area)
+        cy = ((y[:-1] + y[1:]) * cross).sum() / (6 * area)
+        c = o + cx * u + cy * w
+    perimeter = float(np.linalg.norm(np.diff(loop, axis=0), axis=1).sum())
+    return c, abs(area), perimeter
+
+
+def _nearest_loop(loops, normal, predicted):
+    best = None
+    for loop in loops:
+        c, area, per = _loop_properties(loop, normal)
+        d = np.linalg.norm(c - predicted)
+        if best is None or d < best[0]:
+            best = (d, c, area, per)
+    return best
+
+
+def section_perimeters(mandrel, centerline: Centerline, s_values) -> np.ndarray:
+    """Perimeter (m) of the section loop around the centerline at each s (plane normal to T)."""
+    s_values = np.atleast_1d(np.asarray(s_values, dtype=float))
+    p, T, _, _ = centerline.frames_at(s_values)
+    out = np.zeros(len(s_values))
+    for k in range(len(s_values)):
+        best = _nearest_loop(_section_loops(mandrel.mesh, p[k], T[k]), T[k], p[k])
+        out[k] = 0.0 if best is None else best[3]
+    return out
+
+
+def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
+    """A copy with ``perimeter`` filled from the mandrel's sections."""
+    return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s))
+
+
+def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None) -> Centerline:
+    """Slice centroids traced along the mandrel (``centerline = "auto"``).
+
+    The two ends come from the principal axis of the vertices; the tip is the end nearer the STL
+    frame's origin. From there the trace steps ``h``, slices the mesh normal to the current
+    tangent, and takes the area centroid of the section loop nearest the predicted point; the
+    tangent follows consecutive centroids, so bends are followed. The ends are extended to the
+    mesh's extremes along the end tangents.
+    """
+    V = mandrel.vertices
+    centre = V.mean(axis=0)
+    _, _, vt = np.linalg.svd(V - centre, full_matrices=False)
+    axis = vt[0]
+    proj = (V - centre) @ axis
+    ends = [V[np.argmin(proj)], V[np.argmax(proj)]]
+    if np.linalg.norm(ends[1]) < np.linalg.norm(ends[0]):
+        axis = -axis
+        proj = -proj
+    extent = float(proj.max() - proj.min())
+    # a bent part is longer along its path than along its principal axis: allow for that
+    n = n_sections or 200
+    h = extent / n
+    T = axis.copy()
+    start = centre + axis * (proj.min() + 0.5 * h)
+    best = _nearest_loop(_section_loops(mandrel.mesh, start, T), T, start)
+    if best is None:
+        raise MandrelError(f"{mandrel.source or 'mandrel'}: no cross-section near the tip: cannot derive a centerline")
+    pts = [best[1]]
+    pers = [best[3]]
+    for _ in range(8 * n):
+        predicted = pts[-1] + h * T
+        best = _nearest_loop(_section_loops(mandrel.mesh, predicted, T), T, predicted)
+        if best is None or best[0] > 2.0 * h + 0.5 * np.sqrt(best[2]):
+            break
+        c = best[1]
+        step = c - pts[-1]
+        if np.linalg.norm(step) < 1e-12:
+            break
+        new_T = step / np.linalg.norm(step)
+        if new_T @ T < 0.5:
+            break
+        T = new_T
+        pts.append(c)
+        pers.append(best[3])
+    pts = np.array(pts)
+    if len(pts) < 2:
+        raise MandrelError(f"{mandrel.source or 'mandrel'}: the centerline trace found fewer than two sections")
+    # extend to the extremes of the mesh along the end tangents
+    t0 = pts[1] - pts[0]
+    t0 /= np.linalg.norm(t0)
+    t1 = pts[-1] - pts[-2]
+    t1 /= np.linalg.norm(t1)
+    near0 = np.linalg.norm(V - pts[0], axis=1) < 4 * h + np.sqrt(max(pers[0], 1e-12))
+    near1 = np.linalg.norm(V - pts[-1], axis=1) < 4 * h + np.sqrt(max(pers[-1], 1e-12))
+    back = max(0.0, float(-((V[near0] - pts[0]) @ t0).min())) if np.any(near0) else 0.0
+    ahead = max(0.0, float(((V[near1] - pts[-1]) @ t1).max())) if np.any(near1) else 0.0
+    pts = np.vstack([pts[0] - back * t0, pts, pts[-1] + ahead * t1])
+    pers = np.array([pers[0], *pers, pers[-1]])
+    return centerline_from_points(pts, roll_reference=roll_reference, perimeter=pers)

@@ -1,0 +1,242 @@
+"""The mandrel: a closed, outward-wound triangle mesh in its own (STL) frame, in metres.
+
+Besides the triangles it carries what the deposition kernels need: unit face normals, a smooth
+normal at every face corner (angle-weighted over the faces around the vertex, split at creases so
+that a flat end cap does not bend the side's normals) and the face across every edge.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MandrelError
+from ..tolerances import tol
+
+UNITS = {"m": 1.0, "mm": 1e-3}
+
+
+@dataclass(frozen=True)
+class Mandrel:
+    """A watertight mandrel mesh, mandrel frame, SI.
+
+    vertices : (nv, 3) float64, m
+    faces : (nf, 3) int64, wound so that face normals point outwards
+    face_normals : (nf, 3) float64, unit, outwards
+    corner_normals : (nf, 3, 3) float64, unit smooth normal at corner k of face f
+    neighbors : (nf, 3) int64, face across edge k (corners k, k+1) of face f; -1 on a boundary
+    source : the file it came from ("" if built from arrays)
+    repairs : sentences saying what the intake repaired (empty when nothing was needed)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_normals: np.ndarray
+    corner_normals: np.ndarray
+    neighbors: np.ndarray
+    source: str = ""
+    repairs: tuple = field(default=())
+
+    @cached_property
+    def mesh(self):
+        """A trimesh view (ray queries use embree when embreex is installed)."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def diagonal(self) -> float:
+        """Bounding-box diagonal, m."""
+        b = self.bounds
+        return float(np.linalg.norm(b[1] - b[0]))
+
+    def intersect_segments(self, starts, ends):
+        """First hit of each segment start -> end with the mandrel.
+
+        Hits closer than ``tol.ray_offset * diagonal`` to the start are ignored. Returns
+        (hit (n,) bool, point (n, 3), face (n,) int64 (-1 if none), distance (n,) m (inf if none)).
+        """
+        starts = np.asarray(starts, dtype=float).reshape(-1, 3)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 3)
+        n = len(starts)
+        hit = np.zeros(n, dtype=bool)
+        point = np.zeros((n, 3))
+        face = np.full(n, -1, dtype=np.int64)
+        dist = np.full(n, np.inf)
+        if n == 0:
+            return hit, point, face, dist
+        d = ends - starts
+        length = np.linalg.norm(d, axis=1)
+        ok = length > 0
+        dirs = np.zeros_like(d)
+        dirs[ok] = d[ok] / length[ok, None]
+        idx = np.nonzero(ok)[0]
+        loc, ray, tri = self.mesh.ray.intersects_location(starts[idx], dirs[idx], multiple_hits=True)
+        if len(ray) == 0:
+            return hit, point, face, dist
+        ray = idx[ray]
+        t = np.einsum("ij,ij->i", loc - starts[ray], dirs[ray])
+        keep = (t > tol.ray_offset * self.diagonal) & (t <= length[ray])
+        ray, t, loc, tri = ray[keep], t[keep], loc[keep], tri[keep]
+        order = np.lexsort((t, ray))
+        ray, t, loc, tri = ray[order], t[order], loc[order], tri[order]
+        first = np.ones(len(ray), dtype=bool)
+        first[1:] = ray[1:] != ray[:-1]
+        r = ray[first]
+        hit[r] = True
+        point[r] = loc[first]
+        face[r] = tri[first]
+        dist[r] = t[first]
+        return hit, point, face, dist
+
+    def closest_points(self, points):
+        """Closest surface points and their faces: ((m, 3), (m,) int64)."""
+        import trimesh
+
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        closest, _, faces = trimesh.proximity.closest_point(self.mesh, points)
+        return closest, np.asarray(faces, dtype=np.int64)
+
+    def smooth_normal(self, face, point):
+        """Smooth unit normal at a point of a face (NumPy reference of the kernels' blend)."""
+        p = self.vertices[self.faces[face]]
+        A = np.stack([p[1] - p[0], p[2] - p[0]], axis=1)
+        b12, *_ = np.linalg.lstsq(A, np.asarray(point, dtype=float) - p[0], rcond=None)
+        b = np.array([1.0 - b12.sum(), b12[0], b12[1]])
+        n = b @ self.corner_normals[face]
+        return n / np.linalg.norm(n)
+
+
+def face_neighbors(faces) -> np.ndarray:
+    """(nf, 3) int64: the face across edge k (corners k, k+1) of each face, -1 if none or ambiguous."""
+    faces = np.asarray(faces, dtype=np.int64)
+    nf = len(faces)
+    a = faces.reshape(-1)
+    b = np.roll(faces, -1, axis=1).reshape(-1)
+    nv = int(faces.max()) + 1 if nf else 0
+    key = a * nv + b
+    twin = b * nv + a
+    order = np.argsort(key, kind="stable")
+    sorted_keys = key[order]
+    pos = np.searchsorted(sorted_keys, twin)
+    pos = np.minimum(pos, len(sorted_keys) - 1)
+    found = sorted_keys[pos] == twin
+    # an edge used twice in the same direction is non-manifold or mis-wound: no neighbour
+    dup = np.zeros(len(key), dtype=bool)
+    same = sorted_keys[1:] == sorted_keys[:-1]
+    dup[order[1:][same]] = True
+    dup[order[:-1][same]] = True
+    out = np.where(found, order[pos] // 3, -1)
+    out[dup] = -1
+    return out.reshape(nf, 3)
+
+
+def _corner_normals(vertices, faces, face_normals):
+    from .._kernels.mesh import corner_normals
+
+    p = vertices[faces]
+    angles = np.empty((len(faces), 3))
+    for k in range(3):
+        u = p[:, (k + 1) % 3] - p[:, k]
+        w = p[:, (k + 2) % 3] - p[:, k]
+        c = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
+        angles[:, k] = np.arccos(np.clip(c, -1.0, 1.0))
+    flat = faces.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    vert_ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=len(vertices)))]).astype(np.int64)
+    vert_faces = (order // 3).astype(np.int64)
+    vert_corner = (order % 3).astype(np.int64)
+    cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
+    return corner_normals(faces, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
+
+
+def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bool = True) -> Mandrel:
+    """Build a Mandrel from vertices (nv, 3) m and faces (nf, 3); checks closure and orientation."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    name = source or "mandrel"
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise MandrelError(f"{name}: expected a triangle mesh, got vertices {vertices.shape} and faces {faces.shape}")
+    if not np.all(np.isfinite(vertices)):
+        raise MandrelError(f"{name}: the STL has non-finite vertex coordinates")
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    area2 = np.linalg.norm(cross, axis=1)
+    normals = cross / np.where(area2 > 0, area2, 1.0)[:, None]
+    neighbors = face_neighbors(faces)
+    if check:
+        _check_closed(name, vertices, faces, neighbors, cross)
+    return Mandrel(vertices=vertices, faces=faces, face_normals=normals,
+                   corner_normals=_corner_normals(vertices, faces, normals), neighbors=neighbors,
+                   source=str(source), repairs=tuple(repairs))
+
+
+def _check_closed(name, vertices, faces, neighbors, cross):
+    open_edges = int(np.sum(neighbors < 0))
+    if open_edges:
+        a = faces.reshape(-1)[neighbors.reshape(-1) < 0]
+        where = vertices[a].mean(axis=0)
+        raise MandrelError(
+            f"{name} is not watertight: {open_edges} edges have no matching neighbour (open or "
+            f"inconsistently wound, around ({where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g}) m). A mandrel "
+            "must be one closed surface with consistent winding; repair it in your CAD tool or mesh editor")
+    volume = float(np.einsum("ij,ij->", vertices[faces[:, 0]], cross)) / 6.0
+    if volume <= 0:
+        raise MandrelError(
+            f"{name}: the triangles are wound inwards (enclosed volume {volume:.4g} m^3 is not positive); "
+            "flip the normals of the STL")
+
+
+def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (merged duplicates) and faces of an STL, in the file's unit."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MandrelError(f"mandrel STL not found: {path}")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mesh = trimesh.load(str(path), file_type="stl", force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds for broken files
+        raise MandrelError(f"{path}: not a readable STL file ({exc})") from None
+    if len(mesh.faces) == 0:
+        raise MandrelError(f"{path}: the STL has no triangles")
+    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def merge_vertices(vertices, faces, rel_tol):
+    """Merge vertices closer than rel_tol * bounding-box diagonal; drop faces that collapse."""
+    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
+    q = np.round((vertices - vertices.min(axis=0)) / (rel_tol * diag)).astype(np.int64)
+    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    new_faces = inverse[faces]
+    keep = (new_faces[:, 0] != new_faces[:, 1]) & (new_faces[:, 1] != new_faces[:, 2]) & (new_faces[:, 0] != new_faces[:, 2])
+    return vertices[first], new_faces[keep]
+
+
+def load_mandrel(path, unit: str = "m") -> Mandrel:
+    """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres)."""
+    if unit not in UNITS:
+        raise MandrelError(f'[mandrel] stl_unit = "{unit}": expected "m" or "mm"')
+    vertices, faces = read_stl(path)
+    vertices = vertices * UNITS[unit]
+    repairs = ()
+    try:
+        from .repair import repair_mesh
+    except ImportError:  # pragma: no cover - repair module optional
+        repair_mesh = None
+    if repair_mesh is not None:
+        vertices, faces, report = repair_mesh(vertices, faces, source=str(path))
+        repairs = tuple(report.messages)
+    else:
+        vertices, faces = merge_vertices(vertices, faces, tol.merge_vertices)
+    return mandrel_from_arrays(vertices, faces, source=str(path), repairs=repairs)
