@@ -1,0 +1,121 @@
+"""The yarn on the guide ring: Capstan along the yarn, Amontons across it (paper §2.3; DESIGN.md §3.3).
+
+Machine frame: the ring has radius ``r_ring`` about the z axis in the plane ``z = z_ring``; its point
+``R(theta_r) = (r cos theta_r, r sin theta_r, z_ring)``. The yarn runs straight from the fixed point
+``A`` (last crossing or fell point) over ``R`` to the supply point ``B``, where the spool tension
+``f_ext`` acts.
+
+* Capstan (eq. 9): ``f_int = f_ext exp(capstan_sign mu_r eta)``, ``eta`` the yarn's deflection at
+  ``R`` (``cos eta = -u_int . u_ext``, unit vectors ``R->A``, ``R->B``). The default
+  ``capstan_sign = -1`` is eq. 9 as the paper writes it, ``f_ext = f_int exp(mu_r eta)``: lower tension on
+  the mandrel side. That is the tension drop of a yarn sliding over the ring towards the supply; a yarn
+  fed from the spool towards the mandrel would carry the higher tension on the mandrel side
+  (``capstan_sign = +1``). The paper's choice is kept as the default; the frontal solver decides.
+* Transverse stick/slip (eqs. 11-13): ``F_r = f_int u_int + f_ext u_ext``, ``F^t = F_r . t_r`` with
+  ``t_r = (-sin theta_r, cos theta_r, 0)``, ``|F^n| = |F_r - F^t t_r|``; ``Psi_r = |F^t| - mu_r |F^n|``.
+  Stick keeps ``theta_r``; slip moves ``R`` in the direction of ``F^t`` to the nearest ``Psi_r = 0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._kernels import ring as K
+from .contact import ContactInputError, as_friction, as_vector
+
+STATUS_MESSAGES = {
+    K.RING_OK: "ok",
+    K.RING_DEGENERATE: "A or B lies on the ring point, or the tension or radius is not positive",
+    K.RING_NO_ROOT: "no ring point within half a turn holds the yarn inside the friction cone",
+}
+
+
+@dataclass(frozen=True)
+class RingSolution:
+    """Result of :func:`solve_ring` (machine frame, SI units).
+
+    R : (3,) m, ring point. theta_r : rad. f_int : N, tension of the segment R->A; f_ext : N, spool
+    tension (input). eta : rad, Capstan (deflection) angle. psi_r : N. slip : 0 stick, 1 slip
+    (transverse). slide : -1, 0, +1, the sense theta_r moved in. u_int, u_ext : (3,) unit vectors
+    R->A, R->B. F_r : (3,) N, F_r = f_int u_int + f_ext u_ext. status : kernel status
+    (``STATUS_MESSAGES``); other fields are zero unless ``ok``.
+    """
+
+    R: np.ndarray
+    theta_r: float
+    f_int: float
+    f_ext: float
+    eta: float
+    psi_r: float
+    slip: int
+    slide: int
+    u_int: np.ndarray
+    u_ext: np.ndarray
+    F_r: np.ndarray
+    status: int
+    iterations: int
+
+    @property
+    def ok(self) -> bool:
+        return self.status == K.RING_OK
+
+    @property
+    def message(self) -> str:
+        return STATUS_MESSAGES[self.status]
+
+    @property
+    def F_int(self) -> np.ndarray:
+        """Force of the segment R->A on the ring point, f_int u_int, (3,) N."""
+        return self.f_int * self.u_int
+
+    @classmethod
+    def from_row(cls, row, status, f_ext) -> "RingSolution":
+        """Unpack one kernel output row (``_kernels.ring.RING_OUT_*`` layout)."""
+        row = np.array(row, dtype=np.float64)
+        vec = {}
+        for name, k in (("R", K.RING_OUT_R), ("u_int", K.RING_OUT_U_INT), ("u_ext", K.RING_OUT_U_EXT),
+                        ("F_r", K.RING_OUT_F_R)):
+            vec[name] = row[k:k + 3]
+            vec[name].flags.writeable = False
+        return cls(theta_r=float(row[K.RING_OUT_THETA]), f_int=float(row[K.RING_OUT_F_INT]),
+                   f_ext=float(f_ext), eta=float(row[K.RING_OUT_ETA]), psi_r=float(row[K.RING_OUT_PSI]),
+                   slip=int(row[K.RING_OUT_SLIP]), slide=int(row[K.RING_OUT_SLIDE]), status=int(status),
+                   iterations=int(row[K.RING_OUT_ITERATIONS]), **vec)
+
+
+def _positive(name, value) -> float:
+    v = float(value)
+    if not (np.isfinite(v) and v > 0.0):
+        raise ContactInputError(f"{name} = {value!r}: expected a finite number > 0")
+    return v
+
+
+def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1) -> RingSolution:
+    """Solve the yarn-ring contact (paper Fig. A.17: stick predictor, transverse slip corrector).
+
+    A, B : (3,) float64, m, machine frame: fixed point and supply point. f_ext : N, spool tension.
+    r_ring : m, ring radius; z_ring : m, ring plane. theta_prev : rad, the ring angle carried from the
+    previous step. mu_r : yarn-ring friction >= 0. capstan_sign : -1 (paper eq. 9) or +1 (module
+    docstring). Returns a :class:`RingSolution`; check ``.ok``.
+    """
+    a, b = as_vector("A", A), as_vector("B", B)
+    f = _positive("f_ext", f_ext)
+    r = _positive("r_ring", r_ring)
+    z = float(z_ring)
+    th = float(theta_prev)
+    if not (np.isfinite(z) and np.isfinite(th)):
+        raise ContactInputError(f"z_ring = {z_ring!r}, theta_prev = {theta_prev!r}: expected finite numbers")
+    if capstan_sign not in (-1, 1):
+        raise ContactInputError(f"capstan_sign = {capstan_sign!r}: expected -1 or +1")
+    out = np.zeros(K.RING_OUT_SIZE)
+    status = K.solve_ring(a[0], a[1], a[2], b[0], b[1], b[2], f, r, z, th, as_friction("mu_r", mu_r),
+                          float(capstan_sign), out)
+    return RingSolution.from_row(out, status, f)
+
+
+def ring_point(theta_r, r_ring, z_ring) -> np.ndarray:
+    """R(theta_r) = (r cos, r sin, z_ring), (..., 3) float64, m."""
+    th = np.asarray(theta_r, dtype=np.float64)
+    return np.stack([r_ring * np.cos(th), r_ring * np.sin(th), np.full_like(th, z_ring)], axis=-1)
