@@ -182,14 +182,59 @@ def write_centerline_csv(centerline: Centerline, path, unit: str = "m") -> Path:
 
 
 def _section_loops(mesh, origin, normal):
-    """Closed section loops (list of (k, 3) arrays) of a mesh with a plane."""
+    """Closed section loops (list of (k, 3) arrays, first point repeated last) of a mesh with a plane."""
+    from trimesh.intersections import mesh_plane
+
     try:
-        section = mesh.section(plane_origin=origin, plane_normal=normal)
+        segments = mesh_plane(mesh, plane_normal=normal, plane_origin=origin)
     except Exception:
         return []
-    if section is None:
+    return chain_segments(np.asarray(segments))
+
+
+def chain_segments(segments, rel_tol=1e-9):
+    """Join segments (n, 2, 3) that share end points into closed loops; open chains are dropped."""
+    if len(segments) == 0:
         return []
-    return [np.asarray(d) for d in section.discrete if len(d) >= 4]
+    scale = float(np.ptp(segments.reshape(-1, 3), axis=0).max()) or 1.0
+    keys = np.round(segments.reshape(-1, 3) / (rel_tol * 1e3 * scale)).astype(np.int64)
+    _, ids = np.unique(keys, axis=0, return_inverse=True)
+    ids = ids.reshape(-1, 2)
+    points = {}
+    adjacency: dict[int, list] = {}
+    for k, (a, b) in enumerate(ids):
+        if a == b:
+            continue
+        points[a] = segments[k, 0]
+        points[b] = segments[k, 1]
+        adjacency.setdefault(a, []).append(b)
+        adjacency.setdefault(b, []).append(a)
+    loops = []
+    seen = set()
+    for start in adjacency:
+        if start in seen:
+            continue
+        loop = [start]
+        seen.add(start)
+        prev, cur = None, start
+        closed = False
+        while True:
+            nxt = [q for q in adjacency[cur] if q != prev]
+            if not nxt:
+                break
+            q = nxt[0]
+            if q == start:
+                closed = True
+                break
+            if q in seen:
+                break
+            seen.add(q)
+            loop.append(q)
+            prev, cur = cur, q
+        if closed and len(loop) >= 3:
+            pts = np.array([points[q] for q in loop + [start]])
+            loops.append(pts)
+    return loops
 
 
 def _loop_properties(loop, normal):
@@ -254,16 +299,22 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     _, _, vt = np.linalg.svd(V - centre, full_matrices=False)
     axis = vt[0]
     proj = (V - centre) @ axis
-    ends = [V[np.argmin(proj)], V[np.argmax(proj)]]
-    if np.linalg.norm(ends[1]) < np.linalg.norm(ends[0]):
+    if np.linalg.norm(V[np.argmax(proj)]) < np.linalg.norm(V[np.argmin(proj)]):
         axis = -axis
         proj = -proj
     extent = float(proj.max() - proj.min())
-    # a bent part is longer along its path than along its principal axis: allow for that
+    tip = V[np.argmin(proj)]
+    # local axis at the tip: principal axis of the vertices near the tip end (a bent part's global
+    # axis is oblique there)
+    near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
+    local_centre = near.mean(axis=0)
+    _, _, vt_local = np.linalg.svd(near - local_centre, full_matrices=False)
+    T = vt_local[0] if vt_local[0] @ (local_centre - tip) >= 0 else -vt_local[0]
     n = n_sections or 200
     h = extent / n
-    T = axis.copy()
-    start = centre + axis * (proj.min() + 0.5 * h)
+    tip_depth = float(np.min((near - tip) @ T))
+    start = tip + (0.5 * h - tip_depth) * T
+    start = start + (local_centre - start) - ((local_centre - start) @ T) * T
     best = _nearest_loop(_section_loops(mandrel.mesh, start, T), T, start)
     if best is None:
         raise MandrelError(f"{mandrel.source or 'mandrel'}: no cross-section near the tip: cannot derive a centerline")

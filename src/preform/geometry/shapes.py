@@ -105,12 +105,12 @@ def cone(r_tip, r_back, length, n_around=128, n_along=None):
     return revolution(lambda s: r_tip + (r_back - r_tip) * s / length, length, n_around, n_along)
 
 
-def waist(radius=0.075, depth=0.03, width=0.03, centre=0.5, length=1.2, n_around=128, n_along=400):
+def waist(radius=0.075, depth=0.03, width=0.03, centre=0.5, length=1.2, n_around=128, n_along=240):
     """Hourglass: r = radius - depth exp(-((s - centre)/width)^2)."""
     return revolution(lambda s: radius - depth * np.exp(-((s - centre) / width) ** 2), length, n_around, n_along)
 
 
-def bulge(radius=0.05, height=0.04, width=0.015, centre=0.45, length=1.2, n_around=128, n_along=400):
+def bulge(radius=0.05, height=0.04, width=0.015, centre=0.45, length=1.2, n_around=128, n_along=240):
     """A ring bulge: r = radius + height exp(-((s - centre)/width)^2)."""
     return revolution(lambda s: radius + height * np.exp(-((s - centre) / width) ** 2), length, n_around, n_along)
 
