@@ -165,7 +165,8 @@ class Crossing:
             return fail
         px, po = self.psis(tx, to)
         return {"ok": True, "C": C, "f_X": f_x, "f_O": f_o, "theta_X": tx, "theta_O": to,
-                "slip_X": int(slip_x), "slip_O": int(slip_o), "psi_X": px, "psi_O": po, "u_X": u_x, "u_O": u_o}
+                "slip_X": int(slip_x), "slip_O": int(slip_o), "psi_X": px, "psi_O": po,
+                "u_X": u_x, "u_O": u_o}
 
 
 def ring_forces(theta, A, B, f_ext, r, z, mu, capstan_sign=-1):

@@ -151,7 +151,8 @@ def test_single_slip_keeps_the_other_angle(solved):
 def test_slide_sign_follows_the_tension_jump(solved):
     """slide = sign(f_int - f_ext) while slipping with friction, 0 while sticking."""
     for (A_X, A_O, F_X, F_O, theta, mu), s in solved:
-        for slip, slide, f_int, F in ((s.slip_X, s.slide_X, s.f_X_int, F_X), (s.slip_O, s.slide_O, s.f_O_int, F_O)):
+        for slip, slide, f_int, F in ((s.slip_X, s.slide_X, s.f_X_int, F_X),
+                                      (s.slip_O, s.slide_O, s.f_O_int, F_O)):
             if not slip:
                 assert slide == 0
             elif mu > 0:

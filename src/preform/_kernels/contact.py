@@ -20,7 +20,8 @@ Friction (paper eqs. 5-7). For yarn Y in its own Eulerian frame ``n = -(u_int + 
 its two segments on the crossing, ``F_Y = f_int u_int + f_ext u_ext`` (minus the contact force the other
 yarn exerts on Y), splits into ``F^n = (f_int + f_ext) sin(delta/2)`` and ``F^t = (f_int - f_ext)
 cos(delta/2)`` along ``t = (u_int - u_ext)/|.|``, with ``delta`` the deflection of Y at C
-(``u_int . u_ext = -cos delta``). So ``Psi_Y = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2)``,
+(``u_int . u_ext = -cos delta``). So
+``Psi_Y = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2)``,
 which is what this kernel evaluates (no division by ``|u_int + u_ext|``, which vanishes for a straight
 yarn); ``tests/test_contact.py`` checks it against the frame form of eq. 7 on random vectors.
 ``slip_Y = 1`` means Y's tension jump sits on the bound (Y's material slides through C).
@@ -36,8 +37,9 @@ for the sliding direction") and solves "analytically". Symmetrically ``Psi_O`` i
 ``theta_X``. Both slipping (case 3): the paper alternates the two closed forms; that fixed-point
 iteration stalls or wanders off in a few per cent of random configurations, so here the same pair of
 equations is solved as one scalar equation ``g(theta_X) = f_O(theta_X) - bound_O = 0`` (eliminating
-``theta_O`` with the closed form), bracketed outwards from the predictor and refined by Illinois
-regula falsi; the root nearest to the predictor is taken.
+``theta_O`` with the closed form): the root a Newton step from the predictor points at is bracketed
+(growing steps) and refined by Illinois regula falsi; if that finds no bracket, the root nearest
+to the predictor on either side is searched by marching outwards.
 """
 
 from __future__ import annotations
@@ -81,6 +83,9 @@ SCAN_GROWTH = 1.25      # growth of the bracket steps
 SCAN_MAX_STEP = 0.05    # rad, largest bracket step
 SCAN_MAX = 120
 SCAN_EDGE_POINTS = 16   # fine look before the edge of the valid domain
+NEWTON_FD_STEP = 1e-7   # rad, finite-difference step of the Newton bracket
+NEWTON_OVERSHOOT = 0.1  # the first bracket end lies 10 % beyond the Newton point
+NEWTON_EXPANSIONS = 8
 ROOT_MAX_ITER = 200
 ROOT_REL_TOL = 1e-15    # on g / f_O^ext
 
@@ -239,22 +244,63 @@ def _scan_side(tx0, ok0, g0, direction, max_dist, s1, s2, fxe, foe, a1, a2, b1, 
 
 
 @njit(cache=True)
+def _newton_bracket(tx0, g0, s1, s2, fxe, foe, a1, a2, b1, b2, mu, slide_x, slide_o):
+    """Bracket the root a Newton step from tx0 points at: try tx0 + dx, then 2 dx, 4 dx, ...
+
+    Returns (found, x_a, g_a, x_b, g_b, evaluations). The fast path of :func:`both_slip`.
+    """
+    h = NEWTON_FD_STEP * (1.0 if tx0 < 0.5 * math.pi else -1.0)
+    ok, g1, to = both_slip_residual(tx0 + h, s1, s2, fxe, foe, a1, a2, b1, b2, mu, slide_x, slide_o)
+    if not ok or g1 == g0:
+        return False, tx0, g0, tx0, g0, 1
+    dx = -g0 * h / (g1 - g0)
+    x_prev = tx0
+    g_prev = g0
+    evals = 1
+    for k in range(NEWTON_EXPANSIONS):
+        x = tx0 + dx * (1.0 + NEWTON_OVERSHOOT) * (2.0 ** k)
+        if x <= 0.0 or x >= math.pi:
+            break
+        ok, g, to = both_slip_residual(x, s1, s2, fxe, foe, a1, a2, b1, b2, mu, slide_x, slide_o)
+        evals += 1
+        if ok and g * g_prev <= 0.0:
+            return True, x_prev, g_prev, x, g, evals
+        if not ok:
+            found, xa, ga, xb, gb, n = _scan_edge(x_prev, g_prev, x, s1, s2, fxe, foe, a1, a2, b1, b2,
+                                                  mu, slide_x, slide_o)
+            return found, xa, ga, xb, gb, evals + n
+        x_prev = x
+        g_prev = g
+    return False, tx0, g0, tx0, g0, evals
+
+
+@njit(cache=True)
 def both_slip(tx0, s1, s2, fxe, foe, a1, a2, b1, b2, mu, slide_x, slide_o):
-    """Case 3: both yarns on their bounds, root of g nearest tx0. Returns (ok, tx, to, evaluations)."""
+    """Case 3: both yarns on their bounds. Returns (ok, tx, to, evaluations).
+
+    The root of g the Newton step from the predictor tx0 points at (bracketed), else the root
+    nearest tx0 found by marching outwards on both sides.
+    """
     ok0, g0, to0 = both_slip_residual(tx0, s1, s2, fxe, foe, a1, a2, b1, b2, mu, slide_x, slide_o)
     evals = 1
     if ok0 and g0 == 0.0:
         return True, tx0, to0, evals
-    f_up, xa, ga, xb, gb, d_up, n = _scan_side(tx0, ok0, g0, 1.0, math.pi, s1, s2, fxe, foe,
-                                               a1, a2, b1, b2, mu, slide_x, slide_o)
-    evals += n
-    f_dn, xc, gc, xd, gd, d_dn, n = _scan_side(tx0, ok0, g0, -1.0, d_up, s1, s2, fxe, foe,
-                                               a1, a2, b1, b2, mu, slide_x, slide_o)
-    evals += n
-    if f_dn:
-        xa, ga, xb, gb = xc, gc, xd, gd
-    elif not f_up:
-        return False, tx0, 0.0, evals
+    found = False
+    if ok0:
+        found, xa, ga, xb, gb, n = _newton_bracket(tx0, g0, s1, s2, fxe, foe, a1, a2, b1, b2, mu,
+                                                   slide_x, slide_o)
+        evals += n
+    if not found:
+        f_up, xa, ga, xb, gb, d_up, n = _scan_side(tx0, ok0, g0, 1.0, math.pi, s1, s2, fxe, foe,
+                                                   a1, a2, b1, b2, mu, slide_x, slide_o)
+        evals += n
+        f_dn, xc, gc, xd, gd, d_dn, n = _scan_side(tx0, ok0, g0, -1.0, d_up, s1, s2, fxe, foe,
+                                                   a1, a2, b1, b2, mu, slide_x, slide_o)
+        evals += n
+        if f_dn:
+            xa, ga, xb, gb = xc, gc, xd, gd
+        elif not f_up:
+            return False, tx0, 0.0, evals
     if xa < xb:
         lo, g_a, hi, g_b = xa, ga, xb, gb
     else:
