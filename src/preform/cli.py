@@ -83,12 +83,12 @@ def cmd_run(args) -> int:
     from .config import load_config
 
     config = load_config(args.config)  # bad input fails here, before the heavy imports
-    _checked_geometry(config)  # simulate() loads the geometry again: checks fail fast, before it
+    mandrel, centerline = _checked_geometry(config)  # impossible set-ups fail here, before simulating
     from .io import write_results
     from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
 
     out_dir = _out_dir(config, args.out)
-    result = simulate(config, progress=not args.no_progress)
+    result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline)
     fields = None
     map_to_surface = _optional("preform.fields", "map_to_surface")
     if map_to_surface is not None and len(result.yarns.points):

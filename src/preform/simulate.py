@@ -120,10 +120,14 @@ def _tie_points(config, machine, mandrel, centerline, pose, rng):
     return point, face.astype(np.int64)
 
 
-def simulate(config, progress=True) -> Result:
-    """Run the configured model and return a Result (see module docstring)."""
+def simulate(config, progress=True, mandrel=None, centerline=None) -> Result:
+    """Run the configured model and return a Result (see module docstring).
+
+    ``mandrel`` and ``centerline`` may be passed when already loaded (the CLI checks them first).
+    """
     wall0 = _time.perf_counter()
-    mandrel, centerline = load_geometry(config)
+    if mandrel is None or centerline is None:
+        mandrel, centerline = load_geometry(config)
     machine = Machine.from_config(config.machine)
     stepper = _Stepper(config, machine, mandrel, centerline)
     status, message = "done", ""
@@ -235,8 +239,9 @@ class _Stepper:
         """Crossings that reached the mandrel become fell points (interaction model)."""
         if not deposits:
             return
-        k = np.array([d[0] for d in deposits], dtype=np.int64)
-        points = pose.to_mandrel(np.array([d[1] for d in deposits], dtype=float))
+        last = {int(kk): p for kk, p in deposits}     # a yarn's deposits come lowest first: keep the last
+        k = np.array(list(last), dtype=np.int64)
+        points = pose.to_mandrel(np.array(list(last.values()), dtype=float))
         on_surface, faces = self.mandrel.closest_points(points)
         F = self.F.copy()
         face = self.face.copy()
