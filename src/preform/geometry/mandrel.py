@@ -48,11 +48,11 @@ class Mandrel:
 
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
-    @property
+    @cached_property
     def bounds(self) -> np.ndarray:
         return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
 
-    @property
+    @cached_property
     def diagonal(self) -> float:
         """Bounding-box diagonal, m."""
         b = self.bounds
