@@ -186,7 +186,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     config.write_text(CASE.format(machine_extra=""))
     state = {"status": "done", "preflight": []}
 
-    def simulate(cfg, progress=True, mandrel=None, centerline=None):
+    def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False):
         state["progress"] = progress
         return dataclasses.replace(small_result, config=cfg, status=state["status"],
                                    message="" if state["status"] == "done" else "stopped")

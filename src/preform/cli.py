@@ -79,6 +79,10 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
     ]
 
 
+#: the state of a running simulation, saved periodically and on Ctrl-C, removed when it is done
+CHECKPOINT = "checkpoint.pkl"
+
+
 def cmd_run(args) -> int:
     from .config import load_config
 
@@ -88,7 +92,8 @@ def cmd_run(args) -> int:
     from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
 
     out_dir = _out_dir(config, args.out)
-    result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline)
+    result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline,
+                      checkpoint=out_dir / CHECKPOINT, resume=args.resume)
     fields = None
     map_to_surface = _optional("preform.fields", "map_to_surface")
     if map_to_surface is not None and len(result.yarns.points):
@@ -166,6 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("config", metavar="CONFIG", help="case file (TOML)")
     run.add_argument("--out", metavar="DIR", help="result folder (default: [output] dir of the config)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--resume", action="store_true",
+                     help=f"continue an interrupted run from its checkpoint (<out>/{CHECKPOINT})")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser("check", help="validate a case and its mandrel without simulating")

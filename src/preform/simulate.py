@@ -8,14 +8,22 @@ to the last good step, with ``status`` saying so.
 
 from __future__ import annotations
 
+import json
+import os
+import pickle
+import signal
+import threading
 import time as _time
+from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from . import geometry
-from .errors import SimulationError
+from . import __version__
+from .errors import ConfigError, SimulationError
 from .kinematic import Depositor, smooth_normals
 from .zone import ZoneStep, make_zone
 from .machine import Machine
@@ -120,24 +128,67 @@ def _tie_points(config, machine, mandrel, centerline, pose, rng):
     return point, face.astype(np.int64)
 
 
-def simulate(config, progress=True, mandrel=None, centerline=None) -> Result:
+def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False) -> Result:
     """Run the configured model and return a Result (see module docstring).
 
     ``mandrel`` and ``centerline`` may be passed when already loaded (the CLI checks them first).
+    ``checkpoint``: a file where the run's state is saved every ``CHECKPOINT_EVERY_S`` seconds of
+    wall time and when it is interrupted; with ``resume=True`` the run continues from it and
+    gives the same results as a run that was never stopped. Ctrl-C stops after the current step
+    (a second Ctrl-C stops at once).
     """
     wall0 = _time.perf_counter()
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
     machine = Machine.from_config(config.machine)
     stepper = _Stepper(config, machine, mandrel, centerline)
+    if resume:
+        if checkpoint is None or not Path(checkpoint).is_file():
+            raise ConfigError(f"--resume: no checkpoint to resume from at {checkpoint}; run without --resume")
+        stepper.restore(checkpoint)
     status, message = "done", ""
-    try:
-        stepper.run(progress=progress)
-    except KeyboardInterrupt:
-        status, message = "interrupted", f"interrupted by the user at t = {stepper.clock.t:.4g} s"
-    except SimulationError as exc:
-        status, message = "failed", str(exc)
+    with _graceful_interrupt(stepper):
+        try:
+            stepper.run(progress=progress, checkpoint=checkpoint)
+        except KeyboardInterrupt:
+            status = "interrupted"
+            message = f"interrupted by the user at t = {stepper.clock.t:.4g} s"
+            if checkpoint is not None and stepper.consistent:
+                stepper.save(checkpoint)
+                message += "; resume with --resume"
+            elif checkpoint is not None and Path(checkpoint).is_file():
+                message += "; stopped inside a step: --resume continues from the last checkpoint"
+        except SimulationError as exc:
+            status, message = "failed", str(exc)
+    if status == "done" and checkpoint is not None:
+        Path(checkpoint).unlink(missing_ok=True)
     return stepper.result(status, message, _time.perf_counter() - wall0)
+
+
+@contextmanager
+def _graceful_interrupt(stepper):
+    """First Ctrl-C: stop after the current step (state stays consistent); second: at once."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        if stepper.stop_requested:
+            raise KeyboardInterrupt
+        stepper.stop_requested = True
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+#: seconds of wall time between checkpoints
+CHECKPOINT_EVERY_S = 30.0
+#: attributes of _Stepper that make its state (saved and restored by checkpoints)
+_STATE = ("clock", "F", "face", "tie", "laid_steps", "laid_extra", "rows", "fell_hist", "face_hist",
+          "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided")
 
 
 class _Stepper:
@@ -175,6 +226,41 @@ class _Stepper:
         self.zone = make_zone(config, machine, mandrel)
         self.zone.start(0.0, pose.to_machine(self.F), pose)
         self._record(pose, ZoneStep.kinematic(machine.supply_points(0.0)))
+        self.step = 0
+        self.braided = self.braided_length_estimate()
+        self.stop_requested = False
+        self.consistent = True   # False while a step is half applied
+
+    # -- checkpoints --------------------------------------------------------------------------
+    def _fingerprint(self):
+        from .config import dump_config
+
+        d = dump_config(self.config)
+        d.pop("output", None)
+        return json.dumps(d, sort_keys=True, default=str)
+
+    def save(self, path):
+        """Pickle the state atomically (temporary file in the same folder, then rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        state = {name: getattr(self, name) for name in _STATE}
+        payload = {"version": __version__, "config": self._fingerprint(), "state": state}
+        tmp = path.with_name(f".{path.name}.tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(payload, fh, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+
+    def restore(self, path):
+        try:
+            with open(path, "rb") as fh:
+                payload = pickle.load(fh)
+        except Exception as exc:
+            raise ConfigError(f"--resume: the checkpoint {path} cannot be read ({exc}); run without --resume") from None
+        if payload.get("config") != self._fingerprint():
+            raise ConfigError(f"--resume: the checkpoint {path} was made with other inputs; "
+                              "run without --resume to start again")
+        for name, value in payload["state"].items():
+            setattr(self, name, value)
 
     # -- process kinematics -------------------------------------------------------------------
     def pose(self, travel):
@@ -188,57 +274,70 @@ class _Stepper:
         return float(np.mean(self.project(self.F)))
 
     # -- stepping -----------------------------------------------------------------------------
-    def run(self, progress=True):
+    def run(self, progress=True, checkpoint=None):
         cfg = self.config
         target = cfg.process.braid_length
         L = self.centerline.length
         bar = _progress_bar(target, progress)
+        last_save = _time.perf_counter()
         try:
-            braided = self.braided_length_estimate()
-            step = 0
-            while braided < target:
-                v = take_up_speed(cfg.process.take_up_speed, braided)
+            bar(self.braided)
+            while self.braided < target:
+                if self.stop_requested:
+                    raise KeyboardInterrupt
+                v = take_up_speed(cfg.process.take_up_speed, self.braided)
                 self.advance(v)
-                step += 1
-                if step % 10 == 0:
-                    braided = self.braided_length_estimate()
-                    bar(braided)
+                if self.step % 10 == 0:
+                    self.braided = self.braided_length_estimate()
+                    bar(self.braided)
                 if self.clock.travel - self.lead > L:
                     raise SimulationError(
                         f"the mandrel's end passed the machine at t = {self.clock.t:.4g} s before "
-                        f"{target} m were braided ({braided:.4g} m): shorten [process] braid_length "
+                        f"{target} m were braided ({self.braided:.4g} m): shorten [process] braid_length "
                         "or lengthen the mandrel")
+                if checkpoint is not None and _time.perf_counter() - last_save > CHECKPOINT_EVERY_S:
+                    self.save(checkpoint)
+                    last_save = _time.perf_counter()
         finally:
             bar(None)
 
     def advance(self, v):
+        """One time step; the state changes only at the end (an error leaves the last good step)."""
+        self.consistent = False   # a zone with state (interaction) changes during its step
         t0, dt = self.clock.t, self.dt
         travel_end = self.clock.travel + v * dt
         pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
         pose_end = self.pose(travel_end)
         zs = self.zone.step(t0, dt, pose_end.to_machine(self.F), pose_end)
-        self._deposit(zs.deposits, pose_end)
+        F, face, deposited = self._deposit(zs.deposits, pose_end)
         G_mid = pose_mid.to_mandrel(zs.G_mid)
         G_end = pose_end.to_mandrel(zs.G_end)
         max_len = max(20.0 * (self.machine.omega * self.mandrel.diagonal + v) * dt, 10 * self.config.yarn.width)
-        laid = self.depositor.step(self.F, self.face, G_mid, G_end, max_len)
+        laid = self.depositor.step(F, face, G_mid, G_end, max_len)
+        t1 = t0 + dt
         if not np.all(np.isfinite(laid.final_F)):
             bad = int(np.nonzero(~np.all(np.isfinite(laid.final_F), axis=1))[0][0])
-            raise SimulationError(f"non-finite fell point of yarn {bad} at t = {t0 + dt:.6g} s")
-        t1 = t0 + dt
+            raise SimulationError(f"non-finite fell point of yarn {bad} at step {self.step + 1}, t = {t1:.6g} s")
         step = len(self.laid_steps)
+        extra = [(k, step, -1.0, p, f, t1, 0) for k, p, f in deposited]
         for k, items in laid.extra.items():
             for order, (p, f, fl) in enumerate(items):
-                self.laid_extra.append((k, step, order, p, f, t1, fl))
+                extra.append((k, step, order, p, f, t1, fl))
+        self.laid_extra.extend(extra)
         self.laid_steps.append((t1, laid.final_F, laid.final_face, laid.moved, laid.end_flag))
         self.F, self.face = laid.final_F, laid.final_face
         self.clock = _Clock(t1, travel_end)
+        self.step += 1
         self._record(pose_end, zs)
+        self.consistent = True
 
     def _deposit(self, deposits, pose):
-        """Crossings that reached the mandrel become fell points (interaction model)."""
+        """Crossings that reached the mandrel become fell points (interaction model).
+
+        Returns new (F, face) arrays and the list of (yarn, point, face) laid this way.
+        """
         if not deposits:
-            return
+            return self.F, self.face, []
         last = {int(kk): p for kk, p in deposits}     # a yarn's deposits come lowest first: keep the last
         k = np.array(list(last), dtype=np.int64)
         points = pose.to_mandrel(np.array(list(last.values()), dtype=float))
@@ -247,10 +346,7 @@ class _Stepper:
         face = self.face.copy()
         F[k] = on_surface
         face[k] = np.asarray(faces, dtype=np.int64)
-        step = len(self.laid_steps)
-        for j, kk in enumerate(k):
-            self.laid_extra.append((int(kk), step, -1.0, F[kk].copy(), int(face[kk]), self.clock.t + self.dt, 0))
-        self.F, self.face = F, face
+        return F, face, [(int(kk), F[kk].copy(), int(face[kk])) for kk in k]
 
     def _record(self, pose, zs):
         F_machine = pose.to_machine(self.F)
