@@ -52,6 +52,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
     s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
     _check_unit(config, float(mandrel.diagonal), float(distance.max()))
     _check_length(config, float(centerline.length))
+    _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
     reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
     warnings = _check_fit(config, reach)
@@ -82,6 +83,28 @@ def _check_unit(config, diagonal: float, section_radius: float) -> None:
         if unit == "mm":
             raise ConfigError(f'{where}: {size}; is the STL in metres? expected stl_unit = "m"')
         raise MandrelError(f"{config.mandrel.stl}: {size}; expected a mandrel larger than the yarns")
+
+
+#: centerline points tested for lying inside the mandrel
+INSIDE_SAMPLES = 25
+
+
+def _check_centerline_inside(config, mandrel, centerline) -> None:
+    """The centerline must run inside the mandrel where it is braided (the yarns are tied around it)."""
+    contains = getattr(getattr(mandrel, "mesh", None), "contains", None)
+    if contains is None:    # stand-in geometry without a mesh
+        return
+    end = min(config.process.initial_position + config.process.braid_length, centerline.length)
+    s = np.linspace(0.02 * end, end, INSIDE_SAMPLES)
+    points = centerline.frames_at(s)[0]
+    inside = np.asarray(contains(points), dtype=bool)
+    if not np.all(inside):
+        bad = s[~inside][0]
+        p = points[~inside][0]
+        raise ConfigError(
+            f"[mandrel] centerline = {config.mandrel.centerline}: the centerline leaves the mandrel at "
+            f"{bad:.4g} m from the tip (point {p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g} m in the STL frame); "
+            "expected a centerline inside the mandrel, tip first, in the STL's frame and unit")
 
 
 def _check_length(config, length: float) -> None:
