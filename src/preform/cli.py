@@ -67,15 +67,21 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
     from .io.tables import summary_dict
 
     s = summary_dict(result)
-    angle = s["braid_angle_deg"]["steady"]
+    angle = s["braid_angle_deg"]["final"]
     conv = s["convergence_length_m"]["final"]
+    steady = s.get("steady_state") or {}
+    if steady.get("reached"):
+        steady_line = f"steady state from {steady['braided_length_m']:.3f} m braided on"
+    else:
+        steady_line = "steady state not reached in this run"
     status = s["status"] + (f" ({s['message']})" if s["message"] else "")
     return [
         f"results: {out_dir} ({n_files} files)",
         f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall, "
         f"braided length {_fmt(s['braided_length_m'])} m",
-        f"steady braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
-        f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])})",
+        f"final braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
+        f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])}); "
+        + steady_line,
     ]
 
 

@@ -128,6 +128,15 @@ def _steady(result, name):
     return float(np.mean(column[in_window]))
 
 
+def _steady_state(result):
+    from ..steady import steady_state
+
+    try:
+        return steady_state(result.history)
+    except KeyError:
+        return None
+
+
 def flag_counts(yarns) -> dict:
     """Number of deposited points carrying each flag: {"bridge": n, "catch": n, "slip": n}."""
     flags = np.asarray(yarns.flags, dtype=np.int64)
@@ -160,6 +169,7 @@ def summary_dict(result, extra=None) -> dict:
                       "min": _final(result, "convergence_length_min_m"),
                       "max": _final(result, "convergence_length_max_m")},
         },
+        "steady_state": _steady_state(result),
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
