@@ -56,6 +56,24 @@ def barycentric(V, T, f, x, y, z):
 
 
 @njit(cache=True)
+def face_double_area(V, T, f):
+    """Twice the area of face f, |(p1 - p0) x (p2 - p0)|."""
+    p0 = T[f, 0]
+    p1 = T[f, 1]
+    p2 = T[f, 2]
+    ux = V[p1, 0] - V[p0, 0]
+    uy = V[p1, 1] - V[p0, 1]
+    uz = V[p1, 2] - V[p0, 2]
+    wx = V[p2, 0] - V[p0, 0]
+    wy = V[p2, 1] - V[p0, 1]
+    wz = V[p2, 2] - V[p0, 2]
+    qx = uy * wz - uz * wy
+    qy = uz * wx - ux * wz
+    qz = ux * wy - uy * wx
+    return np.sqrt(qx * qx + qy * qy + qz * qz)
+
+
+@njit(cache=True)
 def smooth_normal(V, T, CN, f, x, y, z):
     """Unit smooth normal at (x, y, z) on face f: normalised barycentric blend of corner normals."""
     b0, b1, b2 = barycentric(V, T, f, x, y, z)
@@ -105,6 +123,7 @@ def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
     nx = FN[f, 0]
     ny = FN[f, 1]
     nz = FN[f, 2]
+    two_area = face_double_area(V, T, f)
     for i in range(3):
         j = T[f, (i + 1) % 3]
         k = T[f, (i + 2) % 3]
@@ -116,20 +135,6 @@ def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
         cx = ny * ez - nz * ey
         cy = nz * ex - nx * ez
         cz = nx * ey - ny * ex
-        # 2A from the full cross product of the face
-        p0 = T[f, 0]
-        p1 = T[f, 1]
-        p2 = T[f, 2]
-        ux = V[p1, 0] - V[p0, 0]
-        uy = V[p1, 1] - V[p0, 1]
-        uz = V[p1, 2] - V[p0, 2]
-        wx = V[p2, 0] - V[p0, 0]
-        wy = V[p2, 1] - V[p0, 1]
-        wz = V[p2, 2] - V[p0, 2]
-        qx = uy * wz - uz * wy
-        qy = uz * wx - ux * wz
-        qz = ux * wy - uy * wx
-        two_area = np.sqrt(qx * qx + qy * qy + qz * qz)
         rate = (cx * dx + cy * dy + cz * dz) / two_area
         if rate < -1e-14:
             if i == 0:
