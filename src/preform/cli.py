@@ -36,6 +36,8 @@ def _checked_geometry(config):
     from .simulate import load_geometry
 
     mandrel, centerline = load_geometry(config)
+    for repair in getattr(mandrel, "repairs", ()):
+        print(f"mandrel: {repair}", file=sys.stderr)
     preflight = _optional("preform.checks", "preflight")
     if preflight is not None:
         _print_warnings(preflight(config, mandrel, centerline))

@@ -170,6 +170,7 @@ def summary_dict(result, extra=None) -> dict:
                       "max": _final(result, "convergence_length_max_m")},
         },
         "steady_state": _steady_state(result),
+        "mandrel_repairs": list(getattr(result.mandrel, "repairs", ()) or ()),
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),

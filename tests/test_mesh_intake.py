@@ -1,0 +1,136 @@
+"""Mesh intake of damaged CAD STLs (issue 5, item 1): repaired and said, or refused clearly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from preform.cli import main
+from preform.errors import MandrelError
+from preform.geometry import load_mandrel
+from preform.geometry.repair import repair_mesh
+
+
+@pytest.fixture(scope="module")
+def cone():
+    verts, faces = __import__("preform.geometry.shapes", fromlist=["cone"]).cone(0.04, 0.08, 1.0, n_around=64, n_along=40)
+    return trimesh.Trimesh(verts, faces, process=False)
+
+
+def _check_closed(v, f, volume):
+    m = trimesh.Trimesh(v, f, process=False)
+    assert m.is_watertight and m.is_winding_consistent
+    assert m.volume == pytest.approx(volume, rel=1e-6)
+
+
+def test_clean_mesh_is_untouched(cone):
+    v, f, report = repair_mesh(cone.vertices, cone.faces)
+    assert not report.changed
+    _check_closed(v, f, cone.volume)
+
+
+def test_triangle_soup_is_merged(cone):
+    soup = cone.vertices[cone.faces].reshape(-1, 3)
+    v, f, report = repair_mesh(soup, np.arange(len(soup)).reshape(-1, 3))
+    assert len(v) == len(cone.vertices)
+    assert not report.changed          # a soup is what every STL is: merging it is not a repair
+    _check_closed(v, f, cone.volume)
+
+
+def test_duplicate_vertices_in_an_indexed_mesh_are_merged_and_said(cone):
+    v = np.vstack([cone.vertices, cone.vertices[:10]])
+    f = cone.faces.copy()
+    f[f < 10] += len(cone.vertices)            # half the faces use the copies
+    f[::2] = np.where(f[::2] >= len(cone.vertices), f[::2] - len(cone.vertices), f[::2])
+    v2, f2, report = repair_mesh(v, f)
+    assert "merged 10 duplicate vertices" in report.messages[0]
+    _check_closed(v2, f2, cone.volume)
+
+
+def test_flipped_duplicated_and_degenerate_faces(cone):
+    rng = np.random.default_rng(3)
+    f = cone.faces.copy()
+    pick = rng.random(len(f)) < 0.25
+    f[pick] = f[pick][:, ::-1]
+    f = np.vstack([f, cone.faces[:20], [[0, 0, 1], [1, 1, 1]]])
+    v, f2, report = repair_mesh(cone.vertices, f)
+    text = " ".join(report.messages)
+    assert "flipped" in text or "outwards" in text
+    assert "20 duplicated faces" in text and "2 degenerate faces" in text
+    _check_closed(v, f2, cone.volume)
+
+
+def test_inward_mesh_is_turned_outwards(cone):
+    v, f, report = repair_mesh(cone.vertices, cone.faces[:, ::-1])
+    assert "outwards" in report.messages[-1]
+    _check_closed(v, f, cone.volume)
+
+
+def test_small_holes_are_filled(cone):
+    f = np.delete(cone.faces, [5, 300, 301], axis=0)
+    v, f2, report = repair_mesh(cone.vertices, f)
+    assert "filled" in report.messages[-1]
+    m = trimesh.Trimesh(v, f2, process=False)
+    assert m.is_watertight
+    assert m.volume == pytest.approx(cone.volume, rel=0.01)   # a few facets' worth of volume
+
+
+def test_open_surface_is_refused(cone):
+    sides = cone.faces[np.abs(cone.face_normals[:, 2]) < 0.9]    # caps removed: a tube
+    with pytest.raises(MandrelError, match="open surface.*mm across"):
+        repair_mesh(cone.vertices, sides, source="tube.stl")
+
+
+def test_two_bodies_refused_unless_largest_is_asked_for(cone):
+    v = np.vstack([cone.vertices, cone.vertices * 0.5 + [1, 0, 0]])
+    f = np.vstack([cone.faces, cone.faces + len(cone.vertices)])
+    with pytest.raises(MandrelError, match='2 disjoint bodies.*body="largest"'):
+        repair_mesh(v, f, source="two.stl")
+    v2, f2, report = repair_mesh(v, f, body="largest")
+    assert "largest of 2 bodies" in report.messages[-1]
+    _check_closed(v2, f2, cone.volume)
+
+
+def test_non_manifold_is_refused(cone):
+    v = np.vstack([cone.vertices, [[5.0, 5.0, 5.0]]])
+    f = np.vstack([cone.faces, [[cone.faces[0, 0], cone.faces[0, 1], len(cone.vertices)]]])
+    with pytest.raises(MandrelError, match="non-manifold"):
+        repair_mesh(v, f)
+
+
+def test_repairs_are_reported_by_mandrel_info(tmp_path, cone, capsys):
+    f = cone.faces.copy()
+    f[::7] = f[::7, ::-1]
+    trimesh.Trimesh(cone.vertices, f, process=False).export(tmp_path / "damaged.stl")
+    m = load_mandrel(tmp_path / "damaged.stl")
+    assert m.repairs
+    assert main(["mandrel", "info", str(tmp_path / "damaged.stl"), "--csv", str(tmp_path / "c.csv")]) == 0
+    assert "repaired" in capsys.readouterr().out
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), scale=st.sampled_from([1e-3, 1.0, 1e3]),
+       flip=st.floats(0, 1), dup=st.floats(0, 0.2), jitter=st.booleans())
+def test_random_damage_is_repaired_exactly_or_refused(cone, seed, scale, flip, dup, jitter):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    R = trimesh.transformations.quaternion_matrix(q)[:3, :3]
+    v = (cone.vertices @ R.T) * scale + rng.normal(size=3)
+    if jitter:
+        v = v + rng.normal(scale=1e-12 * scale, size=v.shape)
+    f = cone.faces.copy()
+    pick = rng.random(len(f)) < flip
+    f[pick] = f[pick][:, ::-1]
+    f = np.vstack([f, f[rng.random(len(f)) < dup]])
+    try:
+        v2, f2, _ = repair_mesh(v, f)
+    except MandrelError as exc:
+        assert str(exc)
+        return
+    m = trimesh.Trimesh(v2, f2, process=False)
+    assert m.is_watertight and m.volume > 0
+    assert m.volume == pytest.approx(cone.volume * scale**3, rel=1e-6)
