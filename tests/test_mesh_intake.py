@@ -134,3 +134,24 @@ def test_random_damage_is_repaired_exactly_or_refused(cone, seed, scale, flip, d
     m = trimesh.Trimesh(v2, f2, process=False)
     assert m.is_watertight and m.volume > 0
     assert m.volume == pytest.approx(cone.volume * scale**3, rel=1e-6)
+
+
+def test_self_intersecting_mesh_is_refused(cone):
+    # two overlapping copies of the cone joined into one connected surface would be non-manifold;
+    # instead push a band of vertices through the opposite wall
+    v = cone.vertices.copy()
+    z = v[:, 2]
+    band = (z > 0.45) & (z < 0.55) & (v[:, 0] > 0.02)
+    v[band, 0] -= 0.2            # the band's side pokes out through the other side
+    with pytest.raises(MandrelError, match="intersects itself"):
+        repair_mesh(v, cone.faces, source="folded.stl")
+
+
+def test_shipped_mandrels_do_not_self_intersect():
+    from pathlib import Path
+
+    from preform.geometry.repair import self_intersections
+
+    for stl in sorted((Path(__file__).resolve().parents[1] / "mandrels").glob("*.stl")):
+        m = trimesh.load(stl)
+        assert len(self_intersections(np.asarray(m.vertices), np.asarray(m.faces))) == 0, stl.name

@@ -215,7 +215,46 @@ def repair_mesh(vertices, faces, *, source="mandrel", body=None):
     if _signed_volume(V, F) < 0:
         F = F[:, ::-1].copy()
         msgs.append("turned the normals outwards (the triangles were wound inwards)")
+    _refuse_self_intersections(V, F, source)
     return V, F, RepairReport(tuple(msgs))
+
+
+def self_intersections(vertices, faces):
+    """Edges that pierce a triangle they do not belong to: (k,) edge index pairs (a, b).
+
+    Every pair of crossing (non-coplanar) triangles has such an edge. One batched ray query with
+    trimesh (embree when installed): each edge, shortened by a hair at both ends, is cast against
+    the mesh.
+    """
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    e = np.unique(np.sort(mesh.edges, axis=1), axis=0)
+    a, b = vertices[e[:, 0]], vertices[e[:, 1]]
+    d = b - a
+    length = np.linalg.norm(d, axis=1)
+    ok = length > 0
+    e, a, d, length = e[ok], a[ok], d[ok], length[ok]
+    u = d / length[:, None]
+    eps = 1e-6 * length
+    loc, ray, tri = mesh.ray.intersects_location(a + u * eps[:, None], u, multiple_hits=True)
+    if len(ray) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    t = np.einsum("ij,ij->i", loc - a[ray], u[ray])
+    inside = t < length[ray] - 2 * eps[ray]
+    own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
+    bad = inside & ~own
+    return e[np.unique(ray[bad])]
+
+
+def _refuse_self_intersections(V, F, source):
+    bad = self_intersections(V, F)
+    if len(bad):
+        p = V[bad[0, 0]]
+        raise MandrelError(
+            f"{source}: the surface intersects itself ({len(bad)} edges pierce other triangles, e.g. near "
+            f"({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m), so inside and outside are ambiguous. Export the "
+            "mandrel as one clean solid (a boolean union of its parts)")
 
 
 def _fill_holes(V, F, edge_ids, counts, source):
