@@ -77,6 +77,7 @@ def test_base_case_passes(tmp_path, capsys):
     ("yarn", "width", "4 mm", ["[yarn] width"]),
     ("yarn", "friction", float("nan"), ["[yarn] friction"]),
     ("machine", "guide_ring", {"radius": 0.03}, ["guide ring"]),                 # mandrel does not fit
+    ("machine", "spool_radius", 0.03, ["spool"]),                                # nor the spool ring
     ("mandrel", "stl_unit", "mm", ["stl_unit"]),                                  # 150 m read as ... too small
     ("mandrel", "stl", "nowhere.stl", ["nowhere.stl"]),
     ("process", "braid_length", 5.0, ["braid_length"]),                          # longer than the mandrel
