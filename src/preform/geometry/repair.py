@@ -1,149 +1,415 @@
-"""Mesh intake for real-world CAD STLs (issue 5): repair what can be repaired, refuse the rest.
+"""Mesh intake for real-world CAD STLs (issue 5, item 1): repair what can be repaired, refuse the rest.
 
-``repair_mesh`` merges duplicate vertices, drops degenerate and duplicated faces, makes the winding
-consistent and outward, and fills small holes; it refuses, naming the file and what to do, meshes
-that cannot be a mandrel: large holes (an open surface), several disjoint bodies (unless
-``body="largest"``), non-manifold edges. Every change is said in ``RepairReport.messages``, which
-the run log and ``summary.json`` repeat.
+``repair_mesh`` works on plain arrays and, in this order:
+
+1. merges duplicate and near-duplicate vertices (closer than ``tol.merge_vertices`` times the
+   bounding-box diagonal; the first vertex of a cluster keeps its coordinates);
+2. drops degenerate faces: collapsed ones (a repeated vertex) and zero-area "caps" (one vertex within
+   the merge distance of the opposite edge). A cap's neighbour across the long edge is split at the
+   cap's middle vertex, so no crack is left behind;
+3. drops exact duplicate faces (same three vertices, either winding);
+4. refuses non-manifold edges (three or more faces on one edge);
+5. makes the winding consistent by propagating orientation across every two-face edge (one
+   connected-components call on the orientation double cover; a non-orientable surface is refused);
+6. finds the disjoint bodies and refuses several of them unless ``body`` chooses one;
+7. fills small holes by ear clipping the loop in its mean plane, and refuses large ones (an open
+   surface). Small: the loop spans at most ``SMALL_HOLE`` of the bounding-box diagonal, or it has
+   at most ``FEW_EDGES`` edges (one or two missing triangles, which on a coarse CAD mesh may run the
+   whole length of the part) and its patch covers at most ``SMALL_PATCH`` of the surface area;
+8. turns the winding outwards (signed volume > 0) and refuses a surface that encloses no volume;
+9. refuses self-intersections: an edge that pierces a triangle it does not belong to (one batched
+   ray query, embree when installed). Coplanar overlaps are not detected.
+
+Every change is said in ``RepairReport.messages``, which the run log and ``summary.json`` repeat.
+Merging the corners of an STL triangle soup (``3 * n_faces`` vertices, as every STL file is) is the
+format, not a repair, and is not said.
 """
 
 from __future__ import annotations
 
-from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ..errors import MandrelError
 from ..tolerances import tol
 
-#: holes whose boundary loop spans less than this fraction of the bounding-box diagonal are filled
+#: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
 SMALL_HOLE = 0.05
+#: so are one or two missing triangles (a loop of at most this many edges) whose patch covers at
+#: most SMALL_PATCH of the surface area: on a coarse CAD mesh one triangle can span the whole part
+FEW_EDGES = 4
+SMALL_PATCH = 0.05
+#: a closed surface enclosing less than this times diagonal**3 encloses no volume (flat, folded)
+MIN_VOLUME = 1e-9
+
+_UNIT_NAMES = {1.0: "m", 1e-3: "mm"}
 
 
 @dataclass(frozen=True)
 class RepairReport:
-    messages: tuple = field(default=())
+    """What ``repair_mesh`` did. Counts refer to the input; lengths in metres.
+
+    merged_vertices : vertices merged into others (the shared corners of an STL soup not counted)
+    degenerate_faces : zero-area faces dropped
+    duplicate_faces : repeated faces dropped (same vertices, either winding)
+    flipped_faces : faces whose winding was reversed (consistent and outward)
+    bodies : disjoint bodies found (one kept)
+    holes_filled, largest_hole : small holes filled, and the largest one's span (m)
+    messages : one sentence per change, for people
+    """
+
+    input_vertices: int = 0
+    input_faces: int = 0
+    merged_vertices: int = 0
+    degenerate_faces: int = 0
+    duplicate_faces: int = 0
+    flipped_faces: int = 0
+    bodies: int = 1
+    holes_filled: int = 0
+    largest_hole: float = 0.0
+    messages: tuple[str, ...] = ()
 
     @property
     def changed(self) -> bool:
+        """True when anything beyond welding an STL soup was repaired."""
         return bool(self.messages)
 
 
-def _diag(vertices):
-    return float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
+def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None):
+    """Repair a triangle mesh (or soup) into one closed, outward-wound body; see the module docstring.
+
+    vertices : (n, 3) float64, m, the STL's frame (already converted with ``unit_scale``)
+    faces : (m, 3) int64, indices into ``vertices``
+    source : the file name, quoted in messages
+    unit_scale : metres per unit of the source file (1e-3 for an STL in mm); locations in messages
+        are given in the file's own coordinates so they can be found in the CAD tool
+    body : None (exactly one body required), "largest", or an index into the bodies ordered by
+        decreasing bounding-box diagonal (0 is the largest)
+
+    Returns ``(vertices (k, 3) float64 m, faces (l, 3) int64, RepairReport)``; unused vertices are
+    dropped. The inputs are not modified. Raises MandrelError, naming ``source``, what is wrong and
+    what to do, for meshes that cannot be a mandrel.
+    """
+    say = _Messages(source, unit_scale)
+    V, F = _validated(vertices, faces, say)
+    counts = {"input_vertices": len(V), "input_faces": len(F)}
+    radius = tol.merge_vertices * _diagonal(V)
+
+    V, F, counts["merged_vertices"] = _merge_vertices(V, F, radius)
+    if counts["merged_vertices"]:
+        say.change(f"merged {counts['merged_vertices']:,} duplicate vertices")
+    F, counts["degenerate_faces"] = _drop_degenerate(V, F, radius)
+    if counts["degenerate_faces"]:
+        say.change(f"dropped {counts['degenerate_faces']:,} degenerate faces")
+    F, counts["duplicate_faces"] = _drop_duplicate_faces(F)
+    if counts["duplicate_faces"]:
+        say.change(f"dropped {counts['duplicate_faces']:,} duplicated faces")
+    if len(F) == 0:
+        say.refuse(f"no usable triangles (all {counts['input_faces']:,} are degenerate)",
+                   "export the mandrel again as a closed solid")
+
+    edges = _EdgeTable(F)
+    _refuse_non_manifold(V, edges, say)
+    flipped, component = _orientation(F, edges, V, say)
+    F = np.where(flipped[:, None], F[:, ::-1], F)
+    keep, counts["bodies"] = _choose_body(V, F, component, body, say)
+    F, flipped = F[keep], flipped[keep]
+
+    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say)
+    if _signed_volume(V, F) < 0:
+        F = F[:, ::-1]
+        flipped = ~flipped
+    _refuse_flat(V, F, say)
+    n_flipped = int(flipped.sum())
+    counts["flipped_faces"] = n_flipped
+    if n_flipped == len(flipped):
+        say.change(f"turned the normals outwards (all {n_flipped:,} faces were wound inwards)", first=True)
+    elif n_flipped:
+        say.change(f"flipped {n_flipped:,} faces to consistent outward winding", first=True)
+    V, F = _compact(V, F)
+    _refuse_self_intersections(V, F, say)
+    return V, F, RepairReport(**counts, messages=tuple(say.changes))
 
 
-def _merge(vertices, faces, rel_tol):
-    q = np.round((vertices - vertices.min(axis=0)) / (rel_tol * _diag(vertices))).astype(np.int64)
-    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    return vertices[first], inverse.reshape(-1)[faces]
+class _Messages:
+    """Collects repair sentences (orientation ones before hole filling) and raises refusals."""
+
+    def __init__(self, source, unit_scale):
+        self.source = str(source)
+        self.unit_scale = float(unit_scale)
+        self.changes: list[str] = []
+        self._before_holes = 0
+
+    def change(self, text, first=False):
+        if first:   # said in pipeline order, although decided after the hole filling
+            self.changes.insert(self._before_holes, text)
+        else:
+            self.changes.append(text)
+
+    def mark_holes(self):
+        self._before_holes = len(self.changes)
+
+    def refuse(self, what, todo):
+        raise MandrelError(f"{self.source}: {what}. {todo[0].upper()}{todo[1:]}")
+
+    def where(self, point):
+        """A location in the source file's own coordinates and unit."""
+        unit = _UNIT_NAMES.get(self.unit_scale, "file units")
+        p = np.asarray(point, dtype=float) / self.unit_scale
+        return f"near ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) {unit}"
 
 
-def _drop_bad_faces(vertices, faces):
-    p = vertices[faces]
-    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    degenerate = ~distinct | (area2 <= 1e-12 * _diag(vertices) ** 2)
-    faces = faces[~degenerate]
-    _, keep = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
-    keep = np.sort(keep)
-    return faces[keep], int(degenerate.sum()), len(faces) - len(keep)
+def _mm(length):
+    return f"{1e3 * length:.3g} mm" if length < 1.0 else f"{1e3 * length:,.0f} mm"
 
 
-def _edges(faces):
-    """Undirected edge ids per face side (nf, 3), and the (a, b) of each id."""
-    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
-    undirected = np.sort(directed, axis=1)
-    uniq, inverse, counts = np.unique(undirected, axis=0, return_inverse=True, return_counts=True)
-    return inverse.reshape(-1, 3), uniq, counts
+def _validated(vertices, faces, say):
+    """Copies as (n, 3) float64 and (m, 3) int64, or a refusal naming what is wrong."""
+    V = np.array(vertices, dtype=np.float64)
+    F = np.array(faces)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        say.refuse(f"expected a triangle mesh, got vertices of shape {V.shape} and faces of shape {F.shape}",
+                   "export the mandrel as a triangulated STL")
+    if not np.issubdtype(F.dtype, np.integer):
+        say.refuse(f"face indices of type {F.dtype} are not integers", "pass faces as int64 indices")
+    F = F.astype(np.int64)
+    if F.min() < 0 or F.max() >= len(V):
+        say.refuse(f"face indices run from {F.min()} to {F.max()} but there are {len(V)} vertices",
+                   "check the mesh export")
+    if not np.all(np.isfinite(V[np.unique(F)])):
+        say.refuse("some vertex coordinates are not finite (NaN or infinite)", "export the STL again")
+    V, F = _compact(V, F)
+    return V, F
 
 
-def _orient(faces, edge_ids, counts):
-    """Flip faces so that every manifold edge is used in opposite directions; returns (faces, flips)."""
-    nf = len(faces)
-    sides = edge_ids.reshape(-1)
-    order = np.argsort(sides, kind="stable")
-    sorted_sides = sides[order]
-    starts = np.searchsorted(sorted_sides, np.arange(len(counts)))
-    flipped = np.zeros(nf, dtype=bool)
-    seen = np.zeros(nf, dtype=bool)
-    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2)   # (nf, 3, 2)
-    for root in range(nf):
-        if seen[root]:
+def _diagonal(V):
+    """Bounding-box diagonal (m) of vertices (n, 3); 1 for a single point."""
+    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) or 1.0
+
+
+def _compact(V, F):
+    """Drop unused vertices, keeping the order of the used ones."""
+    used = np.zeros(len(V), dtype=bool)
+    used[F.reshape(-1)] = True
+    if used.all():
+        return V, F
+    remap = np.cumsum(used) - 1
+    return V[used], remap[F]
+
+
+def _merge_vertices(V, F, radius):
+    """Merge vertices closer than ``radius`` (m): the lowest index of each cluster survives.
+
+    Returns (vertices, faces, merged) where ``merged`` leaves out the corners shared by an STL
+    soup's triangles when the input is a soup (exact copies, ``3 * len(F)`` vertices).
+    """
+    exact, first_exact, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    pairs = cKDTree(exact).query_pairs(radius, output_type="ndarray")
+    n_exact = len(exact)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_exact, n_exact))
+    _, cluster = connected_components(graph, directed=False)
+    cluster = cluster[inverse.reshape(-1)]                 # per input vertex
+    n_clusters = int(cluster.max()) + 1
+    keeper = np.full(n_clusters, len(V), dtype=np.int64)
+    np.minimum.at(keeper, cluster, np.arange(len(V)))
+    survivors = np.sort(keeper)
+    new_index = np.empty(n_clusters, dtype=np.int64)
+    new_index[np.argsort(keeper)] = np.arange(n_clusters)
+    merged = len(V) - n_clusters
+    if len(V) == 3 * len(F):
+        merged = n_exact - n_clusters                      # a soup: only near-duplicates are repairs
+    return V[survivors], new_index[cluster[F]], merged
+
+
+def _drop_degenerate(V, F, radius):
+    """Drop zero-area faces (height below ``radius`` m); split the neighbour across a cap's long edge.
+
+    Returns (faces, dropped).
+    """
+    collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    p = V[F]
+    side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    length = np.linalg.norm(side, axis=2)
+    area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
+    longest = length.argmax(axis=1)
+    caps = ~collapsed & (area2 <= radius * length.max(axis=1))
+    if caps.any():
+        F = _split_across_caps(F, np.nonzero(caps)[0], longest, collapsed | caps)
+    keep = ~(collapsed | caps)
+    keep = np.concatenate([keep, np.ones(len(F) - len(keep), dtype=bool)])
+    return F[keep], int(np.sum(collapsed | caps))
+
+
+def _split_across_caps(F, caps, longest, dropped):
+    """For each cap (a, b, c) with long edge a-b, split the other face on a-b at c.
+
+    F (m, 3) int64 is not modified; dropped (m,) bool marks the faces about to go; returns faces (m + k, 3): split faces are rewritten in place
+    (first half) and their second halves appended. A cap whose long edge has not exactly one other
+    face, or whose neighbour is a cap or already split, is only dropped (hole filling then sees it).
+    """
+    F = F.copy()
+    key = _edge_keys(F, int(F.max()) + 1)
+    order = np.argsort(key.reshape(-1), kind="stable")
+    sorted_keys = key.reshape(-1)[order]
+    busy = dropped.copy()
+    extra = []
+    for f in caps:
+        k = longest[f]
+        a, b, c = F[f, k], F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+        lo, hi = np.searchsorted(sorted_keys, [key[f, k], key[f, k] + 1])
+        others = [h for h in order[lo:hi] // 3 if h != f]
+        if len(others) != 1 or busy[others[0]]:
             continue
-        seen[root] = True
-        queue = deque([root])
-        while queue:
-            f = queue.popleft()
-            for k in range(3):
-                e = edge_ids[f, k]
-                if counts[e] != 2:
-                    continue
-                a = order[starts[e]]
-                b = order[starts[e] + 1]
-                g_side = b if a // 3 == f else a
-                g = g_side // 3
-                if seen[g]:
-                    continue
-                seen[g] = True
-                da = directed[f, k] if not flipped[f] else directed[f, k][::-1]
-                db = directed[g, g_side % 3]
-                if da[0] == db[0] and da[1] == db[1]:
-                    flipped[g] = True
-                queue.append(g)
-    out = faces.copy()
-    out[flipped] = out[flipped][:, ::-1]
-    return out, int(flipped.sum())
+        g = others[0]
+        busy[g] = True
+        j = int(np.nonzero((F[g] != a) & (F[g] != b))[0][0])      # g = (r, p, q) rolled so r first
+        r, p, q = F[g, j], F[g, (j + 1) % 3], F[g, (j + 2) % 3]
+        F[g] = (r, p, c)
+        extra.append((r, c, q))
+    return np.vstack([F, np.array(extra, dtype=np.int64).reshape(-1, 3)])
 
 
-def _components(nf, edge_ids, counts):
-    sides = edge_ids.reshape(-1)
-    order = np.argsort(sides, kind="stable")
-    sorted_sides = sides[order]
-    pair = (counts[sorted_sides] == 2)
-    first = np.nonzero(pair & np.r_[True, sorted_sides[1:] != sorted_sides[:-1]])[0]
-    a = order[first] // 3
-    b = order[first + 1] // 3
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(nf, nf))
-    return connected_components(graph, directed=False)
+def _edge_keys(F, n_vertices):
+    """Undirected edge key per face side: (m, 3) int64, side k runs F[:, k] -> F[:, k + 1]."""
+    a, b = F, np.roll(F, -1, axis=1)
+    return np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
 
 
-def _boundary_loops(faces, edge_ids, counts):
-    """Loops of boundary edges, each a list of vertex ids directed as in their faces (None for an
-    open chain). Vertices where two holes touch are walked through once per loop."""
-    nxt: dict[int, list] = {}
-    for f, k in zip(*np.nonzero(counts[edge_ids] == 1)):
-        nxt.setdefault(int(faces[f, k]), []).append(int(faces[f, (k + 1) % 3]))
+def _drop_duplicate_faces(F):
+    """Keep the first of faces with the same vertex set (either winding): (faces, dropped)."""
+    _, first = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+    first = np.sort(first)
+    return F[first], len(F) - len(first)
+
+
+class _EdgeTable:
+    """Undirected edges of faces F (m, 3): ``side_edge`` (m, 3) edge id of each face side,
+    ``count`` faces per edge, ``pairs`` (k, 2) the two half-edge ids (3 * face + side) of every
+    two-face edge."""
+
+    def __init__(self, F):
+        key = _edge_keys(F, int(F.max()) + 1).reshape(-1)
+        uniq, inverse, self.count = np.unique(key, return_inverse=True, return_counts=True)
+        self.key = uniq
+        self.side_edge = inverse.reshape(-1, 3)
+        order = np.argsort(inverse, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(self.count)[:-1]])
+        two = np.nonzero(self.count == 2)[0]
+        self.pairs = np.stack([order[starts[two]], order[starts[two] + 1]], axis=1)
+        self.n_vertices = int(F.max()) + 1
+
+    def ends(self, edge):
+        return divmod(int(self.key[edge]), self.n_vertices)
+
+
+def _refuse_non_manifold(V, edges, say):
+    bad = np.nonzero(edges.count > 2)[0]
+    if len(bad):
+        a, b = edges.ends(bad[0])
+        say.refuse(
+            f"{len(bad):,} non-manifold edges (more than two triangles share one edge), e.g. "
+            f"{say.where((V[a] + V[b]) / 2)}, so inside and outside are ambiguous",
+            "export the mandrel as one closed solid: union touching parts and remove internal faces")
+
+
+def _orientation(F, edges, V, say):
+    """Flips for a consistent winding, and a component label per face (both (m,)).
+
+    Orientation double cover: node f is face f as given, node f + m is face f reversed. Across a
+    two-face edge the faces agree when the edge runs in opposite directions in them; the cover links
+    the node pairs that agree. A face whose two nodes end up connected lies on a non-orientable
+    surface. Otherwise each body's faces split into two classes; the class holding the lower node
+    label is kept as given and the other flipped (the outward choice comes later, from the volume).
+    """
+    m = len(F)
+    h1, h2 = edges.pairs[:, 0], edges.pairs[:, 1]
+    same_direction = F.reshape(-1)[h1] == F.reshape(-1)[h2]   # tails equal: the faces disagree
+    f1, f2 = h1 // 3, h2 // 3
+    g1 = np.where(same_direction, f2 + m, f2)
+    g2 = np.where(same_direction, f2, f2 + m)
+    rows = np.concatenate([f1, f1 + m])
+    cols = np.concatenate([g1, g2])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * m, 2 * m))
+    _, label = connected_components(graph, directed=False)
+    given, reversed_ = label[:m], label[m:]
+    if np.any(given == reversed_):
+        f = int(np.nonzero(given == reversed_)[0][0])
+        say.refuse(f"the surface cannot be oriented (one-sided like a Moebius strip), e.g. "
+                   f"{say.where(V[F[f]].mean(axis=0))}", "export the mandrel as one closed solid")
+    body_label = np.minimum(given, reversed_)
+    _, component = np.unique(body_label, return_inverse=True)
+    return given != body_label, component.reshape(-1)
+
+
+def _choose_body(V, F, component, body, say):
+    """Faces to keep (m,) bool and the number of bodies; several bodies need ``body``."""
+    n = int(component.max()) + 1
+    if n == 1:
+        return np.ones(len(F), dtype=bool), 1
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    corner_body = np.repeat(component, 3)
+    corners = V[F.reshape(-1)]
+    for k in range(3):
+        np.minimum.at(lo[:, k], corner_body, corners[:, k])
+        np.maximum.at(hi[:, k], corner_body, corners[:, k])
+    ranking = np.argsort(-np.linalg.norm(hi - lo, axis=1), kind="stable")
+    n_faces = np.bincount(component, minlength=n)
+    listing = "; ".join(
+        f"{i}: {' x '.join(f'{1e3 * x:.4g}' for x in hi[c] - lo[c])} mm, {n_faces[c]:,} triangles"
+        for i, c in enumerate(ranking[:5])) + ("; ..." if n > 5 else "")
+    if body is None:
+        say.refuse(f'{n} disjoint bodies ({listing}), but a mandrel is one body',
+                   'remove the others in your CAD tool, or choose one with body="largest" '
+                   "(or body=<index> in this list)")
+    index = 0 if body == "largest" else body
+    if not isinstance(index, (int, np.integer)) or isinstance(index, bool) or not 0 <= index < n:
+        say.refuse(f"body={body!r} does not choose one of the {n} disjoint bodies ({listing})",
+                   f'use body="largest" or an index from 0 to {n - 1}')
+    chosen = ranking[index]
+    what = f"the largest of {n} bodies" if index == 0 else f"body {index} of {n}"
+    say.change(f"kept {what} ({n_faces[chosen]:,} triangles; bodies by size: {listing})")
+    return component == chosen, n
+
+
+def _boundary_loops(F):
+    """Boundary loops of a consistently wound mesh: lists of vertex ids in the faces' direction
+    (each boundary edge runs loop[i] -> loop[i + 1] in its face). A vertex where two holes touch is
+    split into simple loops; an unclosed chain comes back as None."""
+    edges = _EdgeTable(F)
+    sides = np.nonzero(edges.count[edges.side_edge] == 1)
+    tails = F[sides]
+    heads = F[sides[0], (sides[1] + 1) % 3]
+    following: dict[int, list[int]] = {}
+    for t, h in zip(tails.tolist(), heads.tolist()):
+        following.setdefault(t, []).append(h)
     loops = []
-    while nxt:
-        start = next(iter(nxt))
-        loop = [start]
-        cur = start
+    while following:
+        start = next(iter(following))
+        walk = [start]
         while True:
-            outs = nxt.get(cur)
+            outs = following.get(walk[-1])
             if not outs:
                 loops.append(None)
                 break
-            q = outs.pop()
+            nxt = outs.pop()
             if not outs:
-                del nxt[cur]
-            if q == start:
-                loops.extend(_simple_loops(loop))
+                del following[walk[-1]]
+            if nxt == start:
+                loops.extend(_simple_loops(walk))
                 break
-            loop.append(q)
-            cur = q
+            walk.append(nxt)
     return loops
 
 
-def _simple_loops(loop):
+def _simple_loops(walk):
     """Split a closed walk that passes a vertex twice (two holes touching) into simple loops."""
-    out = []
-    stack = []
-    where = {}
-    for v in loop:
+    out, stack, where = [], [], {}
+    for v in walk:
         if v in where:
             i = where[v]
             out.append(stack[i:])
@@ -154,84 +420,119 @@ def _simple_loops(loop):
             where[v] = len(stack)
             stack.append(v)
     out.append(stack)
-    return [c for c in out if len(c) >= 3]
+    return [loop for loop in out if len(loop) >= 3]
 
 
-def _signed_volume(vertices, faces):
-    p = vertices[faces]
+def _fill_small_holes(V, F, say):
+    """Fill the small boundary loops (module docstring, step 7); refuse if any is large.
+
+    Returns (faces, holes filled, largest span m).
+    """
+    say.mark_holes()
+    loops = _boundary_loops(F)
+    if not loops:
+        return F, 0, 0.0
+    spans = np.array([np.inf if loop is None else _diagonal(V[loop]) for loop in loops])
+    limit = SMALL_HOLE * _diagonal(V[np.unique(F)])
+    patches = [None if loop is None else _triangulate_loop(V, loop[::-1]) for loop in loops]  # fills run against the loop
+    surface = _area(V, F).sum()
+    small = [patch is not None and (span <= limit or (len(patch) <= FEW_EDGES - 2
+                                                      and _area(V, patch).sum() <= SMALL_PATCH * surface))
+             for patch, span in zip(patches, spans)]
+    if not all(small):
+        worst = int(np.argmax(np.where(small, -1.0, spans)))
+        size = "an unclosed chain" if loops[worst] is None else _mm(spans[worst]) + " across"
+        place = "" if loops[worst] is None else ", " + say.where(V[loops[worst]].mean(axis=0))
+        say.refuse(
+            f"the mesh is an open surface: {len(loops)} boundary loop(s), {len(small) - sum(small)} too "
+            f"large to fill, the largest {size}{place} (holes up to {SMALL_HOLE:.0%} of the mandrel's "
+            f"size, {_mm(limit)}, and single missing triangles are filled automatically)",
+            "a mandrel must be one closed solid: close (cap) it in your CAD tool and export it again")
+    say.change(f"filled {len(loops)} small hole{'s' if len(loops) > 1 else ''} "
+               f"(largest {_mm(spans.max())} across)")
+    return np.vstack([F, *patches]), len(loops), float(spans.max())
+
+
+def _area(V, F):
+    """Triangle areas (m,) m^2."""
+    p = V[F]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def _triangulate_loop(V, loop):
+    """Ear-clip a closed loop of vertex ids (k,) projected on its Newell plane: (k - 2, 3) int64,
+    wound like the loop. Falls back to a fan from the first vertex if the projection is not simple."""
+    p = V[loop]
+    normal = np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+    normal /= np.linalg.norm(normal) or 1.0
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    xy = np.column_stack([(p - p.mean(axis=0)) @ u, (p - p.mean(axis=0)) @ w])   # CCW about normal
+    idx = list(range(len(loop)))
+    out = []
+    while len(idx) > 3:
+        ear = _find_ear(xy, idx)
+        if ear is None:
+            break
+        out.append((idx[ear - 1], idx[ear], idx[(ear + 1) % len(idx)]))
+        del idx[ear]
+    out.extend((idx[0], idx[i], idx[i + 1]) for i in range(1, len(idx) - 1))
+    return np.asarray(loop, dtype=np.int64)[np.array(out, dtype=np.int64)]
+
+
+def _find_ear(xy, idx):
+    """Position in ``idx`` of a convex polygon corner with no other corner inside its triangle."""
+    pts = xy[idx]
+    prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
+    turn = _cross2(pts - prev, nxt - pts)
+    for i in np.argsort(-turn):            # widest convex corners first: fewer slivers
+        if turn[i] <= 0:
+            return None
+        a, b, c = prev[i], pts[i], nxt[i]
+        others = np.delete(pts, [(i - 1) % len(pts), i, (i + 1) % len(pts)], axis=0)
+        inside = ((_cross2(b - a, others - a) >= 0) & (_cross2(c - b, others - b) >= 0)
+                  & (_cross2(a - c, others - c) >= 0))
+        if not inside.any():
+            return int(i)
+    return None
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _signed_volume(V, F):
+    """Enclosed volume (m^3) of a closed mesh, positive when wound outwards (about its centre)."""
+    p = V[F] - V[F].reshape(-1, 3).mean(axis=0)
     return float(np.einsum("ij,ij->", p[:, 0], np.cross(p[:, 1], p[:, 2]))) / 6.0
 
 
-def repair_mesh(vertices, faces, *, source="mandrel", body=None):
-    """Repair a triangle soup into a closed, outward mandrel mesh (see module docstring).
-
-    vertices (n, 3) float64 m, faces (m, 3) int. body: None (one body required) or "largest".
-    Returns (vertices, faces, RepairReport); inputs are not modified.
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces, dtype=np.int64)
-    msgs = []
-    n_v = len(V)
-    V, F = _merge(V, F, tol.merge_vertices)
-    if len(V) < n_v and n_v != 3 * len(F):
-        # an STL is a triangle soup by format (3 vertices per triangle): merging it is no repair
-        msgs.append(f"merged {n_v - len(V):,} duplicate vertices")
-    F, n_degenerate, n_duplicate = _drop_bad_faces(V, F)
-    if n_degenerate:
-        msgs.append(f"dropped {n_degenerate} degenerate faces")
-    if n_duplicate:
-        msgs.append(f"dropped {n_duplicate} duplicated faces")
-    if len(F) == 0:
-        raise MandrelError(f"{source}: no usable triangles")
-    edge_ids, edges, counts = _edges(F)
-    if np.any(counts > 2):
-        e = edges[np.argmax(counts)]
-        raise MandrelError(
-            f"{source}: {int(np.sum(counts > 2))} non-manifold edges (more than two triangles on one edge, "
-            f"e.g. near ({', '.join(f'{x:.4g}' for x in V[e[0]])}) m): inside and outside are ambiguous. Export the mandrel "
-            "as one closed solid")
-    n_comp, labels = _components(len(F), edge_ids, counts)
-    if n_comp > 1:
-        sizes = np.bincount(labels)
-        if body != "largest":
-            listing = ", ".join(str(s) for s in sorted(sizes, reverse=True)[:5])
-            raise MandrelError(
-                f"{source}: {n_comp} disjoint bodies ({listing} triangles): a mandrel is one body. Remove the "
-                'others in your CAD tool, or load with body="largest" to keep the largest')
-        keep = labels == np.argmax(sizes)
-        F = F[keep]
-        used = np.unique(F)
-        remap = np.full(len(V), -1, dtype=np.int64)
-        remap[used] = np.arange(len(used))
-        V, F = V[used], remap[F]
-        msgs.append(f"kept the largest of {n_comp} bodies ({int(keep.sum())} triangles)")
-        edge_ids, edges, counts = _edges(F)
-    F, n_flipped = _orient(F, edge_ids, counts)
-    if n_flipped and n_flipped < len(F):
-        msgs.append(f"flipped {n_flipped} faces to a consistent winding")
-    if np.any(counts == 1):
-        F, V, filled, msg = _fill_holes(V, F, edge_ids, counts, source)
-        msgs.append(msg)
-    if _signed_volume(V, F) < 0:
-        F = F[:, ::-1].copy()
-        msgs.append("turned the normals outwards (the triangles were wound inwards)")
-    _refuse_self_intersections(V, F, source)
-    return V, F, RepairReport(tuple(msgs))
+def _refuse_flat(V, F, say):
+    volume = _signed_volume(V, F)
+    diag = _diagonal(V[np.unique(F)])
+    if volume <= MIN_VOLUME * diag**3:
+        say.refuse(f"the closed surface encloses no volume ({volume:.3g} m^3 for a {_mm(diag)} wide mesh: "
+                   "flat or folded onto itself)", "export the mandrel as a solid body")
 
 
 def self_intersections(vertices, faces):
-    """Edges that pierce a triangle they do not belong to: (k,) edge index pairs (a, b).
+    """Edges that pierce a triangle they do not belong to: (k, 2) int64 vertex-index pairs.
 
-    Every pair of crossing (non-coplanar) triangles has such an edge. One batched ray query with
-    trimesh (embree when installed): each edge, shortened by a hair at both ends, is cast against
-    the mesh.
+    vertices : (n, 3) float64, m; faces : (m, 3) int64. Every pair of crossing, non-coplanar
+    triangles has such an edge. One batched ray query with trimesh (embree when installed, which
+    works in float32: the mesh is centred first): each edge, shortened by a hair at both ends, is
+    cast along itself. Coplanar overlaps are not found.
     """
     import trimesh
 
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    centred = vertices - (vertices.max(axis=0) + vertices.min(axis=0)) / 2
+    mesh = trimesh.Trimesh(centred, faces, process=False)
     e = np.unique(np.sort(mesh.edges, axis=1), axis=0)
-    a, b = vertices[e[:, 0]], vertices[e[:, 1]]
-    d = b - a
+    a = centred[e[:, 0]]
+    d = centred[e[:, 1]] - a
     length = np.linalg.norm(d, axis=1)
     ok = length > 0
     e, a, d, length = e[ok], a[ok], d[ok], length[ok]
@@ -243,47 +544,12 @@ def self_intersections(vertices, faces):
     t = np.einsum("ij,ij->i", loc - a[ray], u[ray])
     inside = t < length[ray] - 2 * eps[ray]
     own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
-    bad = inside & ~own
-    return e[np.unique(ray[bad])]
+    return e[np.unique(ray[inside & ~own])]
 
 
-def _refuse_self_intersections(V, F, source):
+def _refuse_self_intersections(V, F, say):
     bad = self_intersections(V, F)
     if len(bad):
-        p = V[bad[0, 0]]
-        raise MandrelError(
-            f"{source}: the surface intersects itself ({len(bad)} edges pierce other triangles, e.g. near "
-            f"({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m), so inside and outside are ambiguous. Export the "
-            "mandrel as one clean solid (a boolean union of its parts)")
-
-
-def _fill_holes(V, F, edge_ids, counts, source):
-    loops = _boundary_loops(F, edge_ids, counts)
-    diag = _diag(V)
-    spans = []
-    for loop in loops:
-        if loop is None or len(loop) < 3:
-            spans.append(np.inf)
-        else:
-            p = V[loop]
-            spans.append(float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))))
-    spans = np.array(spans)
-    if np.any(spans > SMALL_HOLE * diag):
-        big = spans[np.isfinite(spans)]
-        largest = f"{1e3 * big.max():.1f} mm across" if len(big) else "not a closed loop"
-        raise MandrelError(
-            f"{source} is an open surface: {len(loops)} boundary loop(s), the largest {largest} "
-            f"(holes up to {SMALL_HOLE:.0%} of the mandrel's size, {1e3 * SMALL_HOLE * diag:.1f} mm, are filled). "
-            "A mandrel must be closed: cap it in your CAD tool")
-    new_V = [V]
-    new_F = [F]
-    n = len(V)
-    for loop in loops:
-        centre = V[loop].mean(axis=0)
-        new_V.append(centre[None])
-        ring = np.array(loop)
-        # boundary edges run a -> b in their faces: the fill uses b -> a
-        new_F.append(np.stack([np.roll(ring, -1), ring, np.full(len(ring), n)], axis=1))
-        n += 1
-    msg = f"filled {len(loops)} small hole(s) (largest {1e3 * spans.max():.1f} mm across)"
-    return np.vstack(new_F), np.vstack(new_V), len(loops), msg
+        say.refuse(f"the surface intersects itself ({len(bad):,} edges pierce other triangles, e.g. "
+                   f"{say.where(V[bad[0, 0]])}), so inside and outside are ambiguous",
+                   "export the mandrel as one clean solid (a boolean union of its parts)")
