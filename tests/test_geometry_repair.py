@@ -206,7 +206,7 @@ def test_one_long_missing_triangle_of_a_coarse_mesh_is_filled():
 def test_a_missing_large_triangle_is_refused():
     box = _mesh("box")                            # one triangle is 14 % of the surface
     f = np.delete(box.faces, np.argmax(box.area_faces), axis=0)
-    with pytest.raises(MandrelError, match="open surface.*447 mm across")   # hypot(200, 400) mm:
+    with pytest.raises(MandrelError, match="open surface.*447 mm across"):   # hypot(200, 400) mm
         repair_mesh(box.vertices, f)
 
 
