@@ -245,6 +245,14 @@ def test_two_bodies_are_refused_unless_one_is_chosen(sphere):
         repair_mesh(v, f, body=2)
 
 
+def test_unconnected_triangles_are_refused(sphere):
+    v, f = _soup(sphere.vertices, sphere.faces)
+    v = v + np.random.default_rng(4).normal(scale=1e-6, size=v.shape)    # 1e-6 m >> 3.5e-10 m radius
+    for body in (None, "largest"):
+        with pytest.raises(MandrelError, match="960 of 960 triangle edges have no neighbouring triangle"):
+            repair_mesh(v, f, body=body)
+
+
 def test_non_manifold_edge_is_refused(sphere):
     v = np.vstack([sphere.vertices, [[0.5, 0.5, 0.5]]])
     a, b = sphere.faces[0, :2]

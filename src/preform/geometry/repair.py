@@ -8,7 +8,8 @@
    the merge distance of the opposite edge). A cap's neighbour across the long edge is split at the
    cap's middle vertex, so no crack is left behind;
 3. drops exact duplicate faces (same three vertices, either winding);
-4. refuses non-manifold edges (three or more faces on one edge);
+4. refuses non-manifold edges (three or more faces on one edge), and triangles that do not connect
+   at all (more than ``UNWELDED`` of the edges open);
 5. makes the winding consistent by propagating orientation across every two-face edge (one
    connected-components call on the orientation double cover; a non-orientable surface is refused);
 6. finds the disjoint bodies and refuses several of them unless ``body`` chooses one;
@@ -45,6 +46,9 @@ FEW_EDGES = 4
 SMALL_PATCH = 0.05
 #: a closed surface enclosing less than this times diagonal**3 encloses no volume (flat, folded)
 MIN_VOLUME = 1e-9
+
+#: more than this fraction of open edges means the triangles were never connected (not holes)
+UNWELDED = 0.5
 
 _UNIT_NAMES = {1.0: "m", 1e-3: "mm"}
 
@@ -114,6 +118,7 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
 
     edges = _EdgeTable(F)
     _refuse_non_manifold(V, edges, say)
+    _refuse_unwelded(V, edges, radius, say)
     flipped, component = _orientation(F, edges, V, say)
     F = np.where(flipped[:, None], F[:, ::-1], F)
     keep, counts["bodies"] = _choose_body(V, F, component, body, say)
@@ -180,7 +185,7 @@ def _validated(vertices, faces, say):
     if F.min() < 0 or F.max() >= len(V):
         say.refuse(f"face indices run from {F.min()} to {F.max()} but there are {len(V)} vertices",
                    "check the mesh export")
-    if not np.all(np.isfinite(V[np.unique(F)])):
+    if not np.all(np.isfinite(V)) and not np.all(np.isfinite(V[np.unique(F)])):
         say.refuse("some vertex coordinates are not finite (NaN or infinite)", "export the STL again")
     V, F = _compact(V, F)
     return V, F
@@ -207,7 +212,7 @@ def _merge_vertices(V, F, radius):
     Returns (vertices, faces, merged) where ``merged`` leaves out the corners shared by an STL
     soup's triangles when the input is a soup (exact copies, ``3 * len(F)`` vertices).
     """
-    exact, first_exact, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    exact, inverse = _weld_exact(V)
     pairs = cKDTree(exact).query_pairs(radius, output_type="ndarray")
     n_exact = len(exact)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_exact, n_exact))
@@ -223,6 +228,16 @@ def _merge_vertices(V, F, radius):
     if len(V) == 3 * len(F):
         merged = n_exact - n_clusters                      # a soup: only near-duplicates are repairs
     return V[survivors], new_index[cluster[F]], merged
+
+
+def _weld_exact(V):
+    """Distinct rows of V (k, 3) and the row of each vertex (n,); a lexsort, faster than unique."""
+    order = np.lexsort(V.T[::-1])
+    rows = V[order]
+    new = np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])
+    inverse = np.empty(len(V), dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return rows[new], inverse
 
 
 def _drop_degenerate(V, F, radius):
@@ -314,6 +329,16 @@ def _refuse_non_manifold(V, edges, say):
             f"{len(bad):,} non-manifold edges (more than two triangles share one edge), e.g. "
             f"{say.where((V[a] + V[b]) / 2)}, so inside and outside are ambiguous",
             "export the mandrel as one closed solid: union touching parts and remove internal faces")
+
+
+def _refuse_unwelded(V, edges, radius, say):
+    """Most edges open: the triangles' corners do not meet, holes would be everywhere."""
+    n_open = int(np.sum(edges.count == 1))
+    if n_open > UNWELDED * len(edges.count):
+        say.refuse(f"{n_open:,} of {len(edges.count):,} triangle edges have no neighbouring triangle: the "
+                   f"corners of neighbouring triangles do not coincide to within {_mm(radius)} (the merge "
+                   f"tolerance, {tol.merge_vertices:g} of the mesh size)",
+                   "export the STL as one watertight mesh (binary STL, fine tessellation)")
 
 
 def _orientation(F, edges, V, say):
@@ -530,7 +555,9 @@ def self_intersections(vertices, faces):
     faces = np.asarray(faces, dtype=np.int64)
     centred = vertices - (vertices.max(axis=0) + vertices.min(axis=0)) / 2
     mesh = trimesh.Trimesh(centred, faces, process=False)
-    e = np.unique(np.sort(mesh.edges, axis=1), axis=0)
+    n = np.int64(len(vertices))
+    key = np.unique(_edge_keys(faces, n))
+    e = np.stack([key // n, key % n], axis=1)
     a = centred[e[:, 0]]
     d = centred[e[:, 1]] - a
     length = np.linalg.norm(d, axis=1)
