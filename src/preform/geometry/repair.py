@@ -385,7 +385,7 @@ def _choose_body(V, F, component, body, say):
     ranking = np.argsort(-np.linalg.norm(hi - lo, axis=1), kind="stable")
     n_faces = np.bincount(component, minlength=n)
     listing = "; ".join(
-        f"{i}: {' x '.join(f'{1e3 * x:.4g}' for x in hi[c] - lo[c])} mm, {n_faces[c]:,} triangles"
+        f"{i}: {' x '.join(_mm(x)[:-3] for x in hi[c] - lo[c])} mm, {n_faces[c]:,} triangles"
         for i, c in enumerate(ranking[:5])) + ("; ..." if n > 5 else "")
     if body is None:
         say.refuse(f'{n} disjoint bodies ({listing}), but a mandrel is one body',
