@@ -1,8 +1,8 @@
-"""Slow, obvious NumPy twins of the frontal sweeps (``preform._kernels.frontal``), frictionless.
+"""Slow, obvious NumPy twins of the frontal kernels (``preform._kernels.frontal``).
 
-With ``mu = 0`` every crossing slips on both yarns and the internal tensions equal the external
-ones, so the single contact is the force triangle ``f_X u_X + f_O u_O = -S`` in the plane of
-``A_X, A_O, S``: solved here with vectors and rotations, not with the kernel's angle formulas.
+Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
+arrays in creation order as the kernels do), segments are vectors, the friction cone is written
+from DESIGN.md §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``).
 """
 
 from __future__ import annotations
@@ -10,79 +10,62 @@ from __future__ import annotations
 import numpy as np
 
 
-def unit(v):
-    return v / np.linalg.norm(v)
-
-
 def yarn_point(st, c, side, h):
-    s = st["over"][c] if side == 0 else -st["over"][c]
-    return st["pos"][c] + s * h * st["normal"][c]
+    s = st.over[c] if side == 0 else -st.over[c]
+    return st.pos[c] + s * h * st.normal[c]
 
 
-def rotate(v, axis, angle):
-    """Rodrigues rotation of v about the unit axis."""
-    return (v * np.cos(angle) + np.cross(axis, v) * np.sin(angle)
-            + axis * (axis @ v) * (1 - np.cos(angle)))
+def chains(st):
+    """Per yarn: (side, [crossings lowest first])."""
+    n = st.n_yarns // 2
+    return [(0 if k < n else 1, list(st.chain(k))) for k in range(st.n_yarns)]
 
 
-def frictionless_sweeps(st, fell, top, f_top, h):
-    """One force sweep (newest first) and one position sweep (oldest first) on the dict ``st``
-    (arrays of ``ZoneState`` cut to its ``m`` crossings; ``normal`` is updated in place).
-    Returns new positions (m, 3), tensions (m, 2), angles (m, 2), relax (m,)."""
-    m = len(st["pos"])
-    yarn, low, up = st["yarn"], st["low"], st["up"]
-    tension = np.zeros((m, 2))
-    S_all = np.zeros((m, 3))
-    angles = np.zeros((m, 2))
-    relax = np.ones(m)
-    for c in range(m - 1, -1, -1):
-        B, Q, fe = [], [], []
-        for side in range(2):
-            k = yarn[c, side]
-            u = up[c, side]
-            B.append(yarn_point(st, u, side, h) if u >= 0 else top[k])
-            fe.append(tension[u, side] if u >= 0 else f_top[k])
-            lo = low[c, side]
-            Q.append(yarn_point(st, lo, side, h) if lo >= 0 else fell[k])
-        N = np.cross(B[0] - Q[0], B[1] - Q[1])
-        N = unit(N)
-        if N[:2] @ st["pos"][c][:2] < 0:
-            N = -N
-        st["normal"][c] = N
-        sg = st["over"][c] * h
-        P = [st["pos"][c] + sg * N, st["pos"][c] - sg * N]
-        A = [Q[0] - sg * N, Q[1] + sg * N]
-        u_ext = [unit(B[i] - P[i]) for i in range(2)]
-        lu = min(np.linalg.norm(B[i] - P[i]) for i in range(2))
-        la = max(np.linalg.norm(A[i] - P[i]) for i in range(2))
-        relax[c] = max(0.02, lu / (lu + la))
-        S = fe[0] * u_ext[0] + fe[1] * u_ext[1]
-        # force triangle: -f_X u_X is S rotated by the angle opposite f_O ... (law of cosines)
-        Smag = np.linalg.norm(S)
-        e1 = unit(A[1] - A[0])
-        axis = unit(np.cross(e1, S))        # rotating e1 towards S is positive about axis
-        ang_x = np.arccos(np.clip((fe[0] ** 2 + Smag ** 2 - fe[1] ** 2) / (2 * fe[0] * Smag), -1, 1))
-        ang_o = np.arccos(np.clip((fe[1] ** 2 + Smag ** 2 - fe[0] ** 2) / (2 * fe[1] * Smag), -1, 1))
-        dX = rotate(unit(S), axis, -ang_x)   # direction A_X -> C (= -u_X)
-        dO = rotate(unit(S), axis, ang_o)    # direction A_O -> C (= -u_O)
-        angles[c] = (np.arccos(np.clip(dX @ e1, -1, 1)), np.arccos(np.clip(-dO @ e1, -1, 1)))
-        tension[c] = fe
-        S_all[c] = S
-    out = st["pos"].copy()
-    for c in range(m):
-        Q = []
-        for side in range(2):
-            lo = low[c, side]
-            Q.append(yarn_point({**st, "pos": out}, lo, side, h) if lo >= 0 else fell[yarn[c, side]])
-        N = st["normal"][c]
-        sg = st["over"][c] * h
-        A = [Q[0] - sg * N, Q[1] + sg * N]
-        e1 = unit(A[1] - A[0])
-        S = S_all[c]
-        e2 = unit(S - (S @ e1) * e1)
-        tx, to = angles[c]
-        b = np.linalg.norm(A[1] - A[0])
-        C = A[0] + b * np.sin(to) / np.sin(tx + to) * (np.cos(tx) * e1 + np.sin(tx) * e2)
-        out[c] = st["pos"][c] + relax[c] * (C - st["pos"][c])
-    return out, tension, angles, relax
+def polyline(st, k, side, chain, fell, top, h):
+    return np.array([fell[k]] + [yarn_point(st, c, side, h) for c in chain] + [top[k]])
 
+
+def energy_and_gradient(st, fell, top, f_top, h, eps2):
+    """E = sum f sqrt(|d|^2 + eps2) and dE/dC (m, 3), segment tensions from st.tension / f_top."""
+    g = np.zeros((st.m, 3))
+    E = 0.0
+    for k, (side, chain) in enumerate(chains(st)):
+        if not chain:
+            continue
+        pts = polyline(st, k, side, chain, fell, top, h)
+        ids = [-1] + chain + [-1]
+        ten = [st.tension[c, side] for c in chain] + [f_top[k]]
+        for i in range(len(pts) - 1):
+            d = pts[i + 1] - pts[i]
+            l = np.sqrt(d @ d + eps2)
+            E += ten[i] * l
+            if ids[i + 1] >= 0:
+                g[ids[i + 1]] += ten[i] * d / l
+            if ids[i] >= 0:
+                g[ids[i]] -= ten[i] * d / l
+    return E, g
+
+
+def capstan_tensions(st, fell, top, f_top, h, mu):
+    """Tensions below each crossing (m, 2) walking every yarn from its top point down."""
+    out = np.zeros((st.m, 2))
+    for k, (side, chain) in enumerate(chains(st)):
+        pts = polyline(st, k, side, chain, fell, top, h)
+        f = f_top[k]
+        for i in range(len(chain), 0, -1):
+            c = chain[i - 1]
+            lo, p, hi = pts[i - 1], pts[i], pts[i + 1]
+            u_int = (lo - p) / np.linalg.norm(lo - p)
+            u_ext = (hi - p) / np.linalg.norm(hi - p)
+            delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
+            t = mu * np.tan(delta / 2)
+            lo_f, hi_f = f * (1 - t) / (1 + t), (f * (1 + t) / (1 - t) if t < 1 else np.inf)
+            s = st.slip[c, side]
+            if s > 0:
+                f = hi_f
+            elif s < 0:
+                f = lo_f
+            else:
+                f = np.clip(st.ratio[c, side] * f, lo_f, hi_f)
+            out[c, side] = f
+    return out

@@ -6,9 +6,14 @@ Each step (``step``):
 1. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
    both yarns, at the midpoint of the closest points of the two top segments (from the yarn's
    highest crossing, or fell point, to its ring or spool point at the step's end); over/under from
-   the horn-gear pattern; it starts sticking with the Eulerian angles of that creation geometry;
-2. the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
-   points of the step's end;
+   the horn-gear pattern; it starts sliding down its yarns (``frontal.update_slide``). This is
+   only the start of the solve: the solver moves it to where the two yarns balance, which is
+   below the supply as soon as the carriers have parted (no crossing is pinned at the supply);
+2. the contact normals become the radial directions of the crossings (held during the solve), and
+   the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
+   points of the step's end, each yarn on or inside its friction cone; then the friction state of
+   every crossing is decided for the next step from the yarn that slid through it
+   (``frontal.update_slide``);
 3. a crossing that is the lowest on one of its yarns and lies closer to the mandrel than
    ``DEPOSIT_HEIGHT`` yarn thicknesses (signed distance: inside counts) is deposited: it becomes the
    fell point of both its yarns (``ZoneStep.deposits``) and leaves the zone; crossings below it on
@@ -29,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._kernels import frontal as K
 from ..result import Snapshot
 from ..zone import ZoneStep
 from . import frontal
@@ -36,6 +42,8 @@ from .zone_state import ZoneState
 
 #: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
 DEPOSIT_HEIGHT = 1.0
+#: friction state of a new crossing: sliding down its yarns (see ``interaction/frontal.py``)
+NEW_CROSSING_SLIDE = -1
 
 
 class MandrelDistance:
@@ -83,6 +91,7 @@ class InteractionZone:
         self.fell = np.array(F_machine, dtype=float)
         self.G_prev = self.machine.supply_points(t)
         self.lowest_uid_prev = np.full(self.machine.n_yarns, -1, dtype=np.int64)
+        self.F_prev_mandrel = np.asarray(pose.to_mandrel(self.fell), dtype=float)
 
     def boundary(self, t, F_machine) -> frontal.Boundary:
         m = self.machine
@@ -97,9 +106,13 @@ class InteractionZone:
         bc = self.boundary(t1, F_machine)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
-        self.last_report = frontal.solve_zone(self.state, bc, self.f_top, where=where)
         st = self.state
-        st.theta_ref[: st.m] = st.theta[: st.m]
+        K.radial_normals(st.m, st.pos, st.normal)
+        self.last_report = frontal.solve_zone(st, bc, self.f_top, where=where)
+        F_mandrel = np.asarray(pose_end.to_mandrel(F_machine), dtype=float)
+        laid = np.linalg.norm(F_mandrel - self.F_prev_mandrel, axis=1)
+        frontal.update_slide(st, bc, self.f_top, laid)
+        self.F_prev_mandrel = F_mandrel
         deposits = self._deposit(pose_end)
         G_end = self.lowest_points(bc.top)
         uid = np.where(st.lowest >= 0, st.uid[np.maximum(st.lowest, 0)], -1)
@@ -150,11 +163,7 @@ class InteractionZone:
             px, po = self._top_point(kx, bc.fell), self._top_point(ko, bc.fell)
             gx, go = bc.top[kx], bc.top[ko]
             C, N = creation_point(px, gx, po, go)
-            sg = 1.0 if over else -1.0
-            ax = px - sg * self.h * N
-            ao = po + sg * self.h * N
-            theta = plane_angles(ax, ao, C)
-            self.state.add(kx, ko, C, N, bool(over), theta, float(tp))
+            self.state.add(kx, ko, C, N, bool(over), float(tp), slide=NEW_CROSSING_SLIDE)
 
     def _deposit(self, pose):
         st = self.state
@@ -218,18 +227,6 @@ def creation_point(px, gx, po, go):
     if N[0] * C[0] + N[1] * C[1] < 0:
         N = -N
     return C, N
-
-
-def plane_angles(ax, ao, C):
-    """Eulerian angles (theta_X, theta_O), rad, of point C over the base A_X -> A_O."""
-    e1 = ao - ax
-    e1 = e1 / np.linalg.norm(e1)
-    vx = C - ax
-    vo = C - ao
-    tx = np.arctan2(np.linalg.norm(np.cross(e1, vx)), vx @ e1)
-    to = np.arctan2(np.linalg.norm(np.cross(-e1, vo)), -(vo @ e1))
-    eps = 1e-6
-    return np.clip([tx, to], eps, np.pi - eps)
 
 
 def _copy_state(st):

@@ -16,14 +16,16 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``over (cap,) float64``: +1 if the warp is the outer (over) yarn at this crossing, else -1. The
   yarn centerline points are ``C + over * h * N`` (warp) and ``C - over * h * N`` (weft),
   ``h = thickness / 2`` (paper eq. 16, with one normal per crossing);
-- ``theta (cap, 2)``: Eulerian angles (theta_X, theta_O), rad, of the current solve; ``theta_ref``:
-  those of the last converged step (the stick predictor);
-- ``slip (cap, 2) int8``: 0 stick, +1 slipping with the lower tension larger, -1 the other way;
+- ``slip (cap, 2) int8``: friction state per yarn, carried between steps: 0 stick, +1 slipping
+  with the tension below the crossing larger (the yarn slides towards the mandrel through the
+  crossing), -1 the other way (the crossing runs down the yarn faster than the yarn is drawn);
+- ``ratio (cap, 2) float64``: tension below / tension above, kept while sticking;
+- ``below_len (cap, 2) float64, m``: yarn length from the fell point up to the crossing at the end
+  of the last step (NaN before the first), for the sliding direction (``interaction/frontal.py``);
 - ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
   mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
   point below / the supply side above;
 - ``tension (cap, 2) float64, N``: tension of the segment below the crossing on each yarn;
-- ``resultant (cap, 3) float64, N``: the external force ``F_X^ext + F_O^ext`` of the last sweep;
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
 Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
@@ -43,13 +45,12 @@ _FIELDS = {
     "pos": ((3,), np.float64, 0.0),
     "normal": ((3,), np.float64, 0.0),
     "over": ((), np.float64, 1.0),
-    "theta": ((2,), np.float64, 0.0),
-    "theta_ref": ((2,), np.float64, 0.0),
     "slip": ((2,), np.int8, 0),
+    "ratio": ((2,), np.float64, 1.0),
+    "below_len": ((2,), np.float64, np.nan),
     "low": ((2,), np.int64, -1),
     "up": ((2,), np.int64, -1),
     "tension": ((2,), np.float64, 0.0),
-    "resultant": ((3,), np.float64, 0.0),
     "uid": ((), np.int64, -1),
     "t_create": ((), np.float64, 0.0),
 }
@@ -83,8 +84,9 @@ class ZoneState:
             new[: self.m] = old[: self.m]
             setattr(self, name, new)
 
-    def add(self, warp: int, weft: int, pos, normal, over: bool, theta, t: float) -> int:
-        """Append a crossing at the top of warp yarn ``warp`` and weft yarn ``weft``; its index."""
+    def add(self, warp: int, weft: int, pos, normal, over: bool, t: float, slide: int = -1) -> int:
+        """Append a crossing at the top of warp yarn ``warp`` and weft yarn ``weft``; its index.
+        ``slide``: its initial friction state on both yarns (see ``slip``)."""
         self._grow(self.m + 1)
         c = self.m
         self.m += 1
@@ -92,11 +94,10 @@ class ZoneState:
         self.pos[c] = pos
         self.normal[c] = normal
         self.over[c] = 1.0 if over else -1.0
-        self.theta[c] = theta
-        self.theta_ref[c] = theta
-        self.slip[c] = 0
+        self.slip[c] = slide
+        self.ratio[c] = 1.0
+        self.below_len[c] = np.nan
         self.tension[c] = 0.0
-        self.resultant[c] = 0.0
         self.uid[c] = self.next_uid
         self.next_uid += 1
         self.t_create[c] = t
