@@ -301,3 +301,98 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
         cb = (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)
         eta = math.pi - math.acos(min(1.0, max(-1.0, cb)))
         f_top[k] = f_spool * math.exp(mu_r * eta)
+
+
+@njit(cache=True)
+def _block_jacobi(n, indptr, indices, data, binv):
+    """Inverses of the 3x3 diagonal blocks of a CSR matrix (3n x 3n) into binv (n, 3, 3)."""
+    a = np.empty((3, 3))
+    for b in range(n):
+        for i in range(3):
+            for j in range(3):
+                a[i, j] = 0.0
+            r = 3 * b + i
+            for p in range(indptr[r], indptr[r + 1]):
+                col = indices[p]
+                if col // 3 == b:
+                    a[i, col - 3 * b] += data[p]
+        c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+        c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+        c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+        det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+        if abs(det) < 1e-300:
+            det = 1e-300
+        binv[b, 0, 0] = c00 / det
+        binv[b, 1, 0] = c01 / det
+        binv[b, 2, 0] = c02 / det
+        binv[b, 0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det
+        binv[b, 1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det
+        binv[b, 2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det
+        binv[b, 0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det
+        binv[b, 1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
+        binv[b, 2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
+
+
+@njit(cache=True)
+def _matvec(indptr, indices, data, x, out):
+    for r in range(len(indptr) - 1):
+        s = 0.0
+        for p in range(indptr[r], indptr[r + 1]):
+            s += data[p] * x[indices[p]]
+        out[r] = s
+
+
+@njit(cache=True)
+def _precondition(binv, r, z):
+    for b in range(binv.shape[0]):
+        for i in range(3):
+            z[3 * b + i] = (binv[b, i, 0] * r[3 * b] + binv[b, i, 1] * r[3 * b + 1]
+                            + binv[b, i, 2] * r[3 * b + 2])
+
+
+@njit(cache=True)
+def pcg(indptr, indices, data, rhs, rtol, max_iter, x):
+    """Conjugate gradients with 3x3 block-Jacobi preconditioning for the symmetric positive
+    definite CSR matrix (3n x 3n): x (3n,) <- solution of A x = rhs to |r| <= rtol |rhs|.
+    Returns the iterations."""
+    nd = rhs.shape[0]
+    binv = np.empty((nd // 3, 3, 3))
+    _block_jacobi(nd // 3, indptr, indices, data, binv)
+    r = rhs.copy()
+    for i in range(nd):
+        x[i] = 0.0
+    z = np.empty(nd)
+    q = np.empty(nd)
+    _precondition(binv, r, z)
+    p = z.copy()
+    rz = 0.0
+    bn = 0.0
+    for i in range(nd):
+        rz += r[i] * z[i]
+        bn += rhs[i] * rhs[i]
+    stop = rtol * rtol * bn
+    for it in range(max_iter):
+        rr = 0.0
+        for i in range(nd):
+            rr += r[i] * r[i]
+        if rr <= stop:
+            return it
+        _matvec(indptr, indices, data, p, q)
+        pq = 0.0
+        for i in range(nd):
+            pq += p[i] * q[i]
+        if pq <= 0.0:
+            return it
+        alpha = rz / pq
+        for i in range(nd):
+            x[i] += alpha * p[i]
+            r[i] -= alpha * q[i]
+        _precondition(binv, r, z)
+        rz_new = 0.0
+        for i in range(nd):
+            rz_new += r[i] * z[i]
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(nd):
+            p[i] = z[i] + beta * p[i]
+    return max_iter

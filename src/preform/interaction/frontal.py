@@ -72,6 +72,8 @@ LENGTH_SMOOTHING = 1e-18
 ARMIJO = 1e-4
 LINE_SEARCH_HALVINGS = 40
 ROUNDOFF = 1e-13
+#: conjugate-gradient iterations before the sparse LU fallback
+CG_MAX_ITERATIONS = 3000
 #: |material slid through a crossing in a step| below this (m) counts as sticking
 SLIDE_TOLERANCE = 1e-7
 
@@ -155,7 +157,7 @@ class _Network:
             res = self.imbalance()
             if res < tol or k == max_steps:
                 return res, k
-            _newton_step(self, E, nnz)
+            _newton_step(self, E, nnz, res)
 
 
 class _Anderson:
@@ -184,13 +186,28 @@ class _Anderson:
         return phi - (DX + DR) @ gamma
 
 
-def _newton_step(net, E, nnz):
-    """One Newton step on E with Armijo backtracking; moves state.pos in place. Returns |step|."""
+def _newton_direction(H, g, forcing):
+    """Newton direction: block-Jacobi conjugate gradients to the relative accuracy ``forcing``
+    (inexact Newton), sparse LU where CG stalls."""
+    H.sum_duplicates()
+    dx = np.empty_like(g)
+    it = K.pcg(H.indptr.astype(np.int64), H.indices.astype(np.int64), H.data, -g, forcing,
+               CG_MAX_ITERATIONS, dx)
+    if it >= CG_MAX_ITERATIONS or not np.all(np.isfinite(dx)):
+        dx = spsolve(H.tocsc(), -g, permc_spec="MMD_ATA")
+    return dx
+
+
+def _newton_step(net, E, nnz, residual=1.0):
+    """One (inexact) Newton step on E with Armijo backtracking; moves state.pos in place.
+    ``residual``: the current relative imbalance (sets the CG accuracy). Returns |step|."""
     st = net.st
     m = st.m
-    H = sp.csc_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(3 * m, 3 * m))
+    H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(3 * m, 3 * m))
     g = net.grad[:m].ravel()
-    dx = spsolve(H, -g, permc_spec="MMD_AT_PLUS_A")
+    # Eisenstat-Walker-like forcing: what this step must reach, no more
+    forcing = min(0.1, max(residual, 0.1 * BALANCE_TOLERANCE / max(residual, 1e-300), 1e-12))
+    dx = _newton_direction(H, g, forcing)
     if not np.all(np.isfinite(dx)):
         dx = -g / max(np.abs(H.diagonal()).max(), 1e-300)   # gradient step as a fallback
     slope = float(g @ dx)
