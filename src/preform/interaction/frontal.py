@@ -67,7 +67,7 @@ ANDERSON_DEPTH = 5
 BALANCE_ACCEPT = 10.0
 #: smoothing of the segment length, m^2: l = sqrt(|d|^2 + LENGTH_SMOOTHING). Changes a force by
 #: the relative amount LENGTH_SMOOTHING / (2 l^2): < 1e-6 for segments longer than 0.7 um
-LENGTH_SMOOTHING = 1e-18
+LENGTH_SMOOTHING = 1e-12
 #: Armijo constant and halvings of the line search
 ARMIJO = 1e-4
 LINE_SEARCH_HALVINGS = 40
@@ -105,6 +105,7 @@ class SolveReport:
     residual: float
     history: np.ndarray
     lagged: bool = False
+    stuck: bool = False
 
 
 class _Network:
@@ -236,7 +237,8 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE, max_iter=MA
     back to *lagged* friction: the friction tensions of the step's start geometry, held fixed,
     and one exact (convex) balance solve. Then force balance is exact and ``Psi`` holds up to the
     change of the deflections in one step (first order in the time step); ``SolveReport.lagged``
-    says so. SimulationError if even that solve fails."""
+    says so. If that fails too, every crossing sticks with equal tensions (``SolveReport.stuck``).
+    SimulationError if even that solve fails."""
     start = state.pos[: state.m].copy()
     try:
         return _solve(state, bc, f_top, tol, max_iter, where)
@@ -244,6 +246,21 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE, max_iter=MA
         if state.m == 0:
             raise
     state.pos[: state.m] = start
+    try:
+        return _lagged(state, bc, f_top, tol, where)
+    except SimulationError:
+        pass
+    # last resort: every crossing sticks with equal tensions (inside every cone, Psi <= 0): the
+    # frictionless network, which is convex with geometry-independent tensions
+    state.pos[: state.m] = start
+    state.slip[: state.m] = 0
+    state.ratio[: state.m] = 1.0
+    rep = _lagged(state, bc, f_top, tol, where)
+    return SolveReport(rep.iterations, rep.residual, rep.history, lagged=True, stuck=True)
+
+
+def _lagged(state, bc, f_top, tol, where) -> SolveReport:
+    """Friction tensions of the start geometry held fixed, one convex balance solve."""
     net = _Network(state, bc, f_top)
     net.tension, net.f_top = net.friction_tensions()
     residual, steps = net.balance(tol, 4 * NEWTON_STEPS)
@@ -254,7 +271,7 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE, max_iter=MA
             f"friction (tolerance {tol:.3g}, {state.m} crossings)")
     state.tension[: state.m] = net.tension
     f_top[:] = net.f_top
-    return SolveReport(max_iter + steps, float(residual), np.array([residual]), lagged=True)
+    return SolveReport(steps, float(residual), np.array([residual]), lagged=True)
 
 
 def _solve(state, bc, f_top, tol, max_iter, where) -> SolveReport:

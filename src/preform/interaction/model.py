@@ -43,7 +43,7 @@ from .zone_state import ZoneState
 #: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
 DEPOSIT_HEIGHT = 1.0
 #: friction state of a new crossing: sliding down its yarns (see ``interaction/frontal.py``)
-NEW_CROSSING_SLIDE = -1
+NEW_CROSSING_SLIDE = 0
 
 
 class MandrelDistance:
