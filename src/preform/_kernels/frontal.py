@@ -189,9 +189,12 @@ def _segment(E, grad, rows, cols, vals, nnz, ia, ib, pa, pb, f, eps2):
 
 @njit(cache=True)
 def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, tension, h,
-             eps2, grad, rows, cols, vals):
+             eps2, plane, k_wall, grad, rows, cols, vals):
     """Energy E (N m), gradient grad (m, 3) (N) and Hessian triplets (N/m) of the network with the
     tensions fixed (module docstring). rows, cols, vals need 36 (2 m + n_yarns) entries.
+    plane (m, 6): point and outward unit normal of the mandrel's tangent plane near each crossing
+    (machine frame); a crossing behind it is pushed out by the convex penalty k_wall s^2 / 2
+    (s < 0 its signed distance, k_wall N/m). rows, cols, vals need one more block per crossing.
     Returns (E, nnz)."""
     n = n_yarns // 2
     pa = np.empty(3)
@@ -219,11 +222,29 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top
         pb[1] = top[k, 1]
         pb[2] = top[k, 2]
         E, nnz = _segment(E, grad, rows, cols, vals, nnz, c, -1, pa, pb, f_top[k], eps2)
+    for c in range(m):
+        sd = _wall_distance(pos, plane, c)
+        if sd < 0.0:
+            E += 0.5 * k_wall * sd * sd
+            for i in range(3):
+                grad[c, i] += k_wall * sd * plane[c, 3 + i]
+                for j in range(3):
+                    rows[nnz] = 3 * c + i
+                    cols[nnz] = 3 * c + j
+                    vals[nnz] = k_wall * plane[c, 3 + i] * plane[c, 3 + j]
+                    nnz += 1
     return E, nnz
 
 
 @njit(cache=True)
-def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, tension, h, eps2):
+def _wall_distance(pos, plane, c):
+    return ((pos[c, 0] - plane[c, 0]) * plane[c, 3] + (pos[c, 1] - plane[c, 1]) * plane[c, 4]
+            + (pos[c, 2] - plane[c, 2]) * plane[c, 5])
+
+
+@njit(cache=True)
+def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, tension, h, eps2,
+           plane, k_wall):
     """E = sum f l over the segments (N m), as in ``assemble``, without derivatives."""
     n = n_yarns // 2
     pa = np.empty(3)
@@ -242,6 +263,10 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, 
         yarn_point(pos, normal, over, c, 0 if k < n else 1, h, pa)
         E += f_top[k] * math.sqrt((pa[0] - top[k, 0]) ** 2 + (pa[1] - top[k, 1]) ** 2
                                   + (pa[2] - top[k, 2]) ** 2 + eps2)
+    for c in range(m):
+        sd = _wall_distance(pos, plane, c)
+        if sd < 0.0:
+            E += 0.5 * k_wall * sd * sd
     return E
 
 

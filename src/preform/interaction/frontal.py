@@ -21,7 +21,10 @@ Here the same two half-steps are kept, but the position half-step is solved exac
 2. *Position step*: with those tensions, pair balance at every crossing (paper eqs. 3-4, both
    yarns' internal and external forces) is the stationary point of the convex function
    ``E(C) = sum over segments of tension x length``: a weighted Fermat point at every crossing,
-   coupled through the segments. One damped Newton step on ``E`` (sparse Hessian, 3x3 blocks per
+   coupled through the segments. The mandrel is a wall: each crossing stays in front of the
+   tangent plane of the mandrel surface nearest to it (a convex penalty, ``WALL_STIFFNESS``), so
+   the lowest rows rest on the mandrel, where ``model.py`` deposits them, instead of being pulled
+   through it by the yarns that wrap around it. One damped Newton step on ``E`` (sparse Hessian, 3x3 blocks per
    segment, Armijo line search on ``E``) moves all crossings at once, so the long-wave modes that
    make a Gauss-Seidel or shooting sweep slow or unstable are solved directly, and the convexity
    of ``E`` makes every step a descent step whatever the segment lengths.
@@ -74,6 +77,8 @@ LINE_SEARCH_HALVINGS = 40
 ROUNDOFF = 1e-13
 #: conjugate-gradient iterations before the sparse LU fallback
 CG_MAX_ITERATIONS = 3000
+#: stiffness (N/m) of the mandrel wall that keeps crossings outside: 10 N push 1 um
+WALL_STIFFNESS = 1e7
 #: |material slid through a crossing in a step| below this (m) counts as sticking
 SLIDE_TOLERANCE = 1e-7
 
@@ -84,7 +89,8 @@ class Boundary:
 
     fell : (2n, 3) float64, m, fell points; top : (2n, 3) ring points (guide ring) or spool points;
     spool : (2n, 3) spool points; f_spool : N; mu, mu_r : friction; has_ring : bool; h : m, half
-    the yarn thickness.
+    the yarn thickness; plane : (m, 6) or None, per crossing a point and the outward unit normal
+    of the mandrel surface nearest to it (the crossings may not pass behind it).
     """
 
     fell: np.ndarray
@@ -95,6 +101,7 @@ class Boundary:
     mu_r: float
     has_ring: bool
     h: float
+    plane: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -115,10 +122,16 @@ class _Network:
     def __init__(self, state, bc, f_top):
         self.st, self.bc = state, bc
         m = state.m
+        if bc.plane is None:
+            self.plane = np.zeros((m, 6))
+            self.plane[:, 2] = -1e300      # no mandrel: a wall far away
+            self.plane[:, 5] = 1.0
+        else:
+            self.plane = np.ascontiguousarray(bc.plane[:m])
         self.tension = state.tension[:m].copy()
         self.f_top = np.asarray(f_top, dtype=float).copy()
         self.grad = np.zeros((m, 3))
-        nmax = 36 * (2 * m + state.n_yarns)
+        nmax = 36 * (2 * m + state.n_yarns) + 9 * m
         self.rows = np.empty(nmax, dtype=np.int64)
         self.cols = np.empty(nmax, dtype=np.int64)
         self.vals = np.empty(nmax)
@@ -138,13 +151,15 @@ class _Network:
         st, bc = self.st, self.bc
         E, nnz = K.assemble(st.m, st.n_yarns, st.yarn, st.pos, st.normal, st.over, st.low,
                             st.highest, bc.fell, bc.top, self.f_top, self.tension, bc.h,
-                            LENGTH_SMOOTHING, self.grad, self.rows, self.cols, self.vals)
+                            LENGTH_SMOOTHING, self.plane, WALL_STIFFNESS, self.grad, self.rows,
+                            self.cols, self.vals)
         return E, nnz
 
     def energy(self, pos):
         st, bc = self.st, self.bc
         return K.energy(st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest,
-                        bc.fell, bc.top, self.f_top, self.tension, bc.h, LENGTH_SMOOTHING)
+                        bc.fell, bc.top, self.f_top, self.tension, bc.h, LENGTH_SMOOTHING,
+                        self.plane, WALL_STIFFNESS)
 
     def imbalance(self):
         st = self.st

@@ -14,8 +14,9 @@ Each step (``step``):
    points of the step's end, each yarn on or inside its friction cone; then the friction state of
    every crossing is decided for the next step from the yarn that slid through it
    (``frontal.update_slide``);
-3. a crossing that is the lowest on one of its yarns and lies closer to the mandrel than
-   ``DEPOSIT_HEIGHT`` yarn thicknesses (signed distance: inside counts) is deposited: it becomes the
+3. a crossing that lies closer to the mandrel than ``DEPOSIT_HEIGHT`` yarn thicknesses (the
+   solver keeps the crossings outside the mandrel's tangent planes, ``frontal.Boundary.plane``)
+   is deposited: it becomes the
    fell point of both its yarns (``ZoneStep.deposits``) and leaves the zone; crossings below it on
    its other yarn go with it (lowest first), so chains stay consistent on ragged rows;
 4. every yarn's free yarn runs to its lowest crossing (its yarn centerline point there), or to its
@@ -30,6 +31,8 @@ Distances to the mandrel use the nearest face centroid's plane (KD-tree), good t
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -61,6 +64,16 @@ class MandrelDistance:
         _, f = self.tree.query(points)
         return np.einsum("ij,ij->i", points - self.centroids[f], self.normals[f])
 
+    def planes(self, points, pose):
+        """(n, 6): point and outward unit normal of the nearest face's plane, machine frame, for
+        points given in the machine frame (pose: the mandrel's)."""
+        _, f = self.tree.query(np.atleast_2d(pose.to_mandrel(points)))
+        c = self.centroids[f]
+        p0 = np.asarray(pose.to_machine(c), dtype=float)
+        n = np.asarray(pose.to_machine(c + self.normals[f]), dtype=float) - p0
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        return np.hstack([p0, n])
+
 
 class InteractionZone:
     """Crossings with stick/slip friction between the fell points and the supply side."""
@@ -83,6 +96,7 @@ class InteractionZone:
         self.last_report = None
         self.fell = None
         self.t = 0.0
+        self.pose_end = None
 
     # -- interface --------------------------------------------------------------------------
     def start(self, t, F_machine, pose):
@@ -108,6 +122,8 @@ class InteractionZone:
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
         st = self.state
         K.radial_normals(st.m, st.pos, st.normal)
+        self.pose_end = pose_end
+        bc = self._with_wall(bc)
         self.last_report = frontal.solve_zone(st, bc, self.f_top, where=where)
         F_mandrel = np.asarray(pose_end.to_mandrel(F_machine), dtype=float)
         laid = np.linalg.norm(F_mandrel - self.F_prev_mandrel, axis=1)
@@ -133,12 +149,20 @@ class InteractionZone:
         The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
         are in balance with the exported fell points."""
         st = _copy_state(self.state)
-        bc = self.boundary(t, F_machine)
+        bc = self._with_wall(self.boundary(t, F_machine), st)
         f_top = self.f_top.copy()
         frontal.solve_zone(st, bc, f_top, where=f"in the snapshot at t = {t:.6g} s")
         return _snapshot(st, bc, f_top, t, self.machine)
 
     # -- pieces -----------------------------------------------------------------------------
+    def _with_wall(self, bc, state=None):
+        """bc with the mandrel's tangent planes near the crossings (no wall without a mandrel)."""
+        st = self.state if state is None else state
+        planes = getattr(self.distance, "planes", None)
+        if planes is None or st.m == 0 or self.pose_end is None:
+            return bc
+        return dataclasses.replace(bc, plane=planes(st.pos[: st.m], self.pose_end))
+
     def lowest_points(self, top) -> np.ndarray:
         """(2n, 3): each yarn's centerline point at its lowest crossing, or its top point."""
         st = self.state
@@ -169,7 +193,7 @@ class InteractionZone:
         st = self.state
         if self.distance is None or st.m == 0:
             return []
-        cand = np.unique(st.lowest[st.lowest >= 0])
+        cand = np.arange(st.m)
         d = self.distance(pose.to_mandrel(st.pos[cand]))
         hit = cand[d < DEPOSIT_HEIGHT * 2.0 * self.h]
         if len(hit) == 0:
