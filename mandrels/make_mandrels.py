@@ -17,6 +17,7 @@ and runs along +z (the bent tube turns towards +x).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -33,23 +34,46 @@ def straight(length):
 
 MANDRELS = {
     "case_a": (lambda: shapes.cylinder(0.075, 2.0, n_around=128), straight(2.0)),
-    "case_b": (lambda: shapes.case_b(), straight(1.5)),
-    "bent_tube": (lambda: shapes.bent_tube(), shapes.bent_tube_path()),
+    "case_b": (lambda: shapes.case_b(n_around=128, spacing=0.01), straight(1.5)),
+    "bent_tube": (lambda: shapes.bent_tube(n_around=96, spacing=0.008), shapes.bent_tube_path()),
     "cone": (lambda: shapes.cone(0.04, 0.08, 1.0, n_around=128, n_along=100), straight(1.0)),
-    "waist": (lambda: shapes.waist(), straight(1.2)),
-    "bulge": (lambda: shapes.bulge(), straight(1.2)),
+    # 240 rings (5 mm) resolve the 30 mm / 15 mm Gaussians and keep the files under 3 MiB
+    "waist": (lambda: shapes.waist(n_around=128, n_along=240), straight(1.2)),
+    "bulge": (lambda: shapes.bulge(n_around=128, n_along=240), straight(1.2)),
 }
 
 
-def main():
-    for name, (make, path) in MANDRELS.items():
-        vertices, faces = make()
-        mesh = trimesh.Trimesh(vertices, faces, process=False)
-        assert mesh.is_watertight and mesh.volume > 0, name
-        mesh.export(HERE / f"{name}.stl")
-        np.savetxt(HERE / f"{name}_centerline.csv", path, delimiter=",", header="x,y,z", comments="",
-                   fmt="%.9g")
-        print(f"{name}: {len(faces)} triangles, {(HERE / f'{name}.stl').stat().st_size / 1e6:.2f} MB")
+def write(name, out_dir=None):
+    """Write ``<name>.stl`` (binary, m) and ``<name>_centerline.csv`` (x,y,z, tip first) into out_dir
+    (default: this folder)."""
+    out_dir = Path(out_dir or HERE)
+    make, path = MANDRELS[name]
+    vertices, faces = make()
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, name
+    stl = Path(out_dir) / f"{name}.stl"
+    _atomic(stl, lambda tmp: mesh.export(tmp, file_type="stl"))
+    _atomic(Path(out_dir) / f"{name}_centerline.csv",
+            lambda tmp: np.savetxt(tmp, path, delimiter=",", header="x,y,z", comments="", fmt="%.9g"))
+    return stl
+
+
+def _atomic(target, write_to):
+    """Write through a temporary name beside target, then rename (no half files)."""
+    tmp = target.with_name(f".{target.name}.tmp")
+    try:
+        write_to(str(tmp))
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def main(out_dir=None):
+    """Write every mandrel into out_dir (default: this folder)."""
+    for name in MANDRELS:
+        stl = write(name, out_dir)
+        n_faces = len(trimesh.load(stl, file_type="stl").faces)
+        print(f"{name}: {n_faces} triangles, {stl.stat().st_size / 1e6:.2f} MB")
 
 
 if __name__ == "__main__":

@@ -208,12 +208,24 @@ def test_read_csv_missing_or_too_short(tmp_path):
         read_centerline_csv(tmp_path / "one.csv")
 
 
-@pytest.mark.xfail(strict=True, reason="read_centerline_csv accepts a header only on line 1: a header "
-                   "after a leading comment or blank line (both skipped elsewhere) is refused as a bad row")
 def test_read_csv_header_after_a_comment(tmp_path):
     path = tmp_path / "commented.csv"
-    path.write_text("# exported by CAD\nx,y,z\n0,0,0\n0,0,1\n")
+    path.write_text("# exported by CAD\n\nx,y,z\n0,0,0\n0,0,1\n")
     assert read_centerline_csv(path).length == 1.0
+
+
+def test_read_csv_header_picks_the_named_columns(tmp_path):
+    path = tmp_path / "s_first.csv"
+    path.write_text("s,x,y,z\n0,0,0,0\n2,0,0,2\n")
+    cl = read_centerline_csv(path)
+    assert np.allclose(cl.points, [[0, 0, 0], [0, 0, 2]]) and cl.length == 2.0
+
+
+def test_read_csv_second_header_is_a_bad_row(tmp_path):
+    path = tmp_path / "twice.csv"
+    path.write_text("x,y,z\n0,0,0\nx,y,z\n0,0,1\n")
+    with pytest.raises(MandrelError, match="line 3"):
+        read_centerline_csv(path)
 
 
 def test_write_csv_round_trip(tmp_path, bent_path):

@@ -84,6 +84,11 @@ class Centerline:
         return out_s, out_d
 
 
+def _check_unit(unit, name):
+    if unit not in UNITS:
+        raise MandrelError(f'{name} = "{unit}": expected "m" or "mm"')
+
+
 def _initial_normal(T0, roll_reference):
     if roll_reference is not None:
         r = np.asarray(roll_reference, dtype=float)
@@ -138,11 +143,20 @@ def centerline_from_points(points, roll_reference=None, perimeter=None) -> Cente
 
 
 def read_centerline_csv(path, unit: str = "m", roll_reference=None) -> Centerline:
-    """x,y,z per line in the STL's unit, tip first; a header line ``x,y,z`` is allowed."""
+    """Centerline from a CSV of x,y,z per line in the STL's unit, tip first.
+
+    Blank lines and ``#`` comments are skipped. The first other line may be a header naming the
+    columns; if it names ``x``, ``y`` and ``z`` those columns are read (so the ``x,y,z,s,perimeter``
+    files of ``write_centerline_csv`` and ``s,x,y,z`` tables both work), otherwise the first three.
+    A bad row raises MandrelError naming the file and the line.
+    """
+    _check_unit(unit, "[mandrel] stl_unit")
     path = Path(path)
     if not path.is_file():
         raise MandrelError(f"centerline CSV not found: {path}")
     rows = []
+    columns = [0, 1, 2]
+    first = True
     for lineno, line in enumerate(path.read_text().splitlines(), start=1):
         text = line.strip()
         if not text or text.startswith("#"):
@@ -151,19 +165,42 @@ def read_centerline_csv(path, unit: str = "m", roll_reference=None) -> Centerlin
         try:
             values = [float(p) for p in parts]
         except ValueError:
-            if not rows and lineno == 1:
-                continue  # header
+            if first:
+                columns = _header_columns(parts, columns)
+                first = False
+                continue
             raise MandrelError(f"{path}, line {lineno}: expected numbers x,y,z, got {text!r}") from None
-        if len(values) < 3:
-            raise MandrelError(f"{path}, line {lineno}: expected three numbers x,y,z, got {text!r}")
-        rows.append(values[:3])
+        first = False
+        if len(values) <= max(columns):
+            raise MandrelError(f"{path}, line {lineno}: expected {max(columns) + 1} numbers "
+                               f"(x,y,z), got {text!r}")
+        point = [values[c] for c in columns]
+        if not np.all(np.isfinite(point)):
+            raise MandrelError(f"{path}, line {lineno}: x,y,z must be finite numbers, got {text!r}")
+        rows.append(point)
     if len(rows) < 2:
         raise MandrelError(f"{path}: a centerline needs at least two points, found {len(rows)}")
     return centerline_from_points(np.array(rows) * UNITS[unit], roll_reference=roll_reference)
 
 
-def write_centerline_csv(centerline: Centerline, path, unit: str = "m") -> Path:
-    """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv."""
+def _header_columns(names, default):
+    """Column indices of x, y, z in a header row (names lower-cased), else ``default``."""
+    names = [n.lower().strip('"') for n in names]
+    if all(c in names for c in "xyz"):
+        return [names.index(c) for c in "xyz"]
+    return default
+
+
+def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
+    """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv.
+
+    The file is written to a temporary name beside ``path`` and renamed over it, so an interrupted
+    write never leaves a half file. ``write_centerline_csv(centerline, path)`` (the older argument
+    order) is accepted too. perimeter is ``nan`` when the centerline has none.
+    """
+    if isinstance(path, Centerline):
+        path, centerline = centerline, path
+    _check_unit(unit, "centerline unit")
     path = Path(path)
     scale = 1.0 / UNITS[unit]
     per = centerline.perimeter if centerline.perimeter is not None else np.full(len(centerline.s), np.nan)
@@ -285,31 +322,57 @@ def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
     return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s))
 
 
+def _face_centroids_areas(mandrel):
+    """Face centroids (nf, 3) m and areas (nf,) m^2."""
+    p = mandrel.vertices[mandrel.faces]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    return p.mean(axis=1), area
+
+
+def _principal_axis(points, weights):
+    """Unit direction (3,) of largest weighted spread of points (m, 3), and their weighted mean.
+
+    Area weights make the axis a property of the surface, not of how densely it was meshed (a
+    finely meshed fillet would otherwise pull a vertex PCA towards itself).
+    """
+    w = weights / weights.sum()
+    centre = w @ points
+    d = points - centre
+    cov = (d * w[:, None]).T @ d
+    _, vecs = np.linalg.eigh(cov)
+    return vecs[:, -1], centre
+
+
 def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None) -> Centerline:
     """Slice centroids traced along the mandrel (``centerline = "auto"``).
 
-    The two ends come from the principal axis of the vertices; the tip is the end nearer the STL
-    frame's origin. From there the trace steps ``h``, slices the mesh normal to the current
-    tangent, and takes the area centroid of the section loop nearest the predicted point; the
-    tangent follows consecutive centroids, so bends are followed. The ends are extended to the
-    mesh's extremes along the end tangents.
+    The two ends come from the principal axis of the surface (area-weighted PCA of the face
+    centroids); the tip is the end (on that axis) nearer the STL frame's origin, so a mandrel
+    modelled from its tip at the origin, as the shipped ones are, is fed tip first. To feed the
+    other end first, move the STL's origin or give a centerline CSV.
+
+    From the tip the trace steps ``h = extent / n_sections`` (default 200 sections), slices the
+    mesh normal to the current tangent and takes the area centroid of the section loop nearest
+    the predicted point; the tangent follows consecutive centroids, so bends are followed. The ends
+    are extended to the mesh's extremes along the end tangents. ``perimeter`` is filled from the
+    same sections.
     """
     V = mandrel.vertices
-    centre = V.mean(axis=0)
-    _, _, vt = np.linalg.svd(V - centre, full_matrices=False)
-    axis = vt[0]
+    C, A = _face_centroids_areas(mandrel)
+    axis, centre = _principal_axis(C, A)
     proj = (V - centre) @ axis
-    if np.linalg.norm(V[np.argmax(proj)]) < np.linalg.norm(V[np.argmin(proj)]):
+    # the two ends, on the principal axis; the tip is the one nearer the STL origin
+    if np.linalg.norm(centre + proj.max() * axis) < np.linalg.norm(centre + proj.min() * axis):
         axis = -axis
         proj = -proj
     extent = float(proj.max() - proj.min())
     tip = V[np.argmin(proj)]
-    # local axis at the tip: principal axis of the vertices near the tip end (a bent part's global
+    # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
+    near_faces = np.linalg.norm(C - tip, axis=1) < 0.25 * extent
+    T, local_centre = _principal_axis(C[near_faces], A[near_faces])
+    T = T if T @ (local_centre - tip) >= 0 else -T
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
-    local_centre = near.mean(axis=0)
-    _, _, vt_local = np.linalg.svd(near - local_centre, full_matrices=False)
-    T = vt_local[0] if vt_local[0] @ (local_centre - tip) >= 0 else -vt_local[0]
     n = n_sections or 200
     h = extent / n
     tip_depth = float(np.min((near - tip) @ T))

@@ -178,20 +178,65 @@ def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bo
                    source=str(source), repairs=tuple(repairs))
 
 
+def edge_use(faces):
+    """How the undirected edges of a face list are used: (open, miswound, non_manifold) masks.
+
+    Returns three (nf, 3) bool arrays over the directed edges (corner k -> k+1 of each face):
+    ``open``: the edge belongs to this face only (a hole's boundary); ``miswound``: exactly one
+    other face has it, in the same direction (the two faces are wound against each other);
+    ``non_manifold``: three or more faces share it.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    a = faces.reshape(-1)
+    b = np.roll(faces, -1, axis=1).reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    _, inverse, counts = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    uses = counts[inverse]
+    forward = np.bincount(inverse, weights=(a < b).astype(float), minlength=len(counts))[inverse]
+    miswound = (uses == 2) & (forward != 1)
+    shape = faces.shape
+    return (uses == 1).reshape(shape), miswound.reshape(shape), (uses > 2).reshape(shape)
+
+
+def _near(vertices, faces, mask):
+    """'(x, y, z) m': the mean of the first vertices of the flagged directed edges."""
+    where = vertices[faces[mask]].mean(axis=0)
+    return f"({where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g}) m"
+
+
+def _count_edges(faces, mask):
+    """Number of distinct undirected edges among the flagged directed edges."""
+    a = faces[mask]
+    b = np.roll(faces, -1, axis=1)[mask]
+    return len(np.unique(np.sort(np.stack([a, b], axis=1), axis=1), axis=0))
+
+
 def _check_closed(name, vertices, faces, neighbors, cross):
-    open_edges = int(np.sum(neighbors < 0))
-    if open_edges:
-        a = faces.reshape(-1)[neighbors.reshape(-1) < 0]
-        where = vertices[a].mean(axis=0)
-        raise MandrelError(
-            f"{name} is not watertight: {open_edges} edges have no matching neighbour (open or "
-            f"inconsistently wound, around ({where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g}) m). A mandrel "
-            "must be one closed surface with consistent winding; repair it in your CAD tool or mesh editor")
+    """Refuse open, non-manifold, inconsistently wound or inward-wound surfaces, saying which."""
+    if np.any(neighbors < 0):
+        open_, miswound, non_manifold = edge_use(faces)
+        if np.any(open_):
+            n_open = _count_edges(faces, open_)
+            raise MandrelError(
+                f"{name} is not watertight: {n_open} open edges (boundary loops near "
+                f"{_near(vertices, faces, open_)}). A mandrel must be a closed surface; close the "
+                "holes in your CAD tool or mesh editor")
+        if np.any(non_manifold):
+            raise MandrelError(
+                f"{name} is not a manifold surface: {_count_edges(faces, non_manifold)} edges are shared "
+                f"by three or more triangles (near {_near(vertices, faces, non_manifold)}). A mandrel "
+                "must be one closed surface")
+        if np.any(miswound):
+            raise MandrelError(
+                f"{name} is not consistently oriented: {_count_edges(faces, miswound)} edges join two "
+                f"triangles wound against each other (near {_near(vertices, faces, miswound)}). "
+                "Re-orient the normals consistently in your CAD tool or mesh editor")
     volume = float(np.einsum("ij,ij->", vertices[faces[:, 0]], cross)) / 6.0
     if volume <= 0:
         raise MandrelError(
-            f"{name}: the triangles are wound inwards (enclosed volume {volume:.4g} m^3 is not positive); "
-            "flip the normals of the STL")
+            f"{name}: the triangles are wound inwards (enclosed volume {volume:.4g} m^3 is not "
+            "positive): the normals point into the mandrel; flip the normals of the STL")
 
 
 def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
