@@ -74,9 +74,6 @@ class ProcessConfig:
 @dataclass(frozen=True)
 class ModelConfig:
     kind: str = "kinematic"         # "kinematic" | "interaction"
-    #: interaction solver: "frontal" (the paper's Fig. 10) or "network" (frictionless limit,
-    #: interaction/network.py)
-    solver: str = "frontal"
     time_step: float | None = None  # s; None: automatic step control
     start: str = "tip"              # "tip" | "random": initial fell points
     seed: int = 0                   # for start = "random"
@@ -110,7 +107,7 @@ KEYS = {
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
-    "model": ("kind", "solver", "time_step", "start", "seed"),
+    "model": ("kind", "time_step", "start", "seed"),
     "output": ("dir", "field_edge_length", "snapshots"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
@@ -119,7 +116,6 @@ REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
 STL_UNITS = ("m", "mm")
 PATTERNS = tuple(PATTERN_M)  # "diamond", "regular", "hercules"
 MODEL_KINDS = ("kinematic", "interaction")
-SOLVERS = ("frontal", "network")
 STARTS = ("tip", "random")
 
 #: coefficients of friction must lie in [0, MAX_FRICTION)
@@ -450,7 +446,6 @@ def _speed_table(sec: _Section, rows: list, what: str) -> tuple[tuple[float, flo
 def _model(sec: _Section) -> ModelConfig:
     return ModelConfig(
         kind=sec.choice("kind", MODEL_KINDS, default=ModelConfig.kind),
-        solver=sec.choice("solver", SOLVERS, default=ModelConfig.solver),
         time_step=sec.number("time_step", "s", default=None, positive=True),
         start=sec.choice("start", STARTS, default=ModelConfig.start),
         seed=sec.integer("seed", "a non-negative integer", default=ModelConfig.seed, minimum=0),
@@ -494,7 +489,7 @@ def dump_config(config: Config) -> dict:
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
                     "braid_length": p.braid_length, "pose_lead": p.pose_lead},
-        "model": {"kind": mo.kind, "solver": mo.solver, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
+        "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},
     }

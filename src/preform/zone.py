@@ -67,15 +67,6 @@ class KinematicZone:
 
 def make_zone(config, machine, mandrel):
     """The zone of ``[model] kind``; ``mandrel`` (mandrel frame) for contact and deposition tests."""
-    if config.model.kind == "interaction" and getattr(config.model, "solver", "frontal") == "network":
-        if config.yarn.friction > 0 or config.yarn.ring_friction > 0:
-            from .errors import ConfigError
-
-            raise ConfigError('[model] solver = "network" is the frictionless limit: expected [yarn] friction = 0 '
-                              "and ring_friction = 0")
-        from .interaction.network import NetworkZone
-
-        return NetworkZone(config, machine, mandrel)
     if config.model.kind == "interaction":
         from .interaction.model import InteractionZone
 
