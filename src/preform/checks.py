@@ -171,9 +171,9 @@ def _value_warnings(config) -> list[str]:
     y, ma, mo = config.yarn, config.machine, config.model
     warnings = []
     if mo.kind == "interaction":
-        warnings.append('[model] kind = "interaction" is experimental in this version: its frontal solver '
-                        "does not yet converge on realistic machines and stops with a non-convergence error "
-                        '(results up to that step are kept); use kind = "kinematic" for production runs')
+        warnings.append('[model] kind = "interaction" is experimental in this version: it is validated on '
+                        "small machines only and is slow on large ones (case A takes minutes per 0.1 m); "
+                        'use kind = "kinematic" for production runs')
     if y.thickness > y.width:
         warnings.append(f"[yarn] thickness = {y.thickness:g} is larger than [yarn] width = {y.width:g}: "
                         "swapped?")
