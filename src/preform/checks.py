@@ -172,7 +172,8 @@ def _value_warnings(config) -> list[str]:
     warnings = []
     if mo.kind == "interaction":
         warnings.append('[model] kind = "interaction" is experimental in this version: it is validated on '
-                        "small machines only and is slow on large ones (case A takes minutes per 0.1 m); "
+                        "small machines; on large ones it is slow and, with friction, may stop with a "
+                        "non-convergence error (results up to that step are kept); "
                         'use kind = "kinematic" for production runs')
     if y.thickness > y.width:
         warnings.append(f"[yarn] thickness = {y.thickness:g} is larger than [yarn] width = {y.width:g}: "
