@@ -257,31 +257,13 @@ def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
-def merge_vertices(vertices, faces, rel_tol):
-    """Merge vertices closer than rel_tol * bounding-box diagonal; drop faces that collapse."""
-    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
-    q = np.round((vertices - vertices.min(axis=0)) / (rel_tol * diag)).astype(np.int64)
-    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    new_faces = inverse[faces]
-    keep = (new_faces[:, 0] != new_faces[:, 1]) & (new_faces[:, 1] != new_faces[:, 2]) & (new_faces[:, 0] != new_faces[:, 2])
-    return vertices[first], new_faces[keep]
-
-
 def load_mandrel(path, unit: str = "m") -> Mandrel:
     """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres)."""
     if unit not in UNITS:
         raise MandrelError(f'[mandrel] stl_unit = "{unit}": expected "m" or "mm"')
     vertices, faces = read_stl(path)
     vertices = vertices * UNITS[unit]
-    repairs = ()
-    try:
-        from .repair import repair_mesh
-    except ImportError:  # pragma: no cover - repair module optional
-        repair_mesh = None
-    if repair_mesh is not None:
-        vertices, faces, report = repair_mesh(vertices, faces, source=str(path))
-        repairs = tuple(report.messages)
-    else:
-        vertices, faces = merge_vertices(vertices, faces, tol.merge_vertices)
-    return mandrel_from_arrays(vertices, faces, source=str(path), repairs=repairs)
+    from .repair import repair_mesh   # repair imports this module: imported here, not at the top
+
+    vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit])
+    return mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
