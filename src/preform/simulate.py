@@ -222,7 +222,7 @@ class _Stepper:
         self.H_hist = []
         self.snapshots = []
         n_snap = config.output.snapshots if config.output is not None else 20
-        self.snapshot_every = None if n_snap <= 0 else n_snap
+        self.snapshot_stride = 0 if n_snap <= 0 else self._snapshot_stride(n_snap)
         self.zone = make_zone(config, machine, mandrel)
         self.zone.start(0.0, pose.to_machine(self.F), pose)
         self._record(pose, ZoneStep.kinematic(machine.supply_points(0.0)))
@@ -265,9 +265,6 @@ class _Stepper:
     # -- process kinematics -------------------------------------------------------------------
     def pose(self, travel):
         return geometry.pose_at(self.centerline, travel, eccentricity=self.ecc, lead=self.lead)
-
-    def supply_mandrel(self, t, pose):
-        return pose.to_mandrel(self.machine.supply_points(t))
 
     def braided_length_estimate(self):
         """Cheap braided length for the stopping test: mean arc length of the fell points."""
@@ -357,14 +354,15 @@ class _Stepper:
         self.lay_dir_hist.append(pose.to_mandrel(zs.G_end) - self.F)
         self.rows.append((self.clock.t, float(np.mean(H)), float(np.min(H)), float(np.max(H)),
                           zs.contacts, zs.iterations, zs.residual))
-        if self.snapshot_every and (len(self.rows) - 1) % max(1, self._snapshot_stride()) == 0:
+        if self.snapshot_stride and (len(self.rows) - 1) % self.snapshot_stride == 0:
             self.snapshots.append(self.zone.snapshot(self.clock.t, F_machine))
 
-    def _snapshot_stride(self):
+    def _snapshot_stride(self, n_snap):
+        """Steps between snapshots so that a run writes about n_snap of them."""
         cfg = self.config
         v = max(s for _, s in cfg.process.take_up_speed)
         n_steps_est = cfg.process.braid_length / (v * self.dt) + 1
-        return int(max(1, n_steps_est // self.snapshot_every))
+        return int(max(1, n_steps_est // n_snap))
 
     # -- packing ------------------------------------------------------------------------------
     def result(self, status, message, wall):
@@ -463,7 +461,7 @@ def braid_angle(direction, tangent, normal):
     return np.arccos(np.clip(c, 0.0, 1.0))
 
 
-def laid_braid_angles(surface, project, centerline, points, face, offsets, mu, stencil=None):
+def laid_braid_angles(surface, project, centerline, points, face, offsets, mu):
     """Braid angle (deg) of the laid yarn at every point, and its slip tendency (bool).
 
     The laid direction at a point is the chord between its neighbours along the yarn (one-sided at
