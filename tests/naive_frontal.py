@@ -1,8 +1,9 @@
 """Slow, obvious NumPy twins of the frontal kernels (``preform._kernels.frontal``).
 
 Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
-arrays in creation order as the kernels do), segments are vectors, the friction cone is written
-from DESIGN.md §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``).
+arrays in creation order as the kernels do), segments are vectors, the energy is written term by
+term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from DESIGN.md
+§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``).
 """
 
 from __future__ import annotations
@@ -25,47 +26,53 @@ def polyline(st, k, side, chain, fell, top, h):
     return np.array([fell[k]] + [yarn_point(st, c, side, h) for c in chain] + [top[k]])
 
 
-def energy_and_gradient(st, fell, top, f_top, h, eps2):
-    """E = sum f sqrt(|d|^2 + eps2) and dE/dC (m, 3), segment tensions from st.tension / f_top."""
-    g = np.zeros((st.m, 3))
+def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2):
+    """The step energy (no wall) by yarns: stretched segments, spool payout, friction."""
     E = 0.0
     for k, (side, chain) in enumerate(chains(st)):
         if not chain:
             continue
         pts = polyline(st, k, side, chain, fell, top, h)
-        ids = [-1] + chain + [-1]
-        ten = [st.tension[c, side] for c in chain] + [f_top[k]]
-        for i in range(len(pts) - 1):
+        s = [st.s_fell[k]] + [st.s[c, side] for c in chain]
+        for i in range(len(chain)):
             d = pts[i + 1] - pts[i]
             l = np.sqrt(d @ d + eps2)
-            E += ten[i] * l
-            if ids[i + 1] >= 0:
-                g[ids[i + 1]] += ten[i] * d / l
-            if ids[i] >= 0:
-                g[ids[i]] -= ten[i] * d / l
-    return E, g
+            q = s[i + 1] - s[i]
+            if q <= 0:
+                return np.inf
+            E += 0.5 * EA * (l - q) ** 2 / q
+        d = pts[-1] - pts[-2]
+        f = f_top[k]
+        E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2)
+    x = st.s[: st.m] - s_old
+    E += np.sum(g * (np.sqrt(x * x + eps_f ** 2) - eps_f) + 0.5 * kappa0 * x * x)
+    return E
 
 
-def capstan_tensions(st, fell, top, f_top, h, mu):
-    """Tensions below each crossing (m, 2) walking every yarn from its top point down."""
+def tensions(st, fell, EA, h, eps2):
+    """Tension below every crossing (m, 2), walking every yarn from its fell point up."""
+    out = np.zeros((st.m, 2))
+    for k, (side, chain) in enumerate(chains(st)):
+        prev, s_prev = fell[k], st.s_fell[k]
+        for c in chain:
+            p = yarn_point(st, c, side, h)
+            l = np.sqrt(np.sum((p - prev) ** 2) + eps2)
+            q = st.s[c, side] - s_prev
+            out[c, side] = EA * (l - q) / q
+            prev, s_prev = p, st.s[c, side]
+    return out
+
+
+def bounds(st, fell, top, tension, f_top, h, mu):
+    """Friction bound mu (f_int + f_ext) tan(delta/2) per crossing and yarn (m, 2)."""
     out = np.zeros((st.m, 2))
     for k, (side, chain) in enumerate(chains(st)):
         pts = polyline(st, k, side, chain, fell, top, h)
-        f = f_top[k]
-        for i in range(len(chain), 0, -1):
-            c = chain[i - 1]
-            lo, p, hi = pts[i - 1], pts[i], pts[i + 1]
+        ten = [tension[c, side] for c in chain] + [f_top[k]]
+        for i, c in enumerate(chain):
+            lo, p, hi = pts[i], pts[i + 1], pts[i + 2]
             u_int = (lo - p) / np.linalg.norm(lo - p)
             u_ext = (hi - p) / np.linalg.norm(hi - p)
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
-            t = mu * np.tan(delta / 2)
-            lo_f, hi_f = f * (1 - t) / (1 + t), (f * (1 + t) / (1 - t) if t < 1 else np.inf)
-            s = st.slip[c, side]
-            if s > 0:
-                f = hi_f
-            elif s < 0:
-                f = lo_f
-            else:
-                f = np.clip(st.ratio[c, side] * f, lo_f, hi_f)
-            out[c, side] = f
+            out[c, side] = mu * (ten[i] + ten[i + 1]) * np.tan(delta / 2)
     return out

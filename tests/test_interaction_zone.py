@@ -92,51 +92,98 @@ def test_creation_point_is_closest_point_midpoint():
 
 
 def _perturbed(mu=0.3, steps=60, seed=0):
+    """A zone after some steps with its crossings, material coordinates and bounds shaken."""
     zone, F, t, _ = run_zone(mu=mu, steps=steps)
     st = zone.state
     rng = np.random.default_rng(seed)
     st.pos[: st.m] += rng.normal(scale=2e-3, size=(st.m, 3))
-    st.tension[: st.m] = rng.uniform(3.0, 6.0, size=(st.m, 2))
-    st.slip[: st.m] = rng.integers(-1, 2, size=(st.m, 2))
-    st.ratio[: st.m] = rng.uniform(0.8, 1.2, size=(st.m, 2))
-    return zone, zone.boundary(t, F)
+    bc = zone.boundary(t, F)
+    frontal.anchor_fell(st, bc)
+    # material coordinates that give every segment a tension in 3..6 N (in tension, where the
+    # Hessian is exact, see _kernels/frontal.py)
+    EA = frontal.axial_stiffness(bc.f_spool)
+    for k, (side, chain) in enumerate(naive.chains(st)):
+        prev, s_prev = bc.fell[k], st.s_fell[k]
+        for c in chain:
+            p = naive.yarn_point(st, c, side, bc.h)
+            l = np.sqrt(np.sum((p - prev) ** 2) + frontal.LENGTH_SMOOTHING)
+            st.s[c, side] = s_prev + l / (1 + rng.uniform(3.0, 6.0) / EA)
+            prev, s_prev = p, st.s[c, side]
+    ten = naive.tensions(st, bc.fell, EA, bc.h, frontal.LENGTH_SMOOTHING)
+    assert 3.0 - 1e-6 < ten.min() and ten.max() < 6.0 + 1e-6
+    return zone, bc
+
+
+def _net(zone, bc, seed=1):
+    st = zone.state
+    rng = np.random.default_rng(seed)
+    f_top = rng.uniform(4.0, 5.0, st.n_yarns)
+    net = frontal._Network(st, bc, f_top)
+    net.s_old = st.s[: st.m] + rng.normal(scale=3 * frontal.FRICTION_CREEP, size=(st.m, 2))
+    net.g = rng.uniform(0.0, 0.5, size=(st.m, 2))
+    return net, f_top
+
+
+def _naive_energy(zone, bc, net, f_top):
+    return naive.energy(zone.state, bc.fell, bc.top, f_top, net.g, net.s_old,
+                        net.EA, frontal.FRICTION_CREEP, frontal.KAPPA0, bc.h,
+                        frontal.LENGTH_SMOOTHING)
 
 
 def test_assemble_matches_numpy_energy_gradient_and_hessian():
     zone, bc = _perturbed()
     st = zone.state
-    f_top = np.random.default_rng(1).uniform(4.0, 5.0, st.n_yarns)
-    eps2 = frontal.LENGTH_SMOOTHING
-    net = frontal._Network(st, bc, f_top)
-    net.tension = st.tension[: st.m].copy()
+    net, f_top = _net(zone, bc)
     E, nnz = net.assemble()
-    E_ref, g_ref = naive.energy_and_gradient(st, bc.fell, bc.top, f_top, bc.h, eps2)
+    E_ref = _naive_energy(zone, bc, net, f_top)
+    assert np.isfinite(E)
     assert E == pytest.approx(E_ref, rel=1e-12)          # same sums, other order: round-off
-    assert np.allclose(net.grad, g_ref, rtol=1e-10, atol=1e-12)
-    # Hessian vs central differences of the NumPy gradient (step 1e-7 m: error ~ 1e-7 relative)
+    # gradient and Hessian vs central differences of the NumPy energy / kernel gradient along a
+    # random direction v (5 unknowns per crossing). Steps: 1e-9 m for the energy (its curvature
+    # EA / q ~ 1e7 N/m makes the O(h^2) error ~1e-8 of the slope), 1e-10 m for the gradient
     import scipy.sparse as sp
-    H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(3 * st.m,) * 2)
-    v = np.random.default_rng(2).normal(size=(st.m, 3))
-    step = 1e-7
-    base = st.pos[: st.m].copy()
-    st.pos[: st.m] = base + step * v
-    gp = naive.energy_and_gradient(st, bc.fell, bc.top, f_top, bc.h, eps2)[1]
-    st.pos[: st.m] = base - step * v
-    gm = naive.energy_and_gradient(st, bc.fell, bc.top, f_top, bc.h, eps2)[1]
-    st.pos[: st.m] = base
-    fd = ((gp - gm) / (2 * step)).ravel()
-    assert np.allclose(H @ v.ravel(), fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+    v = np.random.default_rng(2).normal(size=(st.m, 5))
+    x0 = np.hstack([st.pos[: st.m], st.s[: st.m]]).copy()
+
+    def put(x):
+        st.pos[: st.m] = x[:, :3]
+        st.s[: st.m] = x[:, 3:]
+
+    h = 1e-9
+    put(x0 + h * v)
+    Ep = _naive_energy(zone, bc, net, f_top)
+    put(x0 - h * v)
+    Em = _naive_energy(zone, bc, net, f_top)
+    put(x0)
+    slope = float(np.sum(net.grad * v))
+    assert (Ep - Em) / (2 * h) == pytest.approx(slope, rel=1e-4, abs=1e-6 * abs(E))
+    H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(5 * st.m,) * 2)
+    h = 1e-10
+    put(x0 + h * v)
+    net.assemble()
+    gp = net.grad.copy()
+    put(x0 - h * v)
+    net.assemble()
+    gm = net.grad.copy()
+    put(x0)
+    fd = ((gp - gm) / (2 * h)).ravel()
+    assert np.allclose(H @ v.ravel(), fd, rtol=1e-4, atol=1e-4 * np.abs(fd).max())
 
 
-def test_capstan_sweep_matches_numpy_twin():
+def test_tension_and_bound_kernels_match_numpy_twins():
     zone, bc = _perturbed()
     st = zone.state
-    f_top = np.full(st.n_yarns, 4.7)
-    out = np.zeros((st.m, 2))
-    K.capstan_sweep(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up, bc.fell, bc.top,
-                    f_top, bc.h, 0.3, st.slip, st.ratio, out)
-    ref = naive.capstan_tensions(st, bc.fell, bc.top, f_top, bc.h, 0.3)
-    assert np.allclose(out, ref, rtol=1e-12)
+    net, f_top = _net(zone, bc)
+    net.f_top = f_top
+    net.update_tensions()
+    ref = naive.tensions(st, bc.fell, net.EA, bc.h, frontal.LENGTH_SMOOTHING)
+    assert np.allclose(net.tension, ref, rtol=1e-9, atol=1e-9)
+    g = np.empty((st.m, 2))
+    psi = np.empty((st.m, 2))
+    K.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up, bc.fell, bc.top,
+                      net.tension, f_top, bc.h, 0.3, g, psi)
+    assert np.allclose(g, naive.bounds(st, bc.fell, bc.top, net.tension, f_top, bc.h, 0.3),
+                       rtol=1e-9)
 
 
 def _read_snapshot(path):
@@ -192,8 +239,9 @@ def test_snapshot_file_crossings_in_balance(mu, tmp_path):
 def test_frictionless_tension_equals_spool_tension_along_yarns():
     zone, F, t, _ = run_zone(mu=0.0, steps=90)
     snap = zone.snapshot(t, F)
-    # mu = 0: f_int = f_ext at every crossing (DESIGN.md §3.3); to round-off
-    assert np.allclose(snap.tension_N, 4.7, rtol=1e-12)
+    # mu = 0: f_int = f_ext at every crossing (DESIGN.md §3.3); to the Newton tolerance (1e-8)
+    # and KAPPA0 x slide (1e-9 N)
+    assert np.allclose(snap.tension_N, 4.7, rtol=1e-7)
 
 
 def test_friction_makes_tensions_differ_and_stays_in_the_cone():
@@ -201,7 +249,9 @@ def test_friction_makes_tensions_differ_and_stays_in_the_cone():
     st = zone.state
     ten = st.tension[: st.m]
     assert np.ptp(ten) > 1e-4          # friction acts
-    assert np.all(ten <= 4.7 * (1 + 1e-12))   # sliding down the yarns: tension falls downwards
+    # new crossings slide down the yarns: the tension falls towards the mandrel (to the Newton
+    # tolerance)
+    assert np.all(ten <= 4.7 * (1 + 1e-7))
 
 
 def test_spool_tension_scales_out():
@@ -209,20 +259,21 @@ def test_spool_tension_scales_out():
     z2, *_ = run_zone(mu=0.3, tension=2.0, steps=90)
     z8, *_ = run_zone(mu=0.3, tension=8.0, steps=90)
     assert z2.state.m == z8.state.m
-    # each step converges to a relative imbalance of 1e-9: positions agree far below 1 um
-    assert np.abs(z2.state.pos[: z2.state.m] - z8.state.pos[: z8.state.m]).max() < 1e-6
+    # up to the tow's stretch f / EA (6e-5 at 8 N: < 5 um over the ~5 cm segments here)
+    assert np.abs(z2.state.pos[: z2.state.m] - z8.state.pos[: z8.state.m]).max() < 5e-6
     assert np.allclose(z8.state.tension[: z8.state.m], 4.0 * z2.state.tension[: z2.state.m],
-                       rtol=1e-6)
+                       rtol=1e-3)
 
 
 def test_residual_falls_over_frontal_iterations():
     zone, F, t, _ = run_zone(mu=0.3, steps=40)
     st = zone.state
     st.pos[: st.m] += 1e-3 * np.random.default_rng(2).normal(size=(st.m, 3))
-    rep = frontal.solve_zone(st, zone.boundary(t, F), zone.f_top.copy())
+    rep = frontal.solve_zone(st, zone.boundary(t, F), zone.f_top.copy(),
+                             max_iter=frontal.SNAPSHOT_ITERATIONS)
     h = rep.history
     assert not rep.lagged
-    assert h[-1] < frontal.BALANCE_ACCEPT * frontal.BALANCE_TOLERANCE
+    assert h[-1] < frontal.FRICTION_TOLERANCE
     assert np.all(np.diff(h) < 0)
 
 

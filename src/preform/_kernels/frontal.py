@@ -1,30 +1,40 @@
 """Numba kernels of the frontal solver of the interaction model (paper §2.4; DESIGN.md §3.3).
 
 Arrays and scalars only; the layout of the crossing arrays is documented in
-``preform/interaction/zone_state.py`` (creation order, ``low``/``up`` links, ``over``, ``normal``);
-the reading of the paper implemented here is in ``preform/interaction/frontal.py``. The slow NumPy
-twins live in ``tests/naive_frontal.py``.
+``preform/interaction/zone_state.py`` (creation order, ``low``/``up`` links, ``over``, ``normal``,
+material coordinates ``s``); the reading of the paper implemented here is in
+``preform/interaction/frontal.py``. The slow NumPy twins live in ``tests/naive_frontal.py``.
 
 Geometry. The centerline point of yarn ``side`` (0 warp, 1 weft) at crossing ``c`` is
 ``P = C + s h N`` with ``s = over[c]`` for the warp and ``-over[c]`` for the weft, ``h`` half the
 yarn thickness and ``N = normal[c]`` the contact normal held fixed during a solve (paper eq. 16, one
 normal per crossing). Segments: below every crossing on both yarns (to the lower crossing's yarn
-point or the fell point) with tension ``tension[c, side]``, and the top segment of every yarn (its
-highest crossing to its top point: ring point or spool point) with tension ``f_top[k]``.
+point or the fell point), and the top segment of every yarn (its highest crossing to its top point:
+ring point or spool point).
 
-Two kernels carry the physics:
+Unknowns: 5 per crossing, ``x[5 c + 0..2] = C`` (m, machine frame) and ``x[5 c + 3 + side] =
+s[c, side]``, the material coordinate (m of yarn) of yarn ``side`` at the crossing. The function
+``assemble`` returns (value, gradient, Hessian as COO triplets) of
 
-* ``capstan_sweep`` (force sweep, supply side -> fell points, newest crossing first): the tension
-  below a crossing from the tension above it and the yarn's deflection ``delta`` there, by the
-  discrete Capstan bound of DESIGN.md §3.3 (slipping: on the bound on the side of ``slide``) or
-  the stored stick ratio clipped into the cone (sticking);
-* ``assemble`` (position step): with the tensions fixed, the crossings in force balance are the
-  stationary point of ``E(C) = sum_segments f |P_a - P_b|``, a convex function of the positions;
-  its gradient at a crossing is minus the sum of the four yarn forces on it, so ``grad = 0`` is pair
-  balance (paper eqs. 3-4). ``assemble`` returns ``E``, the gradient and the Hessian as COO
-  triplets (3x3 blocks ``f / l (I - d d^T / l^2)``). The length is smoothed,
-  ``l = sqrt(|d|^2 + eps2)``, so a crossing just created at the supply point (upper segment of
-  length 0) keeps a regular, positive definite Hessian; ``eps2`` is tiny (see ``frontal.py``).
+    E = sum_below W(l, q) + sum_yarns (F(f_top) s_highest + f_top l_top)
+        + sum_(c, side) friction(s - s_old)
+        + sum_c k_wall min(0, dist_c)^2 / 2
+
+* ``W(l, q) = EA (l - q)^2 / (2 q)``: a segment of material length ``q = s_upper - s_lower``
+  (or ``- s_fell``) stretched to length ``l``, tension ``f = dW/dl = EA (l - q) / q`` (a stiff
+  tow; convex in ``(l, q)``, its Hessian ``EA / q v v^T``, ``v = (1, -l/q)``);
+* ``F(f_top) s_highest + f_top l_top``: the spool pays yarn out at the tension ``f_top``
+  (``F = material_force``, the force ``-dW/dq`` of a segment at that tension);
+* friction at the crossing (``_friction``): ``g |s - s_old|`` with ``|x|`` smoothed to
+  ``sqrt(x^2 + eps^2) - eps``, ``g`` the friction bound held fixed in a solve. ``dE/ds = 0``
+  reads ``F(f_below) - F(f_above) = g x / sqrt(x^2 + eps^2)``: a yarn that slides through the
+  crossing (``|x| >> eps``) sits on the bound, one that does not stays inside it (stick);
+* the wall keeps crossings in front of the mandrel's tangent planes.
+
+All terms are convex in the unknowns except the geometric part of a segment in compression
+(``l < q``, a state Newton may pass through; at a solution every yarn is in tension): its
+geometric stiffness in the Hessian is floored at ``GEOMETRIC_FLOOR`` (the gradient stays exact),
+so the Newton matrix is positive definite and every Newton direction descends.
 """
 
 from __future__ import annotations
@@ -102,204 +112,293 @@ def cone(f_ext, d, mu):
     return lo, hi
 
 
-@njit(cache=True)
-def capstan_sweep(m, yarn, pos, normal, over, low, up, fell, top, f_top, h, mu, slide, ratio,
-                  tension):
-    """Tensions below every crossing (N) into tension (m, 2), newest crossing first.
 
-    slide (m, 2) int8: +1 / -1 slipping (internal tension above / below the external one, on the
-    bound), 0 sticking: internal = ratio (m, 2) * external, clipped into the cone.
-    """
-    p = np.empty(3)
-    a = np.empty(3)
-    b = np.empty(3)
-    for c in range(m - 1, -1, -1):
-        for side in range(2):
-            k = yarn[c, side]
-            u = up[c, side]
-            fe = tension[u, side] if u >= 0 else f_top[k]
-            if mu == 0.0:
-                tension[c, side] = fe
-                continue
-            yarn_point(pos, normal, over, c, side, h, p)
-            _end_point(pos, normal, over, low[c, side], side, k, fell, h, a)
-            _end_point(pos, normal, over, u, side, k, top, h, b)
-            d = deflection_dot(p, a, b)
-            lo, hi = cone(fe, d, mu)
-            s = slide[c, side]
-            if s > 0:
-                f = hi if hi < np.inf else fe
-            elif s < 0:
-                f = lo
-            else:
-                f = min(hi, max(lo, ratio[c, side] * fe))
-            tension[c, side] = f
+
+#: N, smallest tension the Hessian's geometric stiffness of a segment uses (see the docstring)
+GEOMETRIC_FLOOR = 1e-3
 
 
 @njit(cache=True)
-def _segment(E, grad, rows, cols, vals, nnz, ia, ib, pa, pb, f, eps2):
-    """Add f * l(pa - pb) to E, its gradient and Hessian blocks (ia, ib: crossing or -1 fixed)."""
+def _lower(k, c, side, lo, pos, normal, over, fell, s, s_fell, h, out):
+    """Yarn point below crossing c on yarn k (lower crossing lo, or the fell point) into out;
+    returns the lower material coordinate."""
+    _end_point(pos, normal, over, lo, side, k, fell, h, out)
+    return s[lo, side] if lo >= 0 else s_fell[k]
+
+
+@njit(cache=True)
+def _sub(pa, pb, eps2):
     dx = pa[0] - pb[0]
     dy = pa[1] - pb[1]
     dz = pa[2] - pb[2]
-    l2 = dx * dx + dy * dy + dz * dz + eps2
-    l = math.sqrt(l2)
-    E += f * l
-    gx = f * dx / l
-    gy = f * dy / l
-    gz = f * dz / l
-    if ia >= 0:
-        grad[ia, 0] += gx
-        grad[ia, 1] += gy
-        grad[ia, 2] += gz
-    if ib >= 0:
-        grad[ib, 0] -= gx
-        grad[ib, 1] -= gy
-        grad[ib, 2] -= gz
-    w = f / l
-    d0 = dx / l
-    d1 = dy / l
-    d2 = dz / l
-    for i in range(3):
-        di = d0 if i == 0 else (d1 if i == 1 else d2)
-        for j in range(3):
-            dj = d0 if j == 0 else (d1 if j == 1 else d2)
-            kij = w * ((1.0 if i == j else 0.0) - di * dj)
-            if ia >= 0:
-                rows[nnz] = 3 * ia + i
-                cols[nnz] = 3 * ia + j
-                vals[nnz] = kij
-                nnz += 1
-            if ib >= 0:
-                rows[nnz] = 3 * ib + i
-                cols[nnz] = 3 * ib + j
-                vals[nnz] = kij
-                nnz += 1
-            if ia >= 0 and ib >= 0:
-                rows[nnz] = 3 * ia + i
-                cols[nnz] = 3 * ib + j
-                vals[nnz] = -kij
-                nnz += 1
-                rows[nnz] = 3 * ib + i
-                cols[nnz] = 3 * ia + j
-                vals[nnz] = -kij
-                nnz += 1
-    return E, nnz
+    return dx, dy, dz, math.sqrt(dx * dx + dy * dy + dz * dz + eps2)
 
 
 @njit(cache=True)
-def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, tension, h,
-             eps2, plane, k_wall, grad, rows, cols, vals):
-    """Energy E (N m), gradient grad (m, 3) (N) and Hessian triplets (N/m) of the network with the
-    tensions fixed (module docstring). rows, cols, vals need 36 (2 m + n_yarns) entries.
-    plane (m, 6): point and outward unit normal of the mandrel's tangent plane near each crossing
-    (machine frame); a crossing behind it is pushed out by the convex penalty k_wall s^2 / 2
-    (s < 0 its signed distance, k_wall N/m). rows, cols, vals need one more block per crossing.
-    Returns (E, nnz)."""
+def segment_tension(l, q, EA):
+    """Tension (N) of a segment of length l (m) and material length q (m); negative when it is
+    shorter than its material (a state Newton may pass through; see ``assemble``)."""
+    return EA * (l - q) / q
+
+
+@njit(cache=True)
+def material_force(f, EA):
+    """-dW/dq of a segment at tension f (N): the force that moves material along the yarn,
+    f + f^2 / (2 EA). The spool's pull on the top material is written with it, so that across a
+    frictionless crossing the tensions are equal exactly."""
+    return f + f * f / (2.0 * EA)
+
+
+@njit(cache=True)
+def _put(rows, cols, vals, nnz, r, c, v):
+    rows[nnz] = r
+    cols[nnz] = c
+    vals[nnz] = v
+    return nnz + 1
+
+
+@njit(cache=True)
+def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old,
+             f_top, g, EA, eps_f, kappa0, h, eps2, plane, k_wall, grad, rows, cols, vals):
+    """E (N m), gradient grad (m, 5) and Hessian triplets of the step's energy (module
+    docstring). Returns (E, nnz); E = inf when a segment's material length is not positive (the
+    line search then backs off). rows, cols, vals need ``triplet_capacity(m, n_yarns)``."""
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)
+    idx = np.empty(8, dtype=np.int64)
+    w = np.empty(8)
     E = 0.0
     nnz = 0
     for c in range(m):
-        grad[c, 0] = 0.0
-        grad[c, 1] = 0.0
-        grad[c, 2] = 0.0
+        for i in range(5):
+            grad[c, i] = 0.0
     for c in range(m):
         for side in range(2):
             k = yarn[c, side]
-            yarn_point(pos, normal, over, c, side, h, pa)
             lo = low[c, side]
-            _end_point(pos, normal, over, lo, side, k, fell, h, pb)
-            E, nnz = _segment(E, grad, rows, cols, vals, nnz, c, lo, pa, pb, tension[c, side], eps2)
+            yarn_point(pos, normal, over, c, side, h, pa)
+            sb = _lower(k, c, side, lo, pos, normal, over, fell, s, s_fell, h, pb)
+            q = s[c, side] - sb
+            if q <= 0.0:
+                return np.inf, 0
+            dx, dy, dz, l = _sub(pa, pb, eps2)
+            dx /= l
+            dy /= l
+            dz /= l
+            f = segment_tension(l, q, EA)
+            # geometric stiffness f / l (I - d d^T) at both ends, f floored (Hessian only; the
+            # gradient stays exact)
+            nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f, GEOMETRIC_FLOOR) / l, dx, dy, dz)
+            e = l - q
+            E += 0.5 * EA * e * e / q
+            wq = -f - f * f / (2.0 * EA)               # dW/dq
+            grad[c, 0] += f * dx
+            grad[c, 1] += f * dy
+            grad[c, 2] += f * dz
+            grad[c, 3 + side] += wq
+            if lo >= 0:
+                grad[lo, 0] -= f * dx
+                grad[lo, 1] -= f * dy
+                grad[lo, 2] -= f * dz
+                grad[lo, 3 + side] -= wq
+            # axial part EA / q w w^T, w = (d, -d, -l/q, +l/q) over (C_a, C_b, s_a, s_b)
+            na = 4
+            idx[0] = 5 * c
+            idx[1] = 5 * c + 1
+            idx[2] = 5 * c + 2
+            idx[3] = 5 * c + 3 + side
+            w[0] = dx
+            w[1] = dy
+            w[2] = dz
+            w[3] = -l / q
+            if lo >= 0:
+                na = 8
+                idx[4] = 5 * lo
+                idx[5] = 5 * lo + 1
+                idx[6] = 5 * lo + 2
+                idx[7] = 5 * lo + 3 + side
+                w[4] = -dx
+                w[5] = -dy
+                w[6] = -dz
+                w[7] = l / q
+            a = EA / q
+            for i in range(na):
+                for j in range(na):
+                    nnz = _put(rows, cols, vals, nnz, idx[i], idx[j], a * w[i] * w[j])
     for k in range(n_yarns):
         c = highest[k]
         if c < 0:
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, pa)
-        pb[0] = top[k, 0]
-        pb[1] = top[k, 1]
-        pb[2] = top[k, 2]
-        E, nnz = _segment(E, grad, rows, cols, vals, nnz, c, -1, pa, pb, f_top[k], eps2)
+        dx, dy, dz, l = _sub(pa, top[k], eps2)
+        fm = material_force(f_top[k], EA)
+        E += fm * s[c, side] + f_top[k] * l
+        grad[c, 0] += f_top[k] * dx / l
+        grad[c, 1] += f_top[k] * dy / l
+        grad[c, 2] += f_top[k] * dz / l
+        grad[c, 3 + side] += fm
+        nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, dx / l, dy / l, dz / l)
     for c in range(m):
+        for side in range(2):
+            x = s[c, side] - s_old[c, side]
+            e, d1, d2 = _friction(x, g[c, side], eps_f, kappa0)
+            E += e
+            grad[c, 3 + side] += d1
+            i = 5 * c + 3 + side
+            nnz = _put(rows, cols, vals, nnz, i, i, d2)
         sd = _wall_distance(pos, plane, c)
         if sd < 0.0:
             E += 0.5 * k_wall * sd * sd
             for i in range(3):
                 grad[c, i] += k_wall * sd * plane[c, 3 + i]
                 for j in range(3):
-                    rows[nnz] = 3 * c + i
-                    cols[nnz] = 3 * c + j
-                    vals[nnz] = k_wall * plane[c, 3 + i] * plane[c, 3 + j]
-                    nnz += 1
+                    nnz = _put(rows, cols, vals, nnz, 5 * c + i, 5 * c + j,
+                               k_wall * plane[c, 3 + i] * plane[c, 3 + j])
     return E, nnz
 
 
 @njit(cache=True)
-def _wall_distance(pos, plane, c):
-    return ((pos[c, 0] - plane[c, 0]) * plane[c, 3] + (pos[c, 1] - plane[c, 1]) * plane[c, 4]
-            + (pos[c, 2] - plane[c, 2]) * plane[c, 5])
+def _friction(x, g, eps_f, kappa0):
+    """Friction term of one yarn at one crossing and its first and second derivative in the slide
+    x = s - s_old (m): g (sqrt(x^2 + eps_f^2) - eps_f), the work of the friction force g against
+    the sliding, |x| smoothed over eps_f; plus kappa0 x^2 / 2, which keeps the material coordinate
+    of a yarn without friction and without tension defined."""
+    r = math.sqrt(x * x + eps_f * eps_f)
+    return (g * (r - eps_f) + 0.5 * kappa0 * x * x, g * x / r + kappa0 * x,
+            g * eps_f * eps_f / (r * r * r) + kappa0)
 
 
 @njit(cache=True)
-def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, f_top, tension, h, eps2,
-           plane, k_wall):
-    """E = sum f l over the segments (N m), as in ``assemble``, without derivatives."""
+def triplet_capacity(m, n_yarns):
+    """Length of the rows/cols/vals arrays ``assemble`` needs."""
+    return m * (2 * (64 + 36) + 2 + 9) + n_yarns * 9
+
+
+@njit(cache=True)
+def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
+    """Blocks w (I - d d^T) of a segment between crossing a and crossing b (or a fixed point)."""
+    for i in range(3):
+        di = dx if i == 0 else (dy if i == 1 else dz)
+        for j in range(3):
+            dj = dx if j == 0 else (dy if j == 1 else dz)
+            kij = w * ((1.0 if i == j else 0.0) - di * dj)
+            nnz = _put(rows, cols, vals, nnz, 5 * a + i, 5 * a + j, kij)
+            if b >= 0:
+                nnz = _put(rows, cols, vals, nnz, 5 * b + i, 5 * b + j, kij)
+                nnz = _put(rows, cols, vals, nnz, 5 * a + i, 5 * b + j, -kij)
+                nnz = _put(rows, cols, vals, nnz, 5 * b + i, 5 * a + j, -kij)
+    return nnz
+
+
+@njit(cache=True)
+def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old, f_top,
+           g, EA, eps_f, kappa0, h, eps2, plane, k_wall):
+    """E as in ``assemble``, without derivatives (inf when a material length is not positive)."""
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)
     E = 0.0
     for c in range(m):
         for side in range(2):
+            k = yarn[c, side]
             yarn_point(pos, normal, over, c, side, h, pa)
-            _end_point(pos, normal, over, low[c, side], side, yarn[c, side], fell, h, pb)
-            E += tension[c, side] * math.sqrt((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2
-                                              + (pa[2] - pb[2]) ** 2 + eps2)
+            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, s, s_fell, h, pb)
+            q = s[c, side] - sb
+            if q <= 0.0:
+                return np.inf
+            l = _sub(pa, pb, eps2)[3]
+            E += 0.5 * EA * (l - q) ** 2 / q
+            E += _friction(s[c, side] - s_old[c, side], g[c, side], eps_f, kappa0)[0]
+        sd = _wall_distance(pos, plane, c)
+        if sd < 0.0:
+            E += 0.5 * k_wall * sd * sd
     for k in range(n_yarns):
         c = highest[k]
         if c < 0:
             continue
-        yarn_point(pos, normal, over, c, 0 if k < n else 1, h, pa)
-        E += f_top[k] * math.sqrt((pa[0] - top[k, 0]) ** 2 + (pa[1] - top[k, 1]) ** 2
-                                  + (pa[2] - top[k, 2]) ** 2 + eps2)
-    for c in range(m):
-        sd = _wall_distance(pos, plane, c)
-        if sd < 0.0:
-            E += 0.5 * k_wall * sd * sd
+        side = 0 if k < n else 1
+        yarn_point(pos, normal, over, c, side, h, pa)
+        E += material_force(f_top[k], EA) * s[c, side] + f_top[k] * _sub(pa, top[k], eps2)[3]
     return E
 
 
 @njit(cache=True)
-def balance_error(m, yarn, up, grad, tension, f_top):
-    """Largest relative force imbalance over the crossings: |grad_c| / (sum of the 4 tensions)."""
+def tensions(m, yarn, pos, normal, over, low, fell, s, s_fell, EA, h, eps2, out):
+    """Tension (N) of the segment below every crossing on both yarns into out (m, 2)."""
+    pa = np.empty(3)
+    pb = np.empty(3)
+    for c in range(m):
+        for side in range(2):
+            k = yarn[c, side]
+            yarn_point(pos, normal, over, c, side, h, pa)
+            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, s, s_fell, h, pb)
+            out[c, side] = segment_tension(_sub(pa, pb, eps2)[3], s[c, side] - sb, EA)
+
+
+@njit(cache=True)
+def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, g,
+                    psi):
+    """Per crossing and yarn the friction bound g = mu (f_int + f_ext) tan(delta/2) (N) of the
+    current geometry and tensions into g (m, 2) (DESIGN.md §3.3), and Psi / (f_int + f_ext),
+    Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2)."""
+    p = np.empty(3)
+    a = np.empty(3)
+    b = np.empty(3)
+    for c in range(m):
+        for side in range(2):
+            k = yarn[c, side]
+            u = up[c, side]
+            fi = tension[c, side]
+            fe = tension[u, side] if u >= 0 else f_top[k]
+            yarn_point(pos, normal, over, c, side, h, p)
+            _end_point(pos, normal, over, low[c, side], side, k, fell, h, a)
+            _end_point(pos, normal, over, u, side, k, top, h, b)
+            ch, sh = CK.half_angles(deflection_dot(p, a, b))
+            tot = max(fi + fe, 1e-300)
+            g[c, side] = mu * (fi + fe) * sh / max(ch, 1e-300)
+            psi[c, side] = (abs(fi - fe) * ch - mu * (fi + fe) * sh) / tot
+
+
+@njit(cache=True)
+def imbalance(m, yarn, up, grad, tension, f_top):
+    """Largest relative residual over the crossings: |force sum| / (sum of the 4 tensions) and
+    |dE/ds| / (f_int + f_ext) per yarn (the friction equation)."""
     worst = 0.0
     for c in range(m):
-        s = tension[c, 0] + tension[c, 1]
+        tot = 0.0
         for side in range(2):
             u = up[c, side]
-            s += tension[u, side] if u >= 0 else f_top[yarn[c, side]]
-        g = math.sqrt(grad[c, 0] ** 2 + grad[c, 1] ** 2 + grad[c, 2] ** 2)
-        e = g / max(s, 1e-300)
+            fe = tension[u, side] if u >= 0 else f_top[yarn[c, side]]
+            pair = max(abs(tension[c, side]) + abs(fe), 1e-300)
+            tot += pair
+            e = abs(grad[c, 3 + side]) / pair
+            if e > worst:
+                worst = e
+        e = math.sqrt(grad[c, 0] ** 2 + grad[c, 1] ** 2 + grad[c, 2] ** 2) / max(tot, 1e-300)
         if e > worst:
             worst = e
     return worst
 
 
 @njit(cache=True)
-def below_lengths(m, yarn, pos, normal, over, low, fell, h, out):
-    """Yarn length (m) from the fell point up to every crossing, per side, into out (m, 2);
-    oldest crossing first (the lower neighbour is done before)."""
+def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, s, tension, EA, h, eps2, s_fell):
+    """Material coordinate of every yarn's fell point such that the segment from it to the
+    yarn's lowest crossing keeps its tension: s_fell = s_lowest - l / (1 + f / EA). Yarn laid on
+    the mandrel leaves the free segment along the yarn (the fell point advances along it), so
+    the tension does not jump when the fell point moves."""
+    n = n_yarns // 2
     p = np.empty(3)
-    q = np.empty(3)
-    for c in range(m):
-        for side in range(2):
-            lo = low[c, side]
-            yarn_point(pos, normal, over, c, side, h, p)
-            _end_point(pos, normal, over, lo, side, yarn[c, side], fell, h, q)
-            d = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
-            out[c, side] = d + (out[lo, side] if lo >= 0 else 0.0)
-
+    for k in range(n_yarns):
+        c = lowest[k]
+        if c < 0:
+            s_fell[k] = 0.0
+            continue
+        side = 0 if k < n else 1
+        yarn_point(pos, normal, over, c, side, h, p)
+        l = _sub(p, fell[k], eps2)[3]
+        s_fell[k] = s[c, side] - l / (1.0 + tension[c, side] / EA)
 
 @njit(cache=True)
 def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spool, mu_r,
@@ -329,95 +428,6 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
 
 
 @njit(cache=True)
-def _block_jacobi(n, indptr, indices, data, binv):
-    """Inverses of the 3x3 diagonal blocks of a CSR matrix (3n x 3n) into binv (n, 3, 3)."""
-    a = np.empty((3, 3))
-    for b in range(n):
-        for i in range(3):
-            for j in range(3):
-                a[i, j] = 0.0
-            r = 3 * b + i
-            for p in range(indptr[r], indptr[r + 1]):
-                col = indices[p]
-                if col // 3 == b:
-                    a[i, col - 3 * b] += data[p]
-        c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-        c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-        c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-        det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-        if abs(det) < 1e-300:
-            det = 1e-300
-        binv[b, 0, 0] = c00 / det
-        binv[b, 1, 0] = c01 / det
-        binv[b, 2, 0] = c02 / det
-        binv[b, 0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det
-        binv[b, 1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det
-        binv[b, 2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det
-        binv[b, 0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det
-        binv[b, 1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
-        binv[b, 2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
-
-
-@njit(cache=True)
-def _matvec(indptr, indices, data, x, out):
-    for r in range(len(indptr) - 1):
-        s = 0.0
-        for p in range(indptr[r], indptr[r + 1]):
-            s += data[p] * x[indices[p]]
-        out[r] = s
-
-
-@njit(cache=True)
-def _precondition(binv, r, z):
-    for b in range(binv.shape[0]):
-        for i in range(3):
-            z[3 * b + i] = (binv[b, i, 0] * r[3 * b] + binv[b, i, 1] * r[3 * b + 1]
-                            + binv[b, i, 2] * r[3 * b + 2])
-
-
-@njit(cache=True)
-def pcg(indptr, indices, data, rhs, rtol, max_iter, x):
-    """Conjugate gradients with 3x3 block-Jacobi preconditioning for the symmetric positive
-    definite CSR matrix (3n x 3n): x (3n,) <- solution of A x = rhs to |r| <= rtol |rhs|.
-    Returns the iterations."""
-    nd = rhs.shape[0]
-    binv = np.empty((nd // 3, 3, 3))
-    _block_jacobi(nd // 3, indptr, indices, data, binv)
-    r = rhs.copy()
-    for i in range(nd):
-        x[i] = 0.0
-    z = np.empty(nd)
-    q = np.empty(nd)
-    _precondition(binv, r, z)
-    p = z.copy()
-    rz = 0.0
-    bn = 0.0
-    for i in range(nd):
-        rz += r[i] * z[i]
-        bn += rhs[i] * rhs[i]
-    stop = rtol * rtol * bn
-    for it in range(max_iter):
-        rr = 0.0
-        for i in range(nd):
-            rr += r[i] * r[i]
-        if rr <= stop:
-            return it
-        _matvec(indptr, indices, data, p, q)
-        pq = 0.0
-        for i in range(nd):
-            pq += p[i] * q[i]
-        if pq <= 0.0:
-            return it
-        alpha = rz / pq
-        for i in range(nd):
-            x[i] += alpha * p[i]
-            r[i] -= alpha * q[i]
-        _precondition(binv, r, z)
-        rz_new = 0.0
-        for i in range(nd):
-            rz_new += r[i] * z[i]
-        beta = rz_new / rz
-        rz = rz_new
-        for i in range(nd):
-            p[i] = z[i] + beta * p[i]
-    return max_iter
+def _wall_distance(pos, plane, c):
+    return ((pos[c, 0] - plane[c, 0]) * plane[c, 3] + (pos[c, 1] - plane[c, 1]) * plane[c, 4]
+            + (pos[c, 2] - plane[c, 2]) * plane[c, 5])

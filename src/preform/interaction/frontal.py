@@ -8,43 +8,59 @@ damps it with minimum-residual mixing (eq. 17). As a map ``C -> G(C)`` that iter
 position error at a crossing by about (lower segment length / upper segment length) per sweep; new
 crossings sit next to the supply points, so on realistic machines (case A: spool radius 1.382 m,
 144 carriers) it diverges even without friction, and under-relaxation only slows the divergence.
+A first version here kept the force sweep (discrete Capstan with the sliding direction of the last
+step) and solved positions exactly for the tensions it gave; a sticking crossing then kept a
+*tension ratio*, not its place on the yarns, and with friction on case A and case B the iteration
+found no balance after a few hundred steps. So stick is now what it is physically.
 
-Here the same two half-steps are kept, but the position half-step is solved exactly:
+Stick and slip as a material constraint
+---------------------------------------
+Every yarn carries a material coordinate ``s`` (m of yarn from a point of its deposited part):
+``s[c, side]`` is the yarn material at crossing ``c``. A yarn *sticks* at a crossing when that
+material does not move through it during the step (``s = s_old``): for inextensible yarns with
+fixed neighbours this is the paper's "Eulerian angles fixed while sticking", and it holds the
+crossing where it was on its yarns instead of letting it run to wherever a force ratio sends it.
+A yarn *slips* when material passes (``s != s_old``); the friction force then is on the Amontons
+bound, opposing the sliding.
 
-1. *Force sweep* (supply side -> fell points, ``_kernels.frontal.capstan_sweep``): every yarn's
-   tension below a crossing from the tension above it, by the friction law in its discrete Capstan
-   form (DESIGN.md §3.3): ``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, ``delta`` the
-   yarn's deflection at the crossing. A slipping yarn sits on the bound on the side of its sliding
-   direction (``Psi = 0``); a sticking yarn keeps the tension ratio it had, clipped into the cone
-   (``Psi <= 0``). The top tension is the spool tension, or the Capstan ``exp(mu_r eta)`` of the
-   guide ring (paper eq. 9).
-2. *Position step*: with those tensions, pair balance at every crossing (paper eqs. 3-4, both
-   yarns' internal and external forces) is the stationary point of the convex function
-   ``E(C) = sum over segments of tension x length``: a weighted Fermat point at every crossing,
-   coupled through the segments. The mandrel is a wall: each crossing stays in front of the
-   tangent plane of the mandrel surface nearest to it (a convex penalty, ``WALL_STIFFNESS``), so
-   the lowest rows rest on the mandrel, where ``model.py`` deposits them, instead of being pulled
-   through it by the yarns that wrap around it. One damped Newton step on ``E`` (sparse Hessian, 3x3 blocks per
-   segment, Armijo line search on ``E``) moves all crossings at once, so the long-wave modes that
-   make a Gauss-Seidel or shooting sweep slow or unstable are solved directly, and the convexity
-   of ``E`` makes every step a descent step whatever the segment lengths.
+One time step is the minimum of a convex energy over the crossing positions ``C`` and the
+material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
 
-The two steps repeat until the relative force imbalance (``|sum of the four yarn forces| / sum of
-the four tensions``, the largest over the crossings) is below ``BALANCE_TOLERANCE`` with the
-tensions of the current geometry: then balance holds and every yarn satisfies its friction law.
-The tensions depend on the geometry only through the deflections, weakly (``mu tan(delta/2)``
-is small), so this outer loop contracts fast; Newton makes the inner problem quadratic. No
-minimum-residual mixing is needed (it is not used). Cost per iteration: an assembly linear in the
-crossings and a sparse factorisation of the crossing lattice (a 2D grid: nearly linear).
+* each segment between two crossings (or a crossing and the fell point) is a stiff tow of material
+  length ``q = s_upper - s_lower`` and tension ``f = EA (l - q) / q``, ``EA = f_spool /
+  TOW_STRAIN``: the paper's yarns are inextensible, and a real tow stretches ~5e-5 at the spool
+  tension; 1e-3 is stiff enough to leave the geometry inextensible to 0.1 % and soft enough that a
+  crossing's transverse motion of a millimetre (second order in the length) does not swamp the
+  stretch, which is what Newton's steps must resolve. Tying EA to the spool tension keeps the
+  model homogeneous in the forces, as Amontons friction is;
+* the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(mu_r
+  eta)`` behind the guide ring, paper eq. 9);
+* friction at every crossing and yarn is ``g |s - s_old|``, the work of the friction force against
+  the sliding, with the bound ``g = mu (f_int + f_ext) tan(delta/2)`` held fixed: its
+  stationarity ``f_int - f_ext in g d|s - s_old|`` *is* the discrete Capstan law of DESIGN.md
+  §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
+  side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps``
+  (``FRICTION_CREEP``): a sticking yarn creeps by ``eps r / sqrt(1 - r^2)`` per step, ``r`` the
+  used fraction of its bound (below ``eps`` while ``r < 0.7``), and its ``Psi`` stays strictly
+  negative. The three slip cases of the paper (warp, weft, both) come out of the one minimisation
+  without case analysis. (An exact active set, stick as a stiff pin and slip with a fixed sense,
+  was tried first: on case A and case B the set cycled between steps' worth of yarns.);
+* the mandrel is a wall: each crossing stays in front of the tangent plane of the mandrel surface
+  nearest to it (a convex penalty, ``WALL_STIFFNESS``), so the lowest rows rest on the mandrel,
+  where ``model.py`` deposits them, instead of being pulled through it.
 
-The Eulerian angles of the paper are not the unknowns here; the friction state is carried as the
-sliding direction per yarn and crossing (``ZoneState.slip``) and decided kinematically between
-steps (``update_slide``): the yarn length from the fell point up to the crossing, plus the yarn
-laid on the mandrel in the step, changes by the material that passed through the crossing. Its
-sign gives the sliding direction, and so the side of the friction bound, for the next step (an
-explicit, one-step-lagged return mapping); where it vanishes or reverses the crossing sticks with
-its current tension ratio. New crossings start sliding with ``-1``: near the supply a crossing
-runs down its yarns much faster than the yarns are drawn.
+``dE/dC = 0`` is pair balance at every crossing (paper eqs. 3-4, both yarns' internal and external
+forces); ``dE/ds = 0`` is the friction law of each yarn. Damped Newton (sparse Hessian with 5
+unknowns per crossing, positive definite by construction, see ``_kernels/frontal.py``; Armijo line
+search on ``E``) descends from any start and converges quadratically near the solution.
+
+The bounds ``g`` depend on the tensions and the deflections (Amontons: the normal force), and the
+top tensions on the ring deflections: an outer fixed point (the frontal iteration) re-evaluates them
+from the balanced geometry and solves again until they change by less than ``FRICTION_TOLERANCE``
+relative to the tensions; the residual history of a solve is that change per iteration. Then every
+crossing is in balance to ``BALANCE_TOLERANCE`` and ``Psi <= FRICTION_TOLERANCE (f_int + f_ext)``.
+The friction state (stick or slip, the sliding direction) and the material coordinates carry over
+from one step to the next: that history is what makes the model differ from a frictionless one.
 """
 
 from __future__ import annotations
@@ -53,34 +69,48 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import splu, spsolve
 
 from .._kernels import frontal as K
 from ..errors import SimulationError
 
-#: convergence: largest relative force imbalance over the crossings
-BALANCE_TOLERANCE = 1e-9
-#: outer iterations (force sweep, position step) per solve
-MAX_ITERATIONS = 25
-#: Newton steps per position step
-NEWTON_STEPS = 30
-#: depth of the minimum-residual (Anderson) mixing of the tensions
-ANDERSON_DEPTH = 5
-#: the final check (balance with the last friction tensions) accepts this times the tolerance
-BALANCE_ACCEPT = 10.0
-#: smoothing of the segment length, m^2: l = sqrt(|d|^2 + LENGTH_SMOOTHING). Changes a force by
-#: the relative amount LENGTH_SMOOTHING / (2 l^2): < 1e-6 for segments longer than 0.7 um
+#: Newton convergence: largest relative residual (force imbalance over the sum of the four
+#: tensions; friction equation over f_int + f_ext); 1e4 times below what the exported snapshots
+#: must meet (1e-3)
+BALANCE_TOLERANCE = 1e-7
+#: frontal (outer) convergence: change of the friction bounds and top tensions between iterations,
+#: relative to the tensions; bounds Psi / (f_int + f_ext) of the result
+FRICTION_TOLERANCE = 1e-6
+#: frontal (outer) iterations per time step. The bounds of a crossing that slides through its
+#: yarns settle slowly (a crossing that slides further deflects its yarns less and lowers its own
+#: bound: the frontal map has slopes near 1 there), so a step stops after a few iterations and the
+#: next step starts from its bounds: the friction bounds lag the geometry by up to a step, like any
+#: explicit update of a state variable, and ``residual`` in history.csv says by how much
+MAX_ITERATIONS = 4
+#: frontal iterations for a snapshot: the exported crossings satisfy Psi to FRICTION_TOLERANCE
+SNAPSHOT_ITERATIONS = 400
+#: Newton steps per inner solve
+NEWTON_STEPS = 80
+#: strain of the tow at the spool tension: EA = f_spool / TOW_STRAIN (module docstring)
+TOW_STRAIN = 1e-3
+#: smoothing of |s - s_old| in the friction term, m of yarn per step (module docstring)
+FRICTION_CREEP = 1e-5
+#: a yarn that slid more than this through a crossing in a step is reported as slipping (it then
+#: uses more than 99.5 % of its friction bound), m
+SLIP_REPORT = 10 * FRICTION_CREEP
+#: tiny stiffness (N/m) that pins the material coordinate of a slack segment; changes a tension
+#: jump by at most KAPPA0 x (slide in a step, < 0.1 m) = 1e-8 N
+KAPPA0 = 1e-7
+#: smoothing of the segment length, m^2: l = sqrt(|d|^2 + LENGTH_SMOOTHING)
 LENGTH_SMOOTHING = 1e-12
 #: Armijo constant and halvings of the line search
 ARMIJO = 1e-4
-LINE_SEARCH_HALVINGS = 40
+LINE_SEARCH_HALVINGS = 50
 ROUNDOFF = 1e-13
-#: conjugate-gradient iterations before the sparse LU fallback
-CG_MAX_ITERATIONS = 3000
+#: iterative refinement steps of the Newton direction
+REFINEMENT_STEPS = 2
 #: stiffness (N/m) of the mandrel wall that keeps crossings outside: 10 N push 1 um
 WALL_STIFFNESS = 1e7
-#: |material slid through a crossing in a step| below this (m) counts as sticking
-SLIDE_TOLERANCE = 1e-7
 
 
 @dataclass(frozen=True)
@@ -106,18 +136,21 @@ class Boundary:
 
 @dataclass(frozen=True)
 class SolveReport:
-    """iterations, residual (relative force imbalance), history (residual per iteration)."""
+    """iterations (frontal), newton (Newton steps in all), residual (the larger of the balance
+    residual and the last friction change), history (friction change per frontal iteration);
+    lagged: the friction bounds had not settled to ``friction_tol`` after ``max_iter`` iterations
+    (the balance holds; Psi is off by at most the last change, relative to the tensions)."""
 
     iterations: int
     residual: float
     history: np.ndarray
+    newton: int = 0
     lagged: bool = False
-    stuck: bool = False
 
 
 class _Network:
-    """The arrays of a state and a boundary, bound for the kernels. ``tension`` / ``f_top`` are
-    the tensions the position step uses (the iterate of the outer loop)."""
+    """The arrays of a state and a boundary, bound for the kernels; ``g`` (m, 2) friction bounds
+    and ``f_top`` (2n,) top tensions are the iterate of the frontal loop."""
 
     def __init__(self, state, bc, f_top):
         self.st, self.bc = state, bc
@@ -128,240 +161,188 @@ class _Network:
             self.plane[:, 5] = 1.0
         else:
             self.plane = np.ascontiguousarray(bc.plane[:m])
-        self.tension = state.tension[:m].copy()
+        self.s_old = state.s[:m].copy()
+        self.EA = axial_stiffness(bc.f_spool)
         self.f_top = np.asarray(f_top, dtype=float).copy()
-        self.grad = np.zeros((m, 3))
-        nmax = 36 * (2 * m + state.n_yarns) + 9 * m
+        self.g = np.zeros((m, 2))
+        self.grad = np.zeros((m, 5))
+        self.tension = np.zeros((m, 2))
+        nmax = K.triplet_capacity(m, state.n_yarns)
         self.rows = np.empty(nmax, dtype=np.int64)
         self.cols = np.empty(nmax, dtype=np.int64)
         self.vals = np.empty(nmax)
 
-    def friction_tensions(self):
-        """The force sweep at the current positions: (tension (m, 2), f_top (2n,)), N."""
+    def _args(self, pos, s):
         st, bc = self.st, self.bc
-        f_top = np.empty(st.n_yarns)
-        tension = np.zeros((st.m, 2))
-        K.top_tensions(st.n_yarns, st.highest, st.pos, st.normal, st.over, bc.fell, bc.top,
-                       bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, f_top)
-        K.capstan_sweep(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up, bc.fell, bc.top,
-                        f_top, bc.h, bc.mu, st.slip, st.ratio, tension)
-        return tension, f_top
+        return (st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest, bc.fell,
+                bc.top, s, st.s_fell, self.s_old, self.f_top, self.g, self.EA,
+                FRICTION_CREEP, KAPPA0, bc.h, LENGTH_SMOOTHING, self.plane, WALL_STIFFNESS)
 
     def assemble(self):
-        st, bc = self.st, self.bc
-        E, nnz = K.assemble(st.m, st.n_yarns, st.yarn, st.pos, st.normal, st.over, st.low,
-                            st.highest, bc.fell, bc.top, self.f_top, self.tension, bc.h,
-                            LENGTH_SMOOTHING, self.plane, WALL_STIFFNESS, self.grad, self.rows,
-                            self.cols, self.vals)
-        return E, nnz
-
-    def energy(self, pos):
-        st, bc = self.st, self.bc
-        return K.energy(st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest,
-                        bc.fell, bc.top, self.f_top, self.tension, bc.h, LENGTH_SMOOTHING,
-                        self.plane, WALL_STIFFNESS)
-
-    def imbalance(self):
         st = self.st
-        return K.balance_error(st.m, st.yarn, st.up, self.grad, self.tension, self.f_top)
+        return K.assemble(*self._args(st.pos, st.s), self.grad, self.rows, self.cols, self.vals)
+
+    def energy(self, pos, s):
+        return K.energy(*self._args(pos, s))
+
+    def update_tensions(self):
+        st, bc = self.st, self.bc
+        K.tensions(st.m, st.yarn, st.pos, st.normal, st.over, st.low, bc.fell, st.s, st.s_fell,
+                   self.EA, bc.h, LENGTH_SMOOTHING, self.tension)
+
+    def bounds(self):
+        """Friction bounds, Psi / (f_int + f_ext) (m, 2) and top tensions of the current geometry
+        and tensions."""
+        st, bc = self.st, self.bc
+        g = np.empty((st.m, 2))
+        psi = np.empty((st.m, 2))
+        f_top = np.empty(st.n_yarns)
+        K.top_tensions(st.n_yarns, st.highest, st.pos, st.normal, st.over, bc.fell, bc.top,
+                       bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, f_top)
+        K.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up, bc.fell,
+                          bc.top, self.tension, f_top, bc.h, bc.mu, g, psi)
+        return g, psi, f_top
 
     def balance(self, tol, max_steps):
-        """Newton steps on E with the tensions fixed until the imbalance is below tol; the last
-        imbalance and the number of steps."""
+        """Newton on E with g and f_top fixed until the residual is below tol; (residual, steps)."""
+        st = self.st
         for k in range(max_steps + 1):
             E, nnz = self.assemble()
-            res = self.imbalance()
+            if not np.isfinite(E):
+                raise SimulationError("a yarn segment between crossings lost its material length")
+            self.update_tensions()
+            res = K.imbalance(st.m, st.yarn, st.up, self.grad, self.tension, self.f_top)
             if res < tol or k == max_steps:
                 return res, k
-            _newton_step(self, E, nnz, res)
+            _newton_step(self, E, nnz)
 
 
-class _Anderson:
-    """Minimum-residual (Anderson type II) mixing of a fixed point x = Phi(x), depth ``depth``:
-    the paper's eq. 17 generalised from one to several past residuals."""
-
-    def __init__(self, depth):
-        self.depth = depth
-        self.dx, self.dr = [], []
-        self.x_prev = self.r_prev = None
-
-    def next(self, x, phi):
-        r = phi - x
-        if self.x_prev is not None:
-            self.dx.append(x - self.x_prev)
-            self.dr.append(r - self.r_prev)
-            if len(self.dx) > self.depth:
-                self.dx.pop(0)
-                self.dr.pop(0)
-        self.x_prev, self.r_prev = x, r
-        if not self.dx:
-            return phi
-        DR = np.stack(self.dr, axis=1)
-        DX = np.stack(self.dx, axis=1)
-        gamma = np.linalg.lstsq(DR, r, rcond=1e-12)[0]
-        return phi - (DX + DR) @ gamma
-
-
-def _newton_direction(H, g, forcing):
-    """Newton direction: block-Jacobi conjugate gradients to the relative accuracy ``forcing``
-    (inexact Newton), sparse LU where CG stalls."""
-    H.sum_duplicates()
-    dx = np.empty_like(g)
-    it = K.pcg(H.indptr.astype(np.int64), H.indices.astype(np.int64), H.data, -g, forcing,
-               CG_MAX_ITERATIONS, dx)
-    if it >= CG_MAX_ITERATIONS or not np.all(np.isfinite(dx)):
-        dx = spsolve(H.tocsc(), -g, permc_spec="MMD_ATA")
+def _newton_direction(H, g):
+    """Newton direction -H^-1 g by a sparse LU in symmetric mode (H is symmetric, positive
+    definite up to the tiny KAPPA0 in slack directions); general sparse LU where that fails."""
+    try:
+        lu = splu(H.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
+                  options=dict(SymmetricMode=True))
+    except RuntimeError:
+        return spsolve(H.tocsc(), -g)
+    dx = lu.solve(-g)
+    # H spans stiffnesses from KAPPA0 to EA / q: two steps of iterative refinement recover the
+    # digits the factorisation loses
+    for _ in range(REFINEMENT_STEPS):
+        dx += lu.solve(-g - H @ dx)
     return dx
 
 
-def _newton_step(net, E, nnz, residual=1.0):
-    """One (inexact) Newton step on E with Armijo backtracking; moves state.pos in place.
-    ``residual``: the current relative imbalance (sets the CG accuracy). Returns |step|."""
+def _newton_step(net, E, nnz):
+    """One Newton step on E with Armijo backtracking; moves state.pos and state.s in place."""
     st = net.st
     m = st.m
-    H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(3 * m, 3 * m))
+    n = 5 * m
+    H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(n, n))
     g = net.grad[:m].ravel()
-    # Eisenstat-Walker-like forcing: what this step must reach, no more
-    forcing = min(0.1, max(residual, 0.1 * BALANCE_TOLERANCE / max(residual, 1e-300), 1e-12))
-    dx = _newton_direction(H, g, forcing)
-    if not np.all(np.isfinite(dx)):
+    dx = _newton_direction(H, g)
+    slope = float(g @ dx) if np.all(np.isfinite(dx)) else 0.0
+    if not slope < 0.0:
         dx = -g / max(np.abs(H.diagonal()).max(), 1e-300)   # gradient step as a fallback
-    slope = float(g @ dx)
-    if slope >= 0.0:
-        dx = -g / max(np.abs(H.diagonal()).max(), 1e-300)
         slope = float(g @ dx)
     pos0 = st.pos[:m].copy()
-    step = dx.reshape(m, 3)
+    s0 = st.s[:m].copy()
+    step = dx.reshape(m, 5)
     t = 1.0
     for _ in range(LINE_SEARCH_HALVINGS):
-        trial = pos0 + t * step
         # the allowance ROUNDOFF |E| lets the last Newton steps through, whose decrease of E is
         # below the round-off of E
-        if net.energy(trial) <= E + ARMIJO * t * slope + ROUNDOFF * abs(E):
+        if net.energy(pos0 + t * step[:, :3], s0 + t * step[:, 3:]) <= (
+                E + ARMIJO * t * slope + ROUNDOFF * abs(E)):
             break
         t *= 0.5
-    st.pos[:m] = pos0 + t * step
-    return t * float(np.abs(step).max())
+    st.pos[:m] = pos0 + t * step[:, :3]
+    st.s[:m] = s0 + t * step[:, 3:]
 
 
-def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE, max_iter=MAX_ITERATIONS,
-               where="") -> SolveReport:
-    """Balance the zone with the friction law solved with the geometry (``_solve``). Where that
-    finds no converged balance within ``max_iter`` iterations (a slipping yarn's bound can lose
-    its equilibrium nearby: the coupled tension-geometry iteration then drifts), the step falls
-    back to *lagged* friction: the friction tensions of the step's start geometry, held fixed,
-    and one exact (convex) balance solve. Then force balance is exact and ``Psi`` holds up to the
-    change of the deflections in one step (first order in the time step); ``SolveReport.lagged``
-    says so. If that fails too, every crossing sticks with equal tensions (``SolveReport.stuck``).
-    SimulationError if even that solve fails."""
-    start = state.pos[: state.m].copy()
-    try:
-        return _solve(state, bc, f_top, tol, max_iter, where)
-    except SimulationError:
-        if state.m == 0:
-            raise
-    state.pos[: state.m] = start
-    try:
-        return _lagged(state, bc, f_top, tol, where)
-    except SimulationError:
-        pass
-    # last resort: every crossing sticks with equal tensions (inside every cone, Psi <= 0): the
-    # frictionless network, which is convex with geometry-independent tensions
-    state.pos[: state.m] = start
-    state.slip[: state.m] = 0
-    state.ratio[: state.m] = 1.0
-    rep = _lagged(state, bc, f_top, tol, where)
-    return SolveReport(rep.iterations, rep.residual, rep.history, lagged=True, stuck=True)
-
-
-def _lagged(state, bc, f_top, tol, where) -> SolveReport:
-    """Friction tensions of the start geometry held fixed, one convex balance solve."""
-    net = _Network(state, bc, f_top)
-    net.tension, net.f_top = net.friction_tensions()
-    residual, steps = net.balance(tol, 4 * NEWTON_STEPS)
-    if not residual < tol:
-        raise SimulationError(
-            f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
-            f"force imbalance (residual) {residual:.3g} after {steps} Newton steps with lagged "
-            f"friction (tolerance {tol:.3g}, {state.m} crossings)")
-    state.tension[: state.m] = net.tension
-    f_top[:] = net.f_top
-    return SolveReport(steps, float(residual), np.array([residual]), lagged=True)
-
-
-def _solve(state, bc, f_top, tol, max_iter, where) -> SolveReport:
-    """Bring every crossing of ``state`` to balance with its friction law (in place; module
-    docstring). f_top (2n,) receives the top tensions. ``where`` names the step and time in the
-    error message; :class:`SimulationError` if the residual stays above ``tol``.
-
-    Outer loop (``max_iter`` iterations): position step to balance with the current tensions,
-    force sweep at the new positions; the residual is the larger of the relative change of the
-    tensions and the relative force imbalance. The tensions are mixed by ``_Anderson``."""
+def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE,
+               friction_tol=FRICTION_TOLERANCE, max_iter=MAX_ITERATIONS, where="") -> SolveReport:
+    """Bring every crossing of ``state`` to balance with its friction law (module docstring), in
+    place: positions, material coordinates, tensions, friction bounds and slip states of the
+    crossings; f_top (2n,) receives the top tensions. ``state.s_fell`` must be anchored
+    (``anchor_fell``). ``where`` names the step and time in the error message;
+    :class:`SimulationError` if the residual stays above the tolerances."""
     m = state.m
     net = _Network(state, bc, f_top)
-    t0, ft0 = net.friction_tensions()
     if m == 0:
-        f_top[:] = ft0
+        net.f_top = net.bounds()[2]
+        f_top[:] = net.f_top
         return SolveReport(0, 0.0, np.zeros(0))
-    net.tension, net.f_top = t0, ft0
-    mix = _Anderson(ANDERSON_DEPTH)
+    # start: the bounds of the last step (new crossings: of the start geometry)
+    net.tension[:] = state.tension[:m]
+    g0, _, ft0 = net.bounds()
+    fresh = ~np.isfinite(state.g[:m])
+    net.g = np.where(fresh, g0, state.g[:m])
+    net.f_top = ft0
     history = []
+    newton = 0
     residual = np.inf
-    x = np.concatenate([t0.ravel(), ft0])
-    scale = max(float(np.abs(ft0).max()), 1e-300)
+    change = np.inf
     for it in range(1, max_iter + 1):
-        imbalance, _ = net.balance(tol, NEWTON_STEPS)
-        t1, ft1 = net.friction_tensions()
-        phi = np.concatenate([t1.ravel(), ft1])
-        change = float(np.abs(phi - x).max()) / scale
-        residual = max(change, imbalance)
-        history.append(residual)
-        if change < tol:
-            # the friction tensions of the final geometry: Psi exact, balance to ~tol
-            net.tension, net.f_top = t1, ft1
-            net.assemble()
-            residual = max(residual, net.imbalance())
-            state.tension[:m] = t1
-            f_top[:] = ft1
-            history[-1] = residual
-            if residual < BALANCE_ACCEPT * tol:
-                return SolveReport(it, float(residual), np.array(history))
+        residual, steps = net.balance(tol, NEWTON_STEPS)
+        newton += steps
+        if not residual < tol:
             break
-        x = np.maximum(mix.next(x, phi), 1e-12 * scale)
-        net.tension = x[: 2 * m].reshape(m, 2).copy()
-        net.f_top = x[2 * m:].copy()
+        g1, psi, ft1 = net.bounds()
+        scale = np.empty((m, 2))
+        for side in range(2):
+            u = state.up[:m, side]
+            f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
+                             ft1[state.yarn[:m, side]])
+            scale[:, side] = net.tension[:, side] + f_ext
+        change = max(float(np.max(np.abs(g1 - net.g) / np.maximum(scale, 1e-300))),
+                     float(np.max(np.abs(ft1 - net.f_top) / ft1)))
+        history.append(change)
+        if change < friction_tol:
+            _accept(state, net, f_top)
+            return SolveReport(it, max(float(residual), change), np.array(history), newton)
+        if it == max_iter:
+            # friction bounds lagged: balance holds, Psi to within the last change; the next
+            # step starts from the newest bounds
+            _accept(state, net, f_top)
+            state.g[:m] = g1
+            return SolveReport(it, max(float(residual), change), np.array(history), newton,
+                               lagged=True)
+        net.g, net.f_top = g1, ft1
     raise SimulationError(
-        f"the frontal solver of the yarn-interaction model did not converge {where}: residual "
-        f"(relative force imbalance / tension change) {residual:.3g} after {len(history)} "
-        f"iterations (tolerance {tol:.3g}, {m} crossings)")
+        f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
+        f"force imbalance (residual) {residual:.3g} after {newton} Newton steps (tolerance "
+        f"{tol:.3g}, {m} crossings)")
 
 
-def update_slide(state, bc: Boundary, f_top, laid):
-    """Decide each crossing's friction state for the next step (module docstring), in place.
-
-    f_top : (2n,) N, top tensions of the last solve; laid : (2n,) float64, m, yarn laid on the mandrel by each yarn since the last call.
-    """
+def _accept(state, net, f_top):
     m = state.m
-    if m == 0:
-        return
-    L = np.empty((m, 2))
-    K.below_lengths(m, state.yarn, state.pos, state.normal, state.over, state.low, bc.fell,
-                    bc.h, L)
-    old = state.below_len[:m]
-    known = np.isfinite(old)
-    w = L - old + np.asarray(laid)[state.yarn[:m]]          # material passed down through C
-    new = np.where(w > SLIDE_TOLERANCE, 1, np.where(w < -SLIDE_TOLERANCE, -1, 0)).astype(np.int8)
-    prev = state.slip[:m]
-    stick = known & ((new == 0) | ((prev != 0) & (new != prev)))
-    slide = known & ~stick
-    f_ext = np.empty((m, 2))
-    for side in range(2):
-        u = state.up[:m, side]
-        f_ext[:, side] = np.where(u >= 0, state.tension[np.maximum(u, 0), side],
-                                  np.asarray(f_top)[state.yarn[:m, side]])
-    ratio = state.tension[:m] / f_ext
-    keep = np.isfinite(ratio)
-    state.ratio[:m][keep] = ratio[keep]
-    state.slip[:m][stick] = 0
-    state.slip[:m][slide] = new[slide]
-    state.below_len[:m] = L
+    state.tension[:m] = net.tension
+    state.g[:m] = net.g
+    slide = state.s[:m] - net.s_old
+    state.slip[:m] = np.where(np.abs(slide) > SLIP_REPORT, np.sign(slide), 0)
+    f_top[:] = net.f_top
+
+
+def axial_stiffness(f_spool):
+    """EA of the tow (N) for the spool tension f_spool (N): f_spool / TOW_STRAIN."""
+    return float(f_spool) / TOW_STRAIN
+
+
+def anchor_fell(state, bc):
+    """Material coordinate of every yarn's fell point (``_kernels.frontal.reanchor``): the yarn
+    laid since the last step leaves the tension of the lowest segment as it was."""
+    K.reanchor(state.n_yarns, state.lowest, state.yarn, state.pos, state.normal, state.over,
+               np.ascontiguousarray(bc.fell, dtype=float), state.s, state.tension,
+               axial_stiffness(bc.f_spool), bc.h, LENGTH_SMOOTHING, state.s_fell)
+
+
+def new_material(state, c, side, below_point, f, bc):
+    """Material coordinate for yarn ``side`` of a crossing ``c`` just created on top of its
+    yarn: the new segment from ``below_point`` (the yarn point below) carries the tension f."""
+    k = state.yarn[c, side]
+    lo = state.low[c, side]
+    s_below = state.s[lo, side] if lo >= 0 else state.s_fell[k]
+    p = state.centerline_point(c, side, bc.h)
+    l = float(np.sqrt(np.sum((p - below_point) ** 2) + LENGTH_SMOOTHING))
+    return s_below + l / (1.0 + f / axial_stiffness(bc.f_spool))

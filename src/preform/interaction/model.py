@@ -3,23 +3,24 @@
 
 Each step (``step``):
 
-1. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
+1. the material coordinate of every fell point is anchored to the new fell points
+   (``frontal.anchor_fell``: the yarn laid on the mandrel leaves the lowest segment's tension);
+2. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
    both yarns, at the midpoint of the closest points of the two top segments (from the yarn's
    highest crossing, or fell point, to its ring or spool point at the step's end); over/under from
-   the horn-gear pattern; it starts sliding down its yarns (``frontal.update_slide``). This is
-   only the start of the solve: the solver moves it to where the two yarns balance, which is
-   below the supply as soon as the carriers have parted (no crossing is pinned at the supply);
-2. the contact normals become the radial directions of the crossings (held during the solve), and
+   the horn-gear pattern; its new segments carry the top tension. This is only the start of the
+   solve: the solver moves it to where the two yarns balance, which is below the supply as soon
+   as the carriers have parted (no crossing is pinned at the supply);
+3. the contact normals become the radial directions of the crossings (held during the solve), and
    the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
-   points of the step's end, each yarn on or inside its friction cone; then the friction state of
-   every crossing is decided for the next step from the yarn that slid through it
-   (``frontal.update_slide``);
-3. a crossing that lies closer to the mandrel than ``DEPOSIT_HEIGHT`` yarn thicknesses (the
+   points of the step's end, each yarn sticking (its material at the crossing stays) or slipping
+   on its friction bound;
+4. a crossing that lies closer to the mandrel than ``DEPOSIT_HEIGHT`` yarn thicknesses (the
    solver keeps the crossings outside the mandrel's tangent planes, ``frontal.Boundary.plane``)
    is deposited: it becomes the
    fell point of both its yarns (``ZoneStep.deposits``) and leaves the zone; crossings below it on
    its other yarn go with it (lowest first), so chains stay consistent on ragged rows;
-4. every yarn's free yarn runs to its lowest crossing (its yarn centerline point there), or to its
+5. every yarn's free yarn runs to its lowest crossing (its yarn centerline point there), or to its
    supply point (ring point, else spool) when it has none: ``G_end``; ``G_mid`` is the mean of the
    previous and the new one while the lowest crossing stays the same, else ``G_end``.
 
@@ -45,8 +46,6 @@ from .zone_state import ZoneState
 
 #: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
 DEPOSIT_HEIGHT = 1.0
-#: friction state of a new crossing: sliding down its yarns (see ``interaction/frontal.py``)
-NEW_CROSSING_SLIDE = 0
 
 
 class MandrelDistance:
@@ -105,7 +104,6 @@ class InteractionZone:
         self.fell = np.array(F_machine, dtype=float)
         self.G_prev = self.machine.supply_points(t)
         self.lowest_uid_prev = np.full(self.machine.n_yarns, -1, dtype=np.int64)
-        self.F_prev_mandrel = np.asarray(pose.to_mandrel(self.fell), dtype=float)
 
     def boundary(self, t, F_machine) -> frontal.Boundary:
         m = self.machine
@@ -118,17 +116,14 @@ class InteractionZone:
         t1 = t0 + dt
         self.step_index += 1
         bc = self.boundary(t1, F_machine)
+        st = self.state
+        frontal.anchor_fell(st, bc)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
-        st = self.state
         K.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
         bc = self._with_wall(bc)
         self.last_report = frontal.solve_zone(st, bc, self.f_top, where=where)
-        F_mandrel = np.asarray(pose_end.to_mandrel(F_machine), dtype=float)
-        laid = np.linalg.norm(F_mandrel - self.F_prev_mandrel, axis=1)
-        frontal.update_slide(st, bc, self.f_top, laid)
-        self.F_prev_mandrel = F_mandrel
         deposits = self._deposit(pose_end)
         G_end = self.lowest_points(bc.top)
         uid = np.where(st.lowest >= 0, st.uid[np.maximum(st.lowest, 0)], -1)
@@ -150,8 +145,10 @@ class InteractionZone:
         are in balance with the exported fell points."""
         st = _copy_state(self.state)
         bc = self._with_wall(self.boundary(t, F_machine), st)
+        frontal.anchor_fell(st, bc)
         f_top = self.f_top.copy()
-        frontal.solve_zone(st, bc, f_top, where=f"in the snapshot at t = {t:.6g} s")
+        frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS,
+                           where=f"in the snapshot at t = {t:.6g} s")
         return _snapshot(st, bc, f_top, t, self.machine)
 
     # -- pieces -----------------------------------------------------------------------------
@@ -187,7 +184,14 @@ class InteractionZone:
             px, po = self._top_point(kx, bc.fell), self._top_point(ko, bc.fell)
             gx, go = bc.top[kx], bc.top[ko]
             C, N = creation_point(px, gx, po, go)
-            self.state.add(kx, ko, C, N, bool(over), float(tp), slide=NEW_CROSSING_SLIDE)
+            st = self.state
+            r = float(np.hypot(C[0], C[1]))
+            if r > 0.0:     # the normal the solve uses (``radial_normals``), so s matches it
+                N = np.array([C[0] / r, C[1] / r, 0.0])
+            c = st.add(kx, ko, C, N, bool(over), float(tp))
+            for side, (k, below) in enumerate(((kx, px), (ko, po))):
+                st.s[c, side] = frontal.new_material(st, c, side, below, self.f_top[k], bc)
+                st.tension[c, side] = self.f_top[k]
 
     def _deposit(self, pose):
         st = self.state

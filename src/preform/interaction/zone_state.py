@@ -16,12 +16,13 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``over (cap,) float64``: +1 if the warp is the outer (over) yarn at this crossing, else -1. The
   yarn centerline points are ``C + over * h * N`` (warp) and ``C - over * h * N`` (weft),
   ``h = thickness / 2`` (paper eq. 16, with one normal per crossing);
-- ``slip (cap, 2) int8``: friction state per yarn, carried between steps: 0 stick, +1 slipping
-  with the tension below the crossing larger (the yarn slides towards the mandrel through the
-  crossing), -1 the other way (the crossing runs down the yarn faster than the yarn is drawn);
-- ``ratio (cap, 2) float64``: tension below / tension above, kept while sticking;
-- ``below_len (cap, 2) float64, m``: yarn length from the fell point up to the crossing at the end
-  of the last step (NaN before the first), for the sliding direction (``interaction/frontal.py``);
+- ``s (cap, 2) float64, m``: material coordinate of each yarn at the crossing (m of yarn from a
+  point of the yarn's deposited part; ``interaction/frontal.py``): what a sticking yarn keeps;
+- ``g (cap, 2) float64, N``: friction bound of each yarn at the crossing from the last solve (NaN
+  before the first), the start of the next;
+- ``slip (cap, 2) int8``: friction state per yarn in the last step: 0 stick, +1 slipping with the
+  tension below the crossing larger (the yarn slides towards the mandrel through the crossing), -1
+  the other way (the crossing runs down the yarn faster than the yarn is drawn);
 - ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
   mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
   point below / the supply side above;
@@ -29,7 +30,7 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
 Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
--1 when it has none.
+-1 when it has none; ``s_fell[k]``: material coordinate of its fell point (m).
 """
 
 from __future__ import annotations
@@ -45,9 +46,9 @@ _FIELDS = {
     "pos": ((3,), np.float64, 0.0),
     "normal": ((3,), np.float64, 0.0),
     "over": ((), np.float64, 1.0),
+    "s": ((2,), np.float64, 0.0),
+    "g": ((2,), np.float64, np.nan),
     "slip": ((2,), np.int8, 0),
-    "ratio": ((2,), np.float64, 1.0),
-    "below_len": ((2,), np.float64, np.nan),
     "low": ((2,), np.int64, -1),
     "up": ((2,), np.int64, -1),
     "tension": ((2,), np.float64, 0.0),
@@ -67,6 +68,7 @@ class ZoneState:
             setattr(self, name, np.full((capacity,) + shape, fill, dtype=dtype))
         self.lowest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
+        self.s_fell = np.zeros(self.n_yarns)
 
     @property
     def capacity(self) -> int:
@@ -84,9 +86,9 @@ class ZoneState:
             new[: self.m] = old[: self.m]
             setattr(self, name, new)
 
-    def add(self, warp: int, weft: int, pos, normal, over: bool, t: float, slide: int = -1) -> int:
+    def add(self, warp: int, weft: int, pos, normal, over: bool, t: float) -> int:
         """Append a crossing at the top of warp yarn ``warp`` and weft yarn ``weft``; its index.
-        ``slide``: its initial friction state on both yarns (see ``slip``)."""
+        Its material coordinates and tensions are the caller's to set (``frontal.new_material``)."""
         self._grow(self.m + 1)
         c = self.m
         self.m += 1
@@ -94,9 +96,9 @@ class ZoneState:
         self.pos[c] = pos
         self.normal[c] = normal
         self.over[c] = 1.0 if over else -1.0
-        self.slip[c] = slide
-        self.ratio[c] = 1.0
-        self.below_len[c] = np.nan
+        self.slip[c] = 0
+        self.s[c] = 0.0
+        self.g[c] = np.nan
         self.tension[c] = 0.0
         self.uid[c] = self.next_uid
         self.next_uid += 1
