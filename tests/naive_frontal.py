@@ -26,8 +26,9 @@ def polyline(st, k, side, chain, fell, top, h):
     return np.array([fell[k]] + [yarn_point(st, c, side, h) for c in chain] + [top[k]])
 
 
-def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2):
-    """The step energy (no wall) by yarns: stretched segments, spool payout, friction."""
+def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top):
+    """The step energy (no wall) by yarns: stretched segments, spool payout (top segment length
+    smoothed by eps2 + eps2_top), friction."""
     E = 0.0
     for k, (side, chain) in enumerate(chains(st)):
         if not chain:
@@ -43,7 +44,7 @@ def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2):
             E += 0.5 * EA * (l - q) ** 2 / q
         d = pts[-1] - pts[-2]
         f = f_top[k]
-        E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2)
+        E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2 + eps2_top)
     x = st.s[: st.m] - s_old
     E += np.sum(g * (np.sqrt(x * x + eps_f ** 2) - eps_f) + 0.5 * kappa0 * x * x)
     return E

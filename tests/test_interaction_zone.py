@@ -127,7 +127,7 @@ def _net(zone, bc, seed=1):
 def _naive_energy(zone, bc, net, f_top):
     return naive.energy(zone.state, bc.fell, bc.top, f_top, net.g, net.s_old,
                         net.EA, frontal.FRICTION_CREEP, frontal.KAPPA0, bc.h,
-                        frontal.LENGTH_SMOOTHING)
+                        frontal.LENGTH_SMOOTHING, K.TOP_SMOOTHING2)
 
 
 def test_assemble_matches_numpy_energy_gradient_and_hessian():
@@ -259,10 +259,11 @@ def test_spool_tension_scales_out():
     z2, *_ = run_zone(mu=0.3, tension=2.0, steps=90)
     z8, *_ = run_zone(mu=0.3, tension=8.0, steps=90)
     assert z2.state.m == z8.state.m
-    # up to the tow's stretch f / EA (6e-5 at 8 N: < 5 um over the ~5 cm segments here)
-    assert np.abs(z2.state.pos[: z2.state.m] - z8.state.pos[: z8.state.m]).max() < 5e-6
+    # EA scales with the spool tension (frontal.TOW_STRAIN), so the whole model is homogeneous:
+    # the same solution up to the solver tolerance (1e-7 relative imbalance: measured 3e-11 m)
+    assert np.abs(z2.state.pos[: z2.state.m] - z8.state.pos[: z8.state.m]).max() < 1e-8
     assert np.allclose(z8.state.tension[: z8.state.m], 4.0 * z2.state.tension[: z2.state.m],
-                       rtol=1e-3)
+                       rtol=1e-6)
 
 
 def test_residual_falls_over_frontal_iterations():

@@ -114,6 +114,12 @@ def cone(f_ext, d, mu):
 
 
 
+#: m^2, extra smoothing of the top segment's length, sqrt(l^2 + TOP_SMOOTHING2): a crossing
+#: whose balance lies at its yarn's ring or spool point (two yarns that have just crossed, with
+#: different ring tensions, meet at the ring) sits within 30 um of it instead of on a kink of E that
+#: Newton cannot resolve. It changes the top force by the relative amount TOP_SMOOTHING2 / (2 l^2):
+#: < 5e-4 for a crossing more than 1 mm below the point
+TOP_SMOOTHING2 = 3e-5 ** 2
 #: N, smallest tension the Hessian's geometric stiffness of a segment uses (see the docstring)
 GEOMETRIC_FLOOR = 1e-3
 
@@ -232,7 +238,7 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, pa)
-        dx, dy, dz, l = _sub(pa, top[k], eps2)
+        dx, dy, dz, l = _sub(pa, top[k], eps2 + TOP_SMOOTHING2)
         fm = material_force(f_top[k], EA)
         E += fm * s[c, side] + f_top[k] * l
         grad[c, 0] += f_top[k] * dx / l
@@ -320,7 +326,7 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fe
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, pa)
-        E += material_force(f_top[k], EA) * s[c, side] + f_top[k] * _sub(pa, top[k], eps2)[3]
+        E += material_force(f_top[k], EA) * s[c, side] + f_top[k] * _sub(pa, top[k], eps2 + TOP_SMOOTHING2)[3]
     return E
 
 
