@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from preform._kernels.frontal import COMPRESSION   # a constant of the model, not code
+
 
 def yarn_point(st, c, side, h):
     s = st.over[c] if side == 0 else -st.over[c]
@@ -41,7 +43,7 @@ def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top)
             q = s[i + 1] - s[i]
             if q <= 0:
                 return np.inf
-            E += 0.5 * EA * (l - q) ** 2 / q
+            E += 0.5 * EA * (l - q) ** 2 / q * (1.0 if l >= q else COMPRESSION)
         d = pts[-1] - pts[-2]
         f = f_top[k]
         E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2 + eps2_top)
@@ -59,7 +61,7 @@ def tensions(st, fell, EA, h, eps2):
             p = yarn_point(st, c, side, h)
             l = np.sqrt(np.sum((p - prev) ** 2) + eps2)
             q = st.s[c, side] - s_prev
-            out[c, side] = EA * (l - q) / q
+            out[c, side] = EA * (l - q) / q * (1.0 if l >= q else COMPRESSION)
             prev, s_prev = p, st.s[c, side]
     return out
 

@@ -20,9 +20,10 @@ s[c, side]``, the material coordinate (m of yarn) of yarn ``side`` at the crossi
         + sum_(c, side) friction(s - s_old)
         + sum_c k_wall min(0, dist_c)^2 / 2
 
-* ``W(l, q) = EA (l - q)^2 / (2 q)``: a segment of material length ``q = s_upper - s_lower``
-  (or ``- s_fell``) stretched to length ``l``, tension ``f = dW/dl = EA (l - q) / q`` (a stiff
-  tow; convex in ``(l, q)``, its Hessian ``EA / q v v^T``, ``v = (1, -l/q)``);
+* ``W(l, q) = k (l - q)^2 / (2 q)``: a segment of material length ``q = s_upper - s_lower``
+  (or ``- s_fell``) stretched to length ``l``, tension ``f = dW/dl = k (l - q) / q`` with ``k = EA``
+  (a stiff tow) or ``COMPRESSION EA`` when slack; convex in ``(l, q)``, its Hessian ``k / q v v^T``,
+  ``v = (1, -l/q)``;
 * ``F(f_top) s_highest + f_top l_top``: the spool pays yarn out at the tension ``f_top``
   (``F = material_force``, the force ``-dW/dq`` of a segment at that tension);
 * friction at the crossing (``_friction``): ``g |s - s_old|`` with ``|x|`` smoothed to
@@ -120,6 +121,10 @@ def cone(f_ext, d, mu):
 #: Newton cannot resolve. It changes the top force by the relative amount TOP_SMOOTHING2 / (2 l^2):
 #: < 5e-4 for a crossing more than 1 mm below the point
 TOP_SMOOTHING2 = 3e-5 ** 2
+#: a segment shorter than its material (slack) pushes back with this fraction of EA: a yarn does not
+#: push, but a small stiffness keeps the material coordinates of a slack stretch defined and the
+#: energy's second derivative bounded below (C1, piecewise quadratic in the stretch)
+COMPRESSION = 1e-2
 #: N, smallest tension the Hessian's geometric stiffness of a segment uses (see the docstring)
 GEOMETRIC_FLOOR = 1e-3
 
@@ -142,9 +147,16 @@ def _sub(pa, pb, eps2):
 
 @njit(cache=True)
 def segment_tension(l, q, EA):
-    """Tension (N) of a segment of length l (m) and material length q (m); negative when it is
-    shorter than its material (a state Newton may pass through; see ``assemble``)."""
-    return EA * (l - q) / q
+    """Tension (N) of a segment of length l (m) and material length q (m); negative, with the
+    small stiffness ``COMPRESSION EA``, when it is shorter than its material (a yarn that cannot
+    push: slack, kept just stiff enough for Newton; see ``assemble``)."""
+    return axial(l, q, EA) * (l - q) / q
+
+
+@njit(cache=True)
+def axial(l, q, EA):
+    """Axial stiffness (N) of a segment: EA stretched, COMPRESSION EA compressed."""
+    return EA if l >= q else COMPRESSION * EA
 
 
 @njit(cache=True)
@@ -197,8 +209,9 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             # gradient stays exact)
             nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f, GEOMETRIC_FLOOR) / l, dx, dy, dz)
             e = l - q
-            E += 0.5 * EA * e * e / q
-            wq = -f - f * f / (2.0 * EA)               # dW/dq
+            ka = axial(l, q, EA)
+            E += 0.5 * ka * e * e / q
+            wq = -f - f * f / (2.0 * ka)               # dW/dq
             grad[c, 0] += f * dx
             grad[c, 1] += f * dy
             grad[c, 2] += f * dz
@@ -228,7 +241,7 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
                 w[5] = -dy
                 w[6] = -dz
                 w[7] = l / q
-            a = EA / q
+            a = ka / q
             for i in range(na):
                 for j in range(na):
                     nnz = _put(rows, cols, vals, nnz, idx[i], idx[j], a * w[i] * w[j])
@@ -315,7 +328,7 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fe
             if q <= 0.0:
                 return np.inf
             l = _sub(pa, pb, eps2)[3]
-            E += 0.5 * EA * (l - q) ** 2 / q
+            E += 0.5 * axial(l, q, EA) * (l - q) ** 2 / q
             E += _friction(s[c, side] - s_old[c, side], g[c, side], eps_f, kappa0)[0]
         sd = _wall_distance(pos, plane, c)
         if sd < 0.0:
@@ -404,7 +417,8 @@ def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, s, tension, EA, h, 
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, p)
         l = _sub(p, fell[k], eps2)[3]
-        s_fell[k] = s[c, side] - l / (1.0 + tension[c, side] / EA)
+        f = tension[c, side]
+        s_fell[k] = s[c, side] - l / (1.0 + f / (EA if f >= 0.0 else COMPRESSION * EA))
 
 @njit(cache=True)
 def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spool, mu_r,
