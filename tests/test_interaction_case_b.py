@@ -1,7 +1,8 @@
 """The interaction model on a case-B-like mandrel (issue 4; paper §3.2, Fig. 11-12).
 
 A rounded square (90 mm, corners 15 mm) blending into a circle of the same perimeter between
-z = 0.35 and 0.45 m, braided with a guide ring (radius 0.12 m, ring friction 0.17), yarn friction
+z = 0.35 and 0.45 m, braided through a guide ring (radius 0.12 m, ring friction 0.17: the ring
+points stick and slip across the ring and lag the carriers), yarn friction
 0.25 and the mandrel 20 mm off the machine axis along +x. Small machine (16 carriers, spool
 0.2 m) so the run takes well under a minute; the transient has decayed by z = 0.2 m (the time
 constant is ~8 cm of braid).
@@ -29,6 +30,8 @@ from test_interaction_zone import _balance_and_psi, _read_snapshot
 LENGTH = 0.75
 SQUARE = (0.2, 0.33)      # z range (m) of steady braid on the square part
 ROUND = (0.48, 0.58)       # z range on the circle part
+RING_RADIUS = 0.12
+MU_R = 0.17
 SIDES = {"+x": (1, 0), "+y": (0, 1), "-x": (-1, 0), "-y": (0, -1)}
 
 
@@ -38,8 +41,8 @@ def run(tmp_path_factory):
     v, f = shapes.case_b(length=LENGTH, blend=(0.35, 0.45), n_around=96)
     stl = write_stl(d / "b.stl", v, f)
     cl = write_centerline(d / "b.csv", [[0, 0, 0], [0, 0, LENGTH]])
-    cfg = make_config(stl, cl, carriers=16, spool_radius=0.2, friction=0.25, ring_friction=0.17,
-                      guide_ring=(0.12, 0.0), braid_length=0.6, initial_position=0.08,
+    cfg = make_config(stl, cl, carriers=16, spool_radius=0.2, friction=0.25, ring_friction=MU_R,
+                      guide_ring=(RING_RADIUS, 0.0), braid_length=0.6, initial_position=0.08,
                       eccentricity=(0.02, 0.0), snapshots=3)
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"))
     res = simulate(cfg, progress=False)
@@ -92,5 +95,22 @@ def test_case_b_snapshots_in_balance_from_the_files(run, tmp_path):
         err, psi = _balance_and_psi(yarns, 0.25)
         assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
         assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
+        for pts, ten, _ in yarns:
+            # the yarn's last three points: highest crossing (or fell point), ring point, spool
+            R = pts[-2]
+            assert np.hypot(R[0], R[1]) == pytest.approx(RING_RADIUS, rel=1e-12)
+            u_int = (pts[-3] - R) / np.linalg.norm(pts[-3] - R)
+            u_ext = (pts[-1] - R) / np.linalg.norm(pts[-1] - R)
+            f_int, f_ext = ten[-2], ten[-1]
+            # Capstan along the yarn (paper eq. 9, drawn towards the mandrel): f_int = f_ext
+            # exp(mu_r eta), eta the deflection at the ring; to the frontal tolerance (1e-6)
+            eta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
+            assert f_int == pytest.approx(f_ext * np.exp(MU_R * eta), rel=1e-5)
+            # transverse Amontons at the ring point (paper eqs. 11-13): |F^t| <= mu_r |F^n|, to
+            # the ring iteration of the snapshot
+            F = f_int * u_int + f_ext * u_ext
+            t = np.array([-R[1], R[0], 0.0]) / RING_RADIUS
+            Ft = F @ t
+            assert abs(Ft) - MU_R * np.linalg.norm(F - Ft * t) < 1e-3 * (f_int + f_ext)
         checked += 1
     assert checked >= 2

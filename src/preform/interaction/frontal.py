@@ -270,14 +270,18 @@ def _newton_step(net, E, nnz):
 
 
 def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE,
-               friction_tol=FRICTION_TOLERANCE, max_iter=MAX_ITERATIONS, where="") -> SolveReport:
+               friction_tol=FRICTION_TOLERANCE, max_iter=MAX_ITERATIONS, where="",
+               s_old=None) -> SolveReport:
     """Bring every crossing of ``state`` to balance with its friction law (module docstring), in
     place: positions, material coordinates, tensions, friction bounds and slip states of the
     crossings; f_top (2n,) receives the top tensions. ``state.s_fell`` must be anchored
-    (``anchor_fell``). ``where`` names the step and time in the error message;
+    (``anchor_fell``). ``s_old`` (m, 2): where each yarn's material sticks (default: where it is
+    now, the end of the last step). ``where`` names the step and time in the error message;
     :class:`SimulationError` if the residual stays above the tolerances."""
     m = state.m
     net = _Network(state, bc, f_top)
+    if s_old is not None:
+        net.s_old = np.array(s_old[:m], dtype=float)
     if m == 0:
         net.f_top = net.bounds()[2]
         f_top[:] = net.f_top

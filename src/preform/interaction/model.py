@@ -24,9 +24,11 @@ Each step (``step``):
    supply point (ring point, else spool) when it has none: ``G_end``; ``G_mid`` is the mean of the
    previous and the new one while the lowest crossing stays the same, else ``G_end``.
 
-Guide ring: the ring point is the ring point at the carrier's azimuth (no transverse slip in this
-version) and the tension below it follows Capstan from the spool tension, ``f = f_spool exp(mu_r
-eta)`` (see ``_kernels/frontal.top_tensions``).
+Guide ring (paper §2.3): every yarn's ring point ``R(theta_r)`` sticks or slips across the ring
+with Amontons friction (``slide_rings``, the single ring-contact solver, after each step's solve:
+the ring point lags the yarn by a step), and the tension below it follows Capstan from the spool
+tension, ``f = f_spool exp(mu_r eta)`` (``_kernels/frontal.top_tensions``), the yarn being drawn
+from the spool towards the mandrel.
 
 Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
 """
@@ -42,10 +44,21 @@ from .._kernels import frontal as K
 from ..result import Snapshot
 from ..zone import ZoneStep
 from . import frontal
+from .._kernels import ring as RK
+from .ring import ring_point
 from .zone_state import ZoneState
 
 #: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
 DEPOSIT_HEIGHT = 1.0
+#: a new crossing starts no lower than this fraction of its yarns' top segments: behind a guide
+#: ring whose points lag the carriers, two yarns whose carriers have passed may not cross yet
+#: below the ring, and their closest points are the crossings below (the solver then takes the
+#: new crossing up to the ring, where the yarns do cross)
+CREATION_LOWEST = 0.5
+#: snapshot: alternations of the zone solve and the ring points' stick/slip, at most, and the
+#: ring-point motion (m) below which they stop
+RING_ITERATIONS = 50
+RING_TOLERANCE = 1e-9
 
 
 class MandrelDistance:
@@ -104,11 +117,22 @@ class InteractionZone:
         self.fell = np.array(F_machine, dtype=float)
         self.G_prev = self.machine.supply_points(t)
         self.lowest_uid_prev = np.full(self.machine.n_yarns, -1, dtype=np.int64)
+        self.pending = []
+        if self.machine.has_ring:    # ring points start at the carriers' azimuths
+            self.ring_theta = np.arctan2(self.G_prev[:, 1], self.G_prev[:, 0])
+            self.ring_anchor = self.ring_theta
 
-    def boundary(self, t, F_machine) -> frontal.Boundary:
+    def boundary(self, t, F_machine, ring_theta=None) -> frontal.Boundary:
+        """The zone's boundary at time t: fell points F_machine, ring points at ``ring_theta``
+        (default: the zone's), spool points."""
         m = self.machine
+        if m.has_ring:
+            theta = self.ring_theta if ring_theta is None else ring_theta
+            top = ring_point(theta, m.ring_radius, m.supply_z)
+        else:
+            top = m.supply_points(t)
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
-                                top=m.supply_points(t), spool=m.spool_points(t),
+                                top=top, spool=m.spool_points(t),
                                 f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
                                 has_ring=bool(m.has_ring), h=self.h)
 
@@ -124,13 +148,17 @@ class InteractionZone:
         self.pose_end = pose_end
         bc = self._with_wall(bc)
         self.last_report = frontal.solve_zone(st, bc, self.f_top, where=where)
+        if self.machine.has_ring:
+            self.ring_anchor = self.ring_theta
+            self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
         deposits = self._deposit(pose_end)
         G_end = self.lowest_points(bc.top)
         uid = np.where(st.lowest >= 0, st.uid[np.maximum(st.lowest, 0)], -1)
         same = (uid >= 0) & (uid == self.lowest_uid_prev)
         G_mid = np.where(same[:, None], 0.5 * (self.G_prev + G_end), G_end)
         none = st.lowest < 0
-        G_mid[none] = self.machine.supply_points(t0 + 0.5 * dt)[none]
+        G_mid[none] = (bc.top if self.machine.has_ring
+                       else self.machine.supply_points(t0 + 0.5 * dt))[none]
         self.G_prev, self.lowest_uid_prev = G_end, uid
         self.fell = bc.fell
         self.t = t1
@@ -144,12 +172,49 @@ class InteractionZone:
         The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
         are in balance with the exported fell points."""
         st = _copy_state(self.state)
-        bc = self._with_wall(self.boundary(t, F_machine), st)
-        frontal.anchor_fell(st, bc)
+        anchor = dict(zip(st.uid[: st.m].tolist(), st.s[: st.m].copy()))
+        fell = np.array(F_machine, dtype=float)
         f_top = self.f_top.copy()
-        frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS,
-                           where=f"in the snapshot at t = {t:.6g} s")
+        theta = getattr(self, "ring_theta", None)
+        where = f"in the snapshot at t = {t:.6g} s"
+        for _ in range(RING_ITERATIONS):
+            # the same stick anchors (yarn material, ring angles) in every pass: a fixed point
+            # of the step's state, not further steps
+            bc = self._with_wall(self.boundary(t, fell, theta), st)
+            frontal.anchor_fell(st, bc)
+            s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
+            frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS, where=where,
+                               s_old=s_old)
+            # a crossing the re-solve laid on the mandrel is deposited there, as a step would
+            deposits = self._deposit(self.pose_end, st)
+            for k, p in deposits:
+                fell[k] = p
+            if not self.machine.has_ring:
+                if not deposits:
+                    break
+                continue
+            new = self.slide_rings(st, bc, getattr(self, "ring_anchor", theta))
+            moved = float(np.abs(new - theta).max()) * self.machine.ring_radius
+            theta = new
+            if moved < RING_TOLERANCE and not deposits:
+                break
         return _snapshot(st, bc, f_top, t, self.machine)
+
+    def slide_rings(self, st, bc, theta):
+        """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
+        ring with Amontons friction (paper §2.3, ``_kernels.ring.solve_ring``), the yarn running
+        from its highest crossing (or fell point) over the ring to its spool point. Explicit: the
+        zone's solve that follows uses them, so the ring point lags its yarn by a step (snapshots
+        iterate to RING_TOLERANCE)."""
+        n = st.n_yarns
+        A = np.array([self._top_point(k, bc.fell, st) for k in range(n)])
+        out = RK.empty_out(n)
+        status = np.empty(n, dtype=np.int64)
+        RK.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
+                       self.machine.ring_radius, self.machine.supply_z, np.asarray(theta, float),
+                       self.mu_r, 1.0, out, status)
+        ok = status == RK.RING_OK
+        return np.where(ok, out[:, RK.RING_OUT_THETA], theta)
 
     # -- pieces -----------------------------------------------------------------------------
     def _with_wall(self, bc, state=None):
@@ -169,21 +234,43 @@ class InteractionZone:
             out[k] = st.centerline_point(st.lowest[k], 0 if k < n else 1, self.h)
         return out
 
-    def _top_point(self, k, fell):
-        st = self.state
+    def _top_point(self, k, fell, state=None):
+        st = self.state if state is None else state
         c = st.highest[k]
         if c < 0:
             return fell[k]
         return st.centerline_point(c, 0 if k < self.machine.n_per_group else 1, self.h)
 
-    def _create_crossings(self, t0, t1, bc):
+    def _ready_passes(self, t0, t1):
+        """The carrier passes whose crossings are due now, in pass order: every pass of the step
+        without a guide ring; behind a ring, a pass's two yarns cross where their ring points
+        pass, which lag the carriers when they stick on the ring, so a pass waits (in
+        ``self.pending``) until the warp's ring angle is no longer ahead of the weft's (the warp
+        turns towards smaller angles). A yarn's later passes wait behind its earlier ones."""
         passes = self.machine.pass_times(t0, t1)
         n = self.machine.n_per_group
-        for tp, i, j, over in zip(passes.time, passes.warp, passes.weft, passes.warp_over):
-            kx, ko = int(i), int(n + j)
+        self.pending.extend((float(tp), int(i), int(n + j), bool(o)) for tp, i, j, o in
+                            zip(passes.time, passes.warp, passes.weft, passes.warp_over))
+        if not self.machine.has_ring:
+            ready, self.pending = self.pending, []
+            return ready
+        ready, wait, blocked = [], [], set()
+        for item in self.pending:
+            _, kx, ko, _ = item
+            d = (self.ring_theta[kx] - self.ring_theta[ko] + np.pi) % (2 * np.pi) - np.pi
+            if kx in blocked or ko in blocked or d > 0.0:
+                wait.append(item)
+                blocked.update((kx, ko))
+            else:
+                ready.append(item)
+        self.pending = wait
+        return ready
+
+    def _create_crossings(self, t0, t1, bc):
+        for tp, kx, ko, over in self._ready_passes(t0, t1):
             px, po = self._top_point(kx, bc.fell), self._top_point(ko, bc.fell)
             gx, go = bc.top[kx], bc.top[ko]
-            C, N = creation_point(px, gx, po, go)
+            C, N = creation_point(px, gx, po, go, lowest=CREATION_LOWEST)
             st = self.state
             r = float(np.hypot(C[0], C[1]))
             if r > 0.0:     # the normal the solve uses (``radial_normals``), so s matches it
@@ -193,9 +280,9 @@ class InteractionZone:
                 st.s[c, side] = frontal.new_material(st, c, side, below, self.f_top[k], bc)
                 st.tension[c, side] = self.f_top[k]
 
-    def _deposit(self, pose):
-        st = self.state
-        if self.distance is None or st.m == 0:
+    def _deposit(self, pose, state=None):
+        st = self.state if state is None else state
+        if self.distance is None or st.m == 0 or pose is None:
             return []
         cand = np.arange(st.m)
         d = self.distance(pose.to_mandrel(st.pos[cand]))
@@ -225,9 +312,11 @@ class InteractionZone:
         return deposits
 
 
-def creation_point(px, gx, po, go):
+def creation_point(px, gx, po, go, lowest=0.0):
     """Where a new crossing starts: midpoint of the closest points of the segments px->gx and
-    po->go (m, machine frame), and the outward unit normal of the two directions."""
+    po->go (m, machine frame), and the outward unit normal of the two directions. ``lowest``: the
+    closest points are taken no lower than this fraction of each segment (a crossing created on
+    top of the one below would start with a segment of no length)."""
     d1 = gx - px
     d2 = go - po
     r = px - po
@@ -248,6 +337,7 @@ def creation_point(px, gx, po, go):
             s, u = float(np.clip(-c / a, 0.0, 1.0)), 0.0
         elif u > 1.0:
             s, u = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
+    s, u = max(s, lowest), max(u, lowest)
     C = 0.5 * (px + s * d1 + po + u * d2)
     N = np.cross(d1, d2)
     nn = np.linalg.norm(N)
