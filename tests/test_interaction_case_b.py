@@ -102,10 +102,10 @@ def test_case_b_snapshots_in_balance_from_the_files(run, tmp_path):
             u_int = (pts[-3] - R) / np.linalg.norm(pts[-3] - R)
             u_ext = (pts[-1] - R) / np.linalg.norm(pts[-1] - R)
             f_int, f_ext = ten[-2], ten[-1]
-            # Capstan along the yarn (paper eq. 9, drawn towards the mandrel): f_int = f_ext
-            # exp(mu_r eta), eta the deflection at the ring; to the frontal tolerance (1e-6)
+            # Capstan along the yarn (paper eq. 9): f_ext = f_int exp(mu_r eta), eta the
+            # deflection at the ring; to the frontal tolerance (1e-6)
             eta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
-            assert f_int == pytest.approx(f_ext * np.exp(MU_R * eta), rel=1e-5)
+            assert f_ext == pytest.approx(f_int * np.exp(MU_R * eta), rel=1e-5)
             # transverse Amontons at the ring point (paper eqs. 11-13): |F^t| <= mu_r |F^n|, to
             # the ring iteration of the snapshot
             F = f_int * u_int + f_ext * u_ext

@@ -424,8 +424,8 @@ def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, s, tension, EA, h, 
 def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spool, mu_r,
                  has_ring, f_top):
     """Tension (N) of every yarn's top segment into f_top (2n,): the spool tension, or behind a
-    guide ring the Capstan law f = f_spool exp(mu_r eta) (paper eq. 9), eta the yarn's deflection
-    at the ring point (the yarn is drawn from the spool towards the mandrel)."""
+    guide ring the Capstan law of the paper's eq. 9, f_spool = f exp(mu_r eta): f = f_spool
+    exp(-mu_r eta), eta the yarn's deflection at the ring point (``interaction/model.py``)."""
     n = n_yarns // 2
     p = np.empty(3)
     for k in range(n_yarns):
@@ -444,7 +444,7 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
         nb = math.sqrt(bx * bx + by * by + bz * bz)
         cb = (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)
         eta = math.pi - math.acos(min(1.0, max(-1.0, cb)))
-        f_top[k] = f_spool * math.exp(mu_r * eta)
+        f_top[k] = f_spool * math.exp(-mu_r * eta)
 
 
 @njit(cache=True)

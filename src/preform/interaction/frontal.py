@@ -33,8 +33,8 @@ material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
   crossing's transverse motion of a millimetre (second order in the length) does not swamp the
   stretch, which is what Newton's steps must resolve. Tying EA to the spool tension keeps the
   model homogeneous in the forces, as Amontons friction is;
-* the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(mu_r
-  eta)`` behind the guide ring, paper eq. 9);
+* the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(-mu_r
+  eta)`` times it behind the guide ring, paper eq. 9);
 * friction at every crossing and yarn is ``g |s - s_old|``, the work of the friction force against
   the sliding, with the bound ``g = mu (f_int + f_ext) tan(delta/2)`` held fixed: its
   stationarity ``f_int - f_ext in g d|s - s_old|`` *is* the discrete Capstan law of DESIGN.md

@@ -27,8 +27,12 @@ Each step (``step``):
 Guide ring (paper §2.3): every yarn's ring point ``R(theta_r)`` sticks or slips across the ring
 with Amontons friction (``slide_rings``, the single ring-contact solver, after each step's solve:
 the ring point lags the yarn by a step), and the tension below it follows Capstan from the spool
-tension, ``f = f_spool exp(mu_r eta)`` (``_kernels/frontal.top_tensions``), the yarn being drawn
-from the spool towards the mandrel.
+tension as the paper's eq. 9 writes it, ``f_spool = f exp(mu_r eta)`` (``_kernels/frontal.
+top_tensions``; the ring solver's default ``capstan_sign = -1``): the mandrel side carries the
+lower tension. (The reverse, the higher tension on the mandrel side of a yarn drawn from the spool,
+was tried: with ring friction 0.6 the ring's normal force then grows with the Capstan factor
+faster than the carriers' pull across the ring, the ring points never slip and the braid stops,
+which braiding machines with such rings do not show.)
 
 Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
 """
@@ -212,7 +216,7 @@ class InteractionZone:
         status = np.empty(n, dtype=np.int64)
         RK.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
                        self.machine.ring_radius, self.machine.supply_z, np.asarray(theta, float),
-                       self.mu_r, 1.0, out, status)
+                       self.mu_r, -1.0, out, status)
         ok = status == RK.RING_OK
         return np.where(ok, out[:, RK.RING_OUT_THETA], theta)
 
