@@ -61,8 +61,10 @@ DEPOSIT_HEIGHT = 1.0
 CREATION_LOWEST = 0.5
 #: snapshot: alternations of the zone solve and the ring points' stick/slip, at most, and the
 #: ring-point motion (m) below which they stop
-RING_ITERATIONS = 50
+RING_ITERATIONS = 20
 RING_TOLERANCE = 1e-9
+#: frontal iterations per pass of that alternation (the last solve iterates to convergence)
+RING_PASS_ITERATIONS = 3
 
 
 class MandrelDistance:
@@ -181,27 +183,31 @@ class InteractionZone:
         f_top = self.f_top.copy()
         theta = getattr(self, "ring_theta", None)
         where = f"in the snapshot at t = {t:.6g} s"
-        for _ in range(RING_ITERATIONS):
+        for i in range(RING_ITERATIONS):
             # the same stick anchors (yarn material, ring angles) in every pass: a fixed point
             # of the step's state, not further steps
             bc = self._with_wall(self.boundary(t, fell, theta), st)
             frontal.anchor_fell(st, bc)
             s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
-            frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS, where=where,
+            frontal.solve_zone(st, bc, f_top, max_iter=RING_PASS_ITERATIONS, where=where,
                                s_old=s_old)
             # a crossing the re-solve laid on the mandrel is deposited there, as a step would
             deposits = self._deposit(self.pose_end, st)
             for k, p in deposits:
                 fell[k] = p
-            if not self.machine.has_ring:
-                if not deposits:
-                    break
-                continue
-            new = self.slide_rings(st, bc, getattr(self, "ring_anchor", theta))
-            moved = float(np.abs(new - theta).max()) * self.machine.ring_radius
-            theta = new
+            moved = 0.0
+            if self.machine.has_ring:
+                new = self.slide_rings(st, bc, getattr(self, "ring_anchor", theta))
+                moved = float(np.abs(new - theta).max()) * self.machine.ring_radius
+                theta = new
             if moved < RING_TOLERANCE and not deposits:
                 break
+        # the friction bounds to convergence at the final ring points and fell points
+        bc = self._with_wall(self.boundary(t, fell, theta), st)
+        frontal.anchor_fell(st, bc)
+        s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
+        frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS, where=where,
+                           s_old=s_old)
         return _snapshot(st, bc, f_top, t, self.machine)
 
     def slide_rings(self, st, bc, theta):
