@@ -23,8 +23,9 @@ crossing where it was on its yarns instead of letting it run to wherever a force
 A yarn *slips* when material passes (``s != s_old``); the friction force then is on the Amontons
 bound, opposing the sliding.
 
-One time step is the minimum of a convex energy over the crossing positions ``C`` and the
-material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
+One time step is the minimum of an energy over the crossing positions ``C`` and the material
+coordinates ``s`` (``_kernels.frontal.assemble`` writes it out; convex but for the geometric part
+of slack segments, see there):
 
 * each segment between two crossings (or a crossing and the fell point) is a stiff tow of material
   length ``q = s_upper - s_lower`` and tension ``f = EA (l - q) / q``, ``EA = f_spool /
@@ -32,7 +33,8 @@ material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
   tension; 1e-3 is stiff enough to leave the geometry inextensible to 0.1 % and soft enough that a
   crossing's transverse motion of a millimetre (second order in the length) does not swamp the
   stretch, which is what Newton's steps must resolve. Tying EA to the spool tension keeps the
-  model homogeneous in the forces, as Amontons friction is;
+  model homogeneous in the forces, as Amontons friction is. A slack segment keeps 1 % of the
+  stiffness (a yarn does not push);
 * the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(-mu_r
   eta)`` times it behind the guide ring, paper eq. 9);
 * friction at every crossing and yarn is ``g |s - s_old|``, the work of the friction force against
@@ -42,8 +44,9 @@ material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
   side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps``
   (``FRICTION_CREEP``, 0.1 mm): a sticking yarn creeps by ``eps r / sqrt(1 - r^2)`` per step,
   ``r`` the used fraction of its bound (below ``eps`` while ``r < 0.7``), and its ``Psi`` stays
-  strictly negative: a regularised Coulomb law, the price of Newton steps that converge. The three slip cases of the paper (warp, weft, both) come out of the one minimisation
-  without case analysis. (An exact active set, stick as a stiff pin and slip with a fixed sense,
+  strictly negative: a regularised Coulomb law, the price of Newton steps that converge. The three
+  slip cases of the paper (warp, weft, both) come out of the one minimisation without case
+  analysis. (An exact active set, stick as a stiff pin and slip with a fixed sense,
   was tried first: on case A and case B the set cycled between steps' worth of yarns.);
 * the mandrel is a wall: each crossing stays in front of the tangent plane of the mandrel surface
   nearest to it (a convex penalty, ``WALL_STIFFNESS``), so the lowest rows rest on the mandrel,
@@ -52,13 +55,17 @@ material coordinates ``s`` (``_kernels.frontal.assemble`` writes it out):
 ``dE/dC = 0`` is pair balance at every crossing (paper eqs. 3-4, both yarns' internal and external
 forces); ``dE/ds = 0`` is the friction law of each yarn. Damped Newton (sparse Hessian with 5
 unknowns per crossing, positive definite by construction, see ``_kernels/frontal.py``; Armijo line
-search on ``E``) descends from any start and converges quadratically near the solution.
+search on ``E``) descends from any start and converges quadratically near the solution; where it
+does not converge within NEWTON_STEPS, the step is solved again by continuation in the friction
+(``_balance_or_continue``).
 
 The bounds ``g`` depend on the tensions and the deflections (Amontons: the normal force), and the
 top tensions on the ring deflections: an outer fixed point (the frontal iteration) re-evaluates them
 from the balanced geometry and solves again until they change by less than ``FRICTION_TOLERANCE``
-relative to the tensions; the residual history of a solve is that change per iteration. Then every
-crossing is in balance to ``BALANCE_TOLERANCE`` and ``Psi <= FRICTION_TOLERANCE (f_int + f_ext)``.
+relative to the tensions; the residual history of a solve is that change per iteration. A time
+step makes MAX_ITERATIONS of them (the bounds lag by up to a step), a snapshot up to
+SNAPSHOT_ITERATIONS. Then every crossing is in balance to ``BALANCE_TOLERANCE`` and ``Psi <=``
+the last change times ``(f_int + f_ext)``.
 The friction state (stick or slip, the sliding direction) and the material coordinates carry over
 from one step to the next: that history is what makes the model differ from a frictionless one.
 """
