@@ -23,9 +23,8 @@ import pytest
 from preform import simulate
 from preform.fields import map_to_surface
 from preform.geometry import shapes
-from preform.io.vtk_yarns import write_convergence
 from simcase import make_config, write_centerline, write_stl
-from test_interaction_zone import _balance_and_psi, _read_snapshot
+from test_interaction_zone import checked_snapshot_files
 
 LENGTH = 0.75
 SQUARE = (0.2, 0.33)      # z range (m) of steady braid on the square part
@@ -86,15 +85,9 @@ def test_braid_angle_differs_between_the_sides_and_through_the_transition(run):
 
 def test_case_b_snapshots_in_balance_from_the_files(run, tmp_path):
     res, _ = run
-    paths = write_convergence(res.snapshots, tmp_path)
-    checked = 0
-    for p in paths[1:]:
-        yarns = _read_snapshot(p)
-        if not any(np.any(c >= 0) for _, _, c in yarns):
-            continue
-        err, psi = _balance_and_psi(yarns, 0.25)
-        assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
-        assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
+    files = checked_snapshot_files(res.snapshots, tmp_path, 0.25)   # balance and Psi
+    assert len(files) >= 2
+    for yarns in files:
         for pts, ten, _ in yarns:
             # the yarn's last three points: highest crossing (or fell point), ring point, spool
             R = pts[-2]
@@ -112,5 +105,3 @@ def test_case_b_snapshots_in_balance_from_the_files(run, tmp_path):
             t = np.array([-R[1], R[0], 0.0]) / RING_RADIUS
             Ft = F @ t
             assert abs(Ft) - MU_R * np.linalg.norm(F - Ft * t) < 1e-3 * (f_int + f_ext)
-        checked += 1
-    assert checked >= 2

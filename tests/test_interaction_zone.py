@@ -224,6 +224,22 @@ def _balance_and_psi(yarns, mu):
     return max(err), max(psis)
 
 
+def checked_snapshot_files(snapshots, out_dir, mu):
+    """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance and
+    the friction law at every crossing (issue 4); the yarns (``_read_snapshot``) of every file
+    that has crossings."""
+    out = []
+    for p in write_convergence(snapshots, out_dir)[1:]:
+        yarns = _read_snapshot(p)
+        if not any(np.any(c >= 0) for _, _, c in yarns):
+            continue
+        err, psi = _balance_and_psi(yarns, mu)
+        assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
+        assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
+        out.append(yarns)
+    return out
+
+
 @pytest.mark.parametrize("mu", [0.0, 0.3])
 def test_snapshot_file_crossings_in_balance(mu, tmp_path):
     zone, F, t, _ = run_zone(mu=mu, steps=90)
