@@ -170,26 +170,32 @@ def test_assemble_matches_numpy_energy_gradient_and_hessian():
     assert np.allclose(H @ v.ravel(), fd, rtol=1e-4, atol=1e-4 * np.abs(fd).max())
 
 
-def test_dissection_order_gives_the_same_newton_direction():
-    """The nested-dissection order only renumbers the unknowns: a permutation of the 5 unknowns
-    of every crossing, and the Newton direction solved in it is the one solved in SuperLU's own
-    order (both to round-off: refined LU solves of the same matrix)."""
+@pytest.mark.parametrize("cholmod", [True, False])
+def test_newton_direction_solves_the_assembled_system(cholmod, monkeypatch):
+    """The Newton direction solves H dx = -g for the assembled Hessian, by CHOLMOD's Cholesky or
+    by SuperLU's LU (its fallback), in the nested-dissection order: the order is a permutation of
+    the 5 unknowns of every crossing, and both give the direction of a plain dense solve (to the
+    round-off of refined factorisations of a matrix with condition ~1e9: EA / q against the
+    tension stiffness f / l)."""
     import scipy.sparse as sp
+    monkeypatch.setattr(frontal, "USE_CHOLMOD", cholmod)
     zone, bc = _perturbed()
     st = zone.state
     net, _ = _net(zone, bc)
     _, nnz = net.assemble()
     n = 5 * st.m
-    dof = frontal.dissection_order(st.low[: st.m])
+    dof = net.order
     assert np.array_equal(np.sort(dof), np.arange(n))
     assert np.array_equal(dof.reshape(-1, 5) % 5, np.tile(np.arange(5), (st.m, 1)))
     H = sp.csr_matrix((net.vals[:nnz], (net.rows[:nnz], net.cols[:nnz])), shape=(n, n))
     g = net.grad[: st.m].ravel()
-    plain = frontal._newton_direction(H, g)
-    ordered = np.empty(n)
-    ordered[dof] = frontal._newton_direction(H[dof][:, dof], g[dof], ordered=True)
-    assert np.linalg.norm(H @ ordered + g) <= 1e-8 * np.linalg.norm(g)
-    assert np.allclose(ordered, plain, rtol=1e-6, atol=1e-9 * np.abs(plain).max())
+    dx = frontal._newton_direction(net, nnz, g)
+    assert np.linalg.norm(H @ dx + g) <= 1e-8 * np.linalg.norm(g)
+    dense = np.linalg.solve(H.toarray(), -g)
+    assert np.allclose(dx, dense, rtol=1e-6, atol=1e-9 * np.abs(dense).max())
+    out = np.empty(n)
+    K.triplet_matvec(nnz, net.rows, net.cols, net.vals, dx, out)   # the kernel vs scipy
+    assert np.allclose(out, H @ dx, rtol=1e-12, atol=1e-12 * np.abs(H @ dx).max())
 
 
 def test_tension_and_bound_kernels_match_numpy_twins():

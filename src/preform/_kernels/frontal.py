@@ -268,13 +268,15 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             i = 5 * c + 3 + side
             nnz = _put(rows, cols, vals, nnz, i, i, d2)
         sd = _wall_distance(pos, plane, c)
-        if sd < 0.0:
-            E += 0.5 * k_wall * sd * sd
-            for i in range(3):
-                grad[c, i] += k_wall * sd * plane[c, 3 + i]
-                for j in range(3):
-                    nnz = _put(rows, cols, vals, nnz, 5 * c + i, 5 * c + j,
-                               k_wall * plane[c, 3 + i] * plane[c, 3 + j])
+        # the wall's entries are written whether it pushes or not: the triplets of a zone are
+        # the same from one Newton step to the next (frontal.py maps them once per solve)
+        kw = k_wall if sd < 0.0 else 0.0
+        E += 0.5 * kw * sd * sd
+        for i in range(3):
+            grad[c, i] += kw * sd * plane[c, 3 + i]
+            for j in range(3):
+                nnz = _put(rows, cols, vals, nnz, 5 * c + i, 5 * c + j,
+                           kw * plane[c, 3 + i] * plane[c, 3 + j])
     return E, nnz
 
 
@@ -287,6 +289,14 @@ def _friction(x, g, eps_f, kappa0):
     r = math.sqrt(x * x + eps_f * eps_f)
     return (g * (r - eps_f) + 0.5 * kappa0 * x * x, g * x / r + kappa0 * x,
             g * eps_f * eps_f / (r * r * r) + kappa0)
+
+
+@njit(cache=True)
+def triplet_matvec(nnz, rows, cols, vals, x, out):
+    """out = H x for H given as ``nnz`` COO triplets (repeated entries add up)."""
+    out[:] = 0.0
+    for i in range(nnz):
+        out[rows[i]] += vals[i] * x[cols[i]]
 
 
 @njit(cache=True)
