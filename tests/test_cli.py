@@ -222,6 +222,20 @@ def test_run_default_out_dir_is_next_to_config(stubbed_run, tmp_path):
     assert (tmp_path / "results" / "case" / "summary.json").is_file()
 
 
+def test_run_model_flag_replaces_the_config_model(stubbed_run, tmp_path):
+    config, _ = stubbed_run
+    for model in ("interaction", "kinematic"):
+        out = tmp_path / model
+        assert main(["run", str(config), "--out", str(out), "--no-progress", "--model", model]) == 0
+        assert json.loads((out / "summary.json").read_text())["inputs"]["model"]["kind"] == model
+
+
+def test_run_unknown_model_is_usage_error(stubbed_run, capsys):
+    config, _ = stubbed_run
+    assert main(["run", str(config), "--model", "frontal"]) == 2
+    assert "interaction" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("status, code", [("interrupted", 130), ("failed", 1)])
 def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status, code):
     config, state = stubbed_run

@@ -95,6 +95,10 @@ def cmd_run(args) -> int:
     from .config import load_config
 
     config = load_config(args.config)  # bad input fails here, before the heavy imports
+    if getattr(args, "model", None):
+        import dataclasses
+
+        config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
     mandrel, centerline = _checked_geometry(config)  # impossible set-ups fail here, before simulating
     from .io import write_results
     from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
@@ -179,6 +183,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("config", metavar="CONFIG", help="case file (TOML)")
     run.add_argument("--out", metavar="DIR", help="result folder (default: [output] dir of the config)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--model", choices=("kinematic", "interaction"),
+                     help="the model to run, in place of the config's [model] kind")
     run.add_argument("--resume", action="store_true",
                      help=f"continue an interrupted run from its checkpoint (<out>/{CHECKPOINT})")
     run.set_defaults(func=cmd_run)
