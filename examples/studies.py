@@ -41,6 +41,9 @@ def study_configs(name, model="interaction", length=None, carriers=None):
     for k, v in fixed.items():
         base = _replace(base, "yarn" if k == "friction" else "process", k, v)
     base = _replace(base, "model", "kind", model)
+    # the studies read history.csv only: no convergence-zone snapshots (each one re-solves the
+    # zone to convergence)
+    base = _replace(base, "output", "snapshots", 0)
     if length is not None:
         base = _replace(base, "process", "braid_length", length)
     if carriers is not None:
@@ -52,10 +55,14 @@ def run_study(name, out, model="interaction", length=None, carriers=None, progre
     """Run every case of a study; write the plot and the table; return {label: Result}."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {label: pf.simulate(cfg, progress=progress)
-               for label, cfg in study_configs(name, model, length, carriers)}
-    _plot(name, results, out / f"{name}.png")
-    _table(results, out / f"{name}.csv")
+    results = {}
+    for label, cfg in study_configs(name, model, length, carriers):
+        results[label] = pf.simulate(cfg, progress=progress)
+        if results[label].status != "done":
+            print(f"{name}, {label}: {results[label].status}: {results[label].message}")
+        # plot and table after every run: a long study stopped half-way keeps its curves
+        _plot(name, results, out / f"{name}.png")
+        _table(results, out / f"{name}.csv")
     return results
 
 
