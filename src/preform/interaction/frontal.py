@@ -57,7 +57,10 @@ forces); ``dE/ds = 0`` is the friction law of each yarn. Damped Newton (sparse H
 unknowns per crossing, positive definite by construction, see ``_kernels/frontal.py``; Armijo line
 search on ``E``) descends from any start and converges quadratically near the solution; where it
 does not converge within NEWTON_STEPS, the step is solved again by continuation in the friction
-(``_balance_or_continue``).
+(``_balance_or_continue``). Each Newton direction is one sparse Cholesky factorisation (CHOLMOD)
+of the Hessian in the nested-dissection order of the crossing lattice (``dissection_order``,
+``_newton_direction``): its cost per crossing stays flat as the zone grows from 48 to 144
+carriers, where SuperLU's minimum-degree order filled the factor ever more.
 
 The bounds ``g`` depend on the tensions and the deflections (Amontons: the normal force), and the
 top tensions on the ring deflections: an outer fixed point (the frontal iteration) re-evaluates them
