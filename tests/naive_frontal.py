@@ -28,9 +28,11 @@ def polyline(st, k, side, chain, fell, top, h):
     return np.array([fell[k]] + [yarn_point(st, c, side, h) for c in chain] + [top[k]])
 
 
-def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top):
-    """The step energy (no wall) by yarns: stretched segments, spool payout (top segment length
-    smoothed by eps2 + eps2_top), friction."""
+def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top, l_jam=0.0,
+           k_jam=0.0):
+    """The step energy (no wall) by yarns: stretched segments, jamming of segments between two
+    crossings shorter than l_jam, spool payout (top segment length smoothed by eps2 + eps2_top),
+    friction."""
     E = 0.0
     for k, (side, chain) in enumerate(chains(st)):
         if not chain:
@@ -44,6 +46,8 @@ def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top)
             if q <= 0:
                 return np.inf
             E += 0.5 * EA * (l - q) ** 2 / q * (1.0 if l >= q else COMPRESSION)
+            if i >= 1 and l < l_jam:      # pts[0] is the fell point
+                E += 0.5 * k_jam * (l_jam - l) ** 2
         d = pts[-1] - pts[-2]
         f = f_top[k]
         E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2 + eps2_top)

@@ -177,7 +177,8 @@ def _put(rows, cols, vals, nnz, r, c, v):
 
 @njit(cache=True)
 def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old,
-             f_top, g, EA, eps_f, kappa0, h, eps2, plane, k_wall, grad, rows, cols, vals):
+             f_top, g, EA, eps_f, kappa0, h, eps2, plane, k_wall, l_jam, k_jam, grad, rows, cols,
+             vals):
     """E (N m), gradient grad (m, 5) and Hessian triplets of the step's energy (module
     docstring). Returns (E, nnz); E = inf when a segment's material length is not positive (the
     line search then backs off). rows, cols, vals need ``triplet_capacity(m, n_yarns)``."""
@@ -207,7 +208,23 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             f = segment_tension(l, q, EA)
             # geometric stiffness f / l (I - d d^T) at both ends, f floored (Hessian only; the
             # gradient stays exact)
-            nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f, GEOMETRIC_FLOOR) / l, dx, dy, dz)
+            # jamming: two crossings of a yarn push apart when closer than l_jam along it (the
+            # crossing yarns lie side by side) with the force fj = k_jam (l_jam - l): its
+            # Hessian is k_jam d d^T plus -fj / l (I - d d^T), which joins the segment's
+            # geometric stiffness (f - fj) / l; the triplets are written always (fixed pattern)
+            gap = l_jam - l
+            kj = k_jam if (gap > 0.0 and lo >= 0) else 0.0
+            nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f - kj * gap, GEOMETRIC_FLOOR) / l,
+                             1.0, -1.0, dx, dy, dz)
+            if lo >= 0:
+                E += 0.5 * kj * gap * gap
+                grad[c, 0] -= kj * gap * dx
+                grad[c, 1] -= kj * gap * dy
+                grad[c, 2] -= kj * gap * dz
+                grad[lo, 0] += kj * gap * dx
+                grad[lo, 1] += kj * gap * dy
+                grad[lo, 2] += kj * gap * dz
+                nnz = _geometric(rows, cols, vals, nnz, c, lo, kj, 0.0, 1.0, dx, dy, dz)
             e = l - q
             ka = axial(l, q, EA)
             E += 0.5 * ka * e * e / q
@@ -258,7 +275,8 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
         grad[c, 1] += f_top[k] * dy / l
         grad[c, 2] += f_top[k] * dz / l
         grad[c, 3 + side] += fm
-        nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, dx / l, dy / l, dz / l)
+        nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, 1.0, -1.0, dx / l, dy / l,
+                         dz / l)
     for c in range(m):
         for side in range(2):
             x = s[c, side] - s_old[c, side]
@@ -302,17 +320,17 @@ def triplet_matvec(nnz, rows, cols, vals, x, out):
 @njit(cache=True)
 def triplet_capacity(m, n_yarns):
     """Length of the rows/cols/vals arrays ``assemble`` needs."""
-    return m * (2 * (64 + 36) + 2 + 9) + n_yarns * 9
+    return m * (2 * (64 + 36 + 36) + 2 + 9) + n_yarns * 9
 
 
 @njit(cache=True)
-def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
+def _geometric(rows, cols, vals, nnz, a, b, w, iso, dd, dx, dy, dz):
     """Blocks w (I - d d^T) of a segment between crossing a and crossing b (or a fixed point)."""
     for i in range(3):
         di = dx if i == 0 else (dy if i == 1 else dz)
         for j in range(3):
             dj = dx if j == 0 else (dy if j == 1 else dz)
-            kij = w * ((1.0 if i == j else 0.0) - di * dj)
+            kij = w * ((iso if i == j else 0.0) + dd * di * dj)
             nnz = _put(rows, cols, vals, nnz, 5 * a + i, 5 * a + j, kij)
             if b >= 0:
                 nnz = _put(rows, cols, vals, nnz, 5 * b + i, 5 * b + j, kij)
@@ -323,7 +341,7 @@ def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
 
 @njit(cache=True)
 def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old, f_top,
-           g, EA, eps_f, kappa0, h, eps2, plane, k_wall):
+           g, EA, eps_f, kappa0, h, eps2, plane, k_wall, l_jam, k_jam):
     """E as in ``assemble``, without derivatives (inf when a material length is not positive)."""
     n = n_yarns // 2
     pa = np.empty(3)
@@ -339,6 +357,8 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fe
                 return np.inf
             l = _sub(pa, pb, eps2)[3]
             E += 0.5 * axial(l, q, EA) * (l - q) ** 2 / q
+            if low[c, side] >= 0 and l < l_jam:
+                E += 0.5 * k_jam * (l_jam - l) ** 2
             E += _friction(s[c, side] - s_old[c, side], g[c, side], eps_f, kappa0)[0]
         sd = _wall_distance(pos, plane, c)
         if sd < 0.0:

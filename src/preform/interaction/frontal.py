@@ -138,6 +138,13 @@ REFINEMENT_STEPS = 2
 REFINEMENT_TRIGGER = 1e-10
 #: stiffness (N/m) of the mandrel wall that keeps crossings outside: 10 N push 1 um
 WALL_STIFFNESS = 1e7
+#: jamming: two crossings of a yarn closer than a yarn width along it push apart (the crossing
+#: yarns lie side by side) with a force that reaches JAM_FORCE x the spool tension where they
+#: would coincide: soft, of the order of the forces in the zone, so that crossings created close
+#: together at a guide ring move apart instead of stopping Newton. Without it, a yarn gone slack
+#: behind high friction (case B, mu 0.5, at 0.4 m) let the other yarns pull its crossings into one
+#: point, with a 300 N segment between them, and Newton found no balance from there
+JAM_FORCE = 1.0
 #: factorise the Newton systems with CHOLMOD (else SuperLU's LU; ``_newton_direction``)
 USE_CHOLMOD = True
 
@@ -149,7 +156,8 @@ class Boundary:
     fell : (2n, 3) float64, m, fell points; top : (2n, 3) ring points (guide ring) or spool points;
     spool : (2n, 3) spool points; f_spool : N; mu, mu_r : friction; has_ring : bool; h : m, half
     the yarn thickness; plane : (m, 6) or None, per crossing a point and the outward unit normal
-    of the mandrel surface nearest to it (the crossings may not pass behind it).
+    of the mandrel surface nearest to it (the crossings may not pass behind it); width : m, the
+    yarn width, the least distance of two crossings along a yarn (jamming; 0: none).
     """
 
     fell: np.ndarray
@@ -161,6 +169,7 @@ class Boundary:
     has_ring: bool
     h: float
     plane: np.ndarray | None = None
+    width: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -241,7 +250,8 @@ class _Network:
         st, bc = self.st, self.bc
         return (st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest, bc.fell,
                 bc.top, s, st.s_fell, self.s_old, self.f_top, self.g, self.EA,
-                FRICTION_CREEP, KAPPA0, bc.h, LENGTH_SMOOTHING, self.plane, WALL_STIFFNESS)
+                FRICTION_CREEP, KAPPA0, bc.h, LENGTH_SMOOTHING, self.plane, WALL_STIFFNESS,
+                bc.width, JAM_FORCE * bc.f_spool / max(bc.width, 1e-300))
 
     def assemble(self):
         st = self.st

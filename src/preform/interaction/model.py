@@ -103,6 +103,7 @@ class InteractionZone:
             MandrelDistance(mandrel) if mandrel is not None else None)
         y = config.yarn
         self.h = 0.5 * float(y.thickness)
+        self.width = float(y.width)
         self.mu = float(y.friction)
         self.mu_r = float(getattr(y, "ring_friction", 0.0) or 0.0)
         self.f_spool = float(y.tension)
@@ -140,7 +141,7 @@ class InteractionZone:
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
                                 top=top, spool=m.spool_points(t),
                                 f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
-                                has_ring=bool(m.has_ring), h=self.h)
+                                has_ring=bool(m.has_ring), h=self.h, width=self.width)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
         t1 = t0 + dt
