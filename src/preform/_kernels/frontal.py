@@ -19,6 +19,7 @@ s[c, side]``, the material coordinate (m of yarn) of yarn ``side`` at the crossi
     E = sum_below W(l, q) + sum_yarns (F(f_top) s_highest + f_top l_top)
         + sum_(c, side) friction(s - s_old)
         + sum_c k_wall min(0, dist_c)^2 / 2
+        + sum_(segments between crossings) k_jam max(0, l_jam - l)^2 / 2
 
 * ``W(l, q) = k (l - q)^2 / (2 q)``: a segment of material length ``q = s_upper - s_lower``
   (or ``- s_fell``) stretched to length ``l``, tension ``f = dW/dl = k (l - q) / q`` with ``k = EA``

@@ -48,6 +48,9 @@ of slack segments, see there):
   slip cases of the paper (warp, weft, both) come out of the one minimisation without case
   analysis. (An exact active set, stick as a stiff pin and slip with a fixed sense,
   was tried first: on case A and case B the set cycled between steps' worth of yarns.);
+* jamming: two crossings of a yarn closer than a yarn width along it push apart (``JAM_FORCE``),
+  as the crossing yarns lying side by side do; it keeps a yarn that friction has left slack from
+  having its crossings pulled into one point;
 * the mandrel is a wall: each crossing stays in front of the tangent plane of the mandrel surface
   nearest to it (a convex penalty, ``WALL_STIFFNESS``), so the lowest rows rest on the mandrel,
   where ``model.py`` deposits them, instead of being pulled through it.
