@@ -212,11 +212,11 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             # jamming: two crossings of a yarn push apart when closer than l_jam along it (the
             # crossing yarns lie side by side) with the force fj = k_jam (l_jam - l): its
             # Hessian is k_jam d d^T plus -fj / l (I - d d^T), which joins the segment's
-            # geometric stiffness (f - fj) / l; the triplets are written always (fixed pattern)
+            # geometric stiffness (f - fj) / l and the axial block below
             gap = l_jam - l
             kj = k_jam if (gap > 0.0 and lo >= 0) else 0.0
             nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f - kj * gap, GEOMETRIC_FLOOR) / l,
-                             1.0, -1.0, dx, dy, dz)
+                             dx, dy, dz)
             if lo >= 0:
                 E += 0.5 * kj * gap * gap
                 grad[c, 0] -= kj * gap * dx
@@ -225,7 +225,6 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
                 grad[lo, 0] += kj * gap * dx
                 grad[lo, 1] += kj * gap * dy
                 grad[lo, 2] += kj * gap * dz
-                nnz = _geometric(rows, cols, vals, nnz, c, lo, kj, 0.0, 1.0, dx, dy, dz)
             e = l - q
             ka = axial(l, q, EA)
             E += 0.5 * ka * e * e / q
@@ -262,7 +261,10 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             a = ka / q
             for i in range(na):
                 for j in range(na):
-                    nnz = _put(rows, cols, vals, nnz, idx[i], idx[j], a * w[i] * w[j])
+                    v = a * w[i] * w[j]
+                    if i != 3 and j != 3 and i != 7 and j != 7:
+                        v += kj * w[i] * w[j]    # the jamming's k d d^T on the positions
+                    nnz = _put(rows, cols, vals, nnz, idx[i], idx[j], v)
     for k in range(n_yarns):
         c = highest[k]
         if c < 0:
@@ -276,8 +278,7 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
         grad[c, 1] += f_top[k] * dy / l
         grad[c, 2] += f_top[k] * dz / l
         grad[c, 3 + side] += fm
-        nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, 1.0, -1.0, dx / l, dy / l,
-                         dz / l)
+        nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, dx / l, dy / l, dz / l)
     for c in range(m):
         for side in range(2):
             x = s[c, side] - s_old[c, side]
@@ -321,17 +322,17 @@ def triplet_matvec(nnz, rows, cols, vals, x, out):
 @njit(cache=True)
 def triplet_capacity(m, n_yarns):
     """Length of the rows/cols/vals arrays ``assemble`` needs."""
-    return m * (2 * (64 + 36 + 36) + 2 + 9) + n_yarns * 9
+    return m * (2 * (64 + 36) + 2 + 9) + n_yarns * 9
 
 
 @njit(cache=True)
-def _geometric(rows, cols, vals, nnz, a, b, w, iso, dd, dx, dy, dz):
+def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
     """Blocks w (I - d d^T) of a segment between crossing a and crossing b (or a fixed point)."""
     for i in range(3):
         di = dx if i == 0 else (dy if i == 1 else dz)
         for j in range(3):
             dj = dx if j == 0 else (dy if j == 1 else dz)
-            kij = w * ((iso if i == j else 0.0) + dd * di * dj)
+            kij = w * ((1.0 if i == j else 0.0) - di * dj)
             nnz = _put(rows, cols, vals, nnz, 5 * a + i, 5 * a + j, kij)
             if b >= 0:
                 nnz = _put(rows, cols, vals, nnz, 5 * b + i, 5 * b + j, kij)

@@ -337,49 +337,36 @@ def _newton_direction(net, nnz, g):
     pattern = net.pattern(nnz)
     v = np.bincount(pattern.slot, weights=net.vals[:nnz][pattern.lower],
                     minlength=pattern.size)
-    b = -g[dof]
-    y = None
+    solve_ordered = None       # a solve of H x = rhs in the dissection order
     if USE_CHOLMOD:
         A = cvx.spmatrix(cvx.matrix(v), pattern.I, pattern.J, (n, n))
         try:
             if net.symbolic is None:
                 net.symbolic = cholmod.symbolic(A, p=cvx.matrix(np.arange(n, dtype=np.int64)))
             cholmod.numeric(A, net.symbolic)
-            x = cvx.matrix(b)
-            cholmod.solve(net.symbolic, x)
-            y = np.asarray(x).ravel()
-
-            def solve(rhs):
-                x = cvx.matrix(rhs[dof])
-                cholmod.solve(net.symbolic, x)
-                out = np.empty(n)
-                out[dof] = np.asarray(x).ravel()
-                return out
         except ArithmeticError:
             net.symbolic = None   # not positive definite: LU below
-            y = None
-    if y is None:
+        else:
+            def solve_ordered(rhs):
+                x = cvx.matrix(rhs)
+                cholmod.solve(net.symbolic, x)
+                return np.asarray(x).ravel()
+    if solve_ordered is None:
         H = sp.csc_matrix((v, (pattern.r, pattern.c)), shape=(n, n))
         H = H + sp.tril(H, -1, format="csc").T
         try:
-            lu = splu(H, permc_spec="NATURAL", diag_pivot_thresh=0.01,
-                      options=dict(SymmetricMode=True))
+            solve_ordered = splu(H, permc_spec="NATURAL", diag_pivot_thresh=0.01,
+                                 options=dict(SymmetricMode=True)).solve
         except RuntimeError:
-            y = spsolve(H, b)
+            def solve_ordered(rhs):
+                return spsolve(H, rhs)
 
-            def solve(rhs):
-                out = np.empty(n)
-                out[dof] = spsolve(H, rhs[dof])
-                return out
-        else:
-            y = lu.solve(b)
+    def solve(rhs):
+        out = np.empty(n)
+        out[dof] = solve_ordered(rhs[dof])
+        return out
 
-            def solve(rhs):
-                out = np.empty(n)
-                out[dof] = lu.solve(rhs[dof])
-                return out
-    dx = np.empty(n)
-    dx[dof] = y
+    dx = solve(-g)
     Hx = np.empty(n)
     gnorm = np.linalg.norm(g)
     for _ in range(REFINEMENT_STEPS):
