@@ -207,12 +207,11 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             dy /= l
             dz /= l
             f = segment_tension(l, q, EA)
-            # geometric stiffness f / l (I - d d^T) at both ends, f floored (Hessian only; the
-            # gradient stays exact)
             # jamming: two crossings of a yarn push apart when closer than l_jam along it (the
-            # crossing yarns lie side by side) with the force fj = k_jam (l_jam - l): its
-            # Hessian is k_jam d d^T plus -fj / l (I - d d^T), which joins the segment's
-            # geometric stiffness (f - fj) / l and the axial block below
+            # crossing yarns lie side by side) with the force fj = k_jam (l_jam - l); its
+            # Hessian k_jam d d^T joins the axial block below. Geometric stiffness of the net
+            # force, (f - fj) / l (I - d d^T) at both ends, floored (Hessian only; the gradient
+            # stays exact)
             gap = l_jam - l
             kj = k_jam if (gap > 0.0 and lo >= 0) else 0.0
             nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f - kj * gap, GEOMETRIC_FLOOR) / l,
