@@ -239,6 +239,19 @@ def test_newton_direction_solves_the_assembled_system(cholmod, monkeypatch):
     out = np.empty(n)
     K.triplet_matvec(nnz, net.rows, net.cols, net.vals, dx, out)   # the kernel vs scipy
     assert np.allclose(out, H @ dx, rtol=1e-12, atol=1e-12 * np.abs(H @ dx).max())
+    # the pattern's entries are the lower triangle of H in the dissection order (kernel vs scipy)
+    pattern = net.pattern(nnz)
+    v = np.empty(pattern.size)
+    K.accumulate(nnz, pattern.slot, net.vals, v)
+    lower = sp.tril(H[dof][:, dof]).tocsc()
+    assert np.array_equal(lower.indices, pattern.r) and np.array_equal(
+        np.repeat(np.arange(n), np.diff(lower.indptr)), pattern.c)
+    assert np.allclose(v, lower.data, rtol=1e-12, atol=1e-12 * np.abs(lower.data).max())
+    # a second Newton step reuses the pattern (and CHOLMOD's analysis) with new values
+    net.vals[:nnz] *= 2.0
+    assert np.allclose(frontal._newton_direction(net, nnz, g), 0.5 * dx, rtol=1e-6,
+                       atol=1e-9 * np.abs(dx).max())
+    assert net.pattern(nnz) is pattern
 
 
 def test_tension_and_bound_kernels_match_numpy_twins():

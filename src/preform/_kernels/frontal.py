@@ -319,6 +319,17 @@ def triplet_matvec(nnz, rows, cols, vals, x, out):
 
 
 @njit(cache=True)
+def accumulate(nnz, slot, vals, out):
+    """out[slot[i]] += vals[i] for the triplets with slot[i] >= 0 (out zeroed first): the
+    values of a sparse matrix's entries from its COO triplets."""
+    out[:] = 0.0
+    for i in range(nnz):
+        k = slot[i]
+        if k >= 0:
+            out[k] += vals[i]
+
+
+@njit(cache=True)
 def triplet_capacity(m, n_yarns):
     """Length of the rows/cols/vals arrays ``assemble`` needs."""
     return m * (2 * (64 + 36) + 2 + 9) + n_yarns * 9

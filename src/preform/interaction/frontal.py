@@ -192,13 +192,11 @@ class SolveReport:
 @dataclass
 class _Pattern:
     nnz: int
-    lower: np.ndarray
     slot: np.ndarray
     size: int
     r: np.ndarray
     c: np.ndarray
-    I: object
-    J: object
+    A: object
 
 
 class _Network:
@@ -232,9 +230,10 @@ class _Network:
 
     def pattern(self, nnz):
         """The lower triangle of the Hessian in the dissection order, from the triplets of
-        ``assemble`` (the same triplets at every Newton step of a solve): ``slot`` (entry of
-        each lower triplet), ``lower`` (the triplets that are), ``r``, ``c`` and cvxopt's ``I``,
-        ``J`` of the entries (column-major), ``size``."""
+        ``assemble`` (the same triplets at every Newton step of a solve): ``size`` entries at
+        ``r``, ``c`` (column-major, as cvxopt stores them), ``slot`` (the entry of each triplet,
+        -1 above the diagonal) and ``A``, cvxopt's matrix of that pattern (its values are
+        replaced at every Newton step: building it anew cost 5 ms on case A)."""
         p = self._pattern
         if p is not None and p.nnz == nnz:
             return p
@@ -242,10 +241,12 @@ class _Network:
         r = self.rank[self.rows[:nnz]]
         c = self.rank[self.cols[:nnz]]
         lower = r >= c
-        key, slot = np.unique(c[lower] * n + r[lower], return_inverse=True)
+        key, inverse = np.unique(c[lower] * n + r[lower], return_inverse=True)
+        slot = np.full(nnz, -1, dtype=np.int64)
+        slot[lower] = inverse
         er, ec = (key % n).astype(np.intp), (key // n).astype(np.intp)
-        self._pattern = p = _Pattern(nnz=nnz, lower=lower, slot=slot, size=key.size, r=er,
-                                     c=ec, I=cvx.matrix(er), J=cvx.matrix(ec))
+        A = cvx.spmatrix(cvx.matrix(np.zeros(key.size)), cvx.matrix(er), cvx.matrix(ec), (n, n))
+        self._pattern = p = _Pattern(nnz=nnz, slot=slot, size=key.size, r=er, c=ec, A=A)
         self.symbolic = None
         return p
 
@@ -335,11 +336,12 @@ def _newton_direction(net, nnz, g):
     n = g.size
     dof = net.order
     pattern = net.pattern(nnz)
-    v = np.bincount(pattern.slot, weights=net.vals[:nnz][pattern.lower],
-                    minlength=pattern.size)
+    v = np.empty(pattern.size)
+    K.accumulate(nnz, pattern.slot, net.vals, v)
     solve_ordered = None       # a solve of H x = rhs in the dissection order
     if USE_CHOLMOD:
-        A = cvx.spmatrix(cvx.matrix(v), pattern.I, pattern.J, (n, n))
+        A = pattern.A
+        A.V = cvx.matrix(v)
         try:
             if net.symbolic is None:
                 net.symbolic = cholmod.symbolic(A, p=cvx.matrix(np.arange(n, dtype=np.int64)))
