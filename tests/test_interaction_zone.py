@@ -385,3 +385,31 @@ def test_non_convergence_names_step_and_residual():
     with pytest.raises(SimulationError, match=r"step 7 .*residual"):
         frontal.solve_zone(st, zone.boundary(t, F), zone.f_top.copy(), max_iter=1, tol=1e-30,
                            where="at step 7 (t = 1 s)")
+
+
+@pytest.mark.parametrize("memory", [frontal.FRICTION_MEMORY, 0.0])
+def test_friction_memory_keeps_a_loaded_sticking_yarn_in_place(memory, monkeypatch):
+    """Elastic-plastic friction (frontal.FRICTION_MEMORY): a yarn that sticks under a load keeps
+    its friction force into the next step, so solving the same step again leaves it where it is.
+    Without the memory every step starts without friction force and the yarn creeps again by
+    about as much as in the first solve (the control case: the test can tell them apart)."""
+    monkeypatch.setattr(frontal, "FRICTION_MEMORY", memory)
+    zone, F, t, _ = run_zone(mu=0.3, steps=60)
+    st = zone.state
+    bc = zone.boundary(t, F)
+    f_top = zone.f_top.copy()
+    centre = st.s[: st.m] - st.offset[: st.m]
+    frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS)
+    s1 = st.s[: st.m].copy()
+    x = s1 - centre                   # the friction slip of the first solve
+    cap = 0.95 / np.sqrt(1 - 0.95**2) * frontal.FRICTION_CREEP
+    loaded = (np.abs(x) > 0.3 * frontal.FRICTION_CREEP) & (np.abs(x) < 0.5 * cap)
+    assert loaded.sum() > 10
+    frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS)
+    moved = np.abs(st.s[: st.m] - s1)[loaded]
+    if memory:
+        # to the solver's tolerances (balance 1e-7, bounds 1e-6 of the tensions) times the
+        # friction compliance FRICTION_CREEP / g
+        assert moved.max() < 1e-2 * frontal.FRICTION_CREEP
+    else:
+        assert np.median(moved) > 0.2 * frontal.FRICTION_CREEP

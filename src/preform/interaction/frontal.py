@@ -42,9 +42,12 @@ of slack segments, see there):
   stationarity ``f_int - f_ext in g d|s - s_old|`` *is* the discrete Capstan law of DESIGN.md
   §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
   side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps``
-  (``FRICTION_CREEP``, 0.1 mm): a sticking yarn creeps by ``eps r / sqrt(1 - r^2)`` per step,
-  ``r`` the used fraction of its bound (below ``eps`` while ``r < 0.7``), and its ``Psi`` stays
-  strictly negative: a regularised Coulomb law, the price of Newton steps that converge. The three
+  (``FRICTION_CREEP``, 0.1 mm): a sticking yarn gives ``eps r / sqrt(1 - r^2)`` to build up
+  its friction force, ``r`` the used fraction of its bound (below ``eps`` while ``r < 0.7``),
+  and its ``Psi`` stays strictly negative: a regularised Coulomb law, the price of Newton steps
+  that converge. The friction term is centred where the last step left the friction force
+  (``s_old = s - offset``, ``FRICTION_MEMORY``), so that give is not repeated at every step
+  while the load stays, and a slipping yarn starts the step with its friction force. The three
   slip cases of the paper (warp, weft, both) come out of the one minimisation without case
   analysis. (An exact active set, stick as a stiff pin and slip with a fixed sense,
   was tried first: on case A and case B the set cycled between steps' worth of yarns.);
@@ -123,8 +126,16 @@ TOW_STRAIN = 1e-3
 #: in 80 steps, 3e-5 takes 67, 1e-4 takes 9. A sticking yarn creeps below 0.1 mm per step while
 #: it uses less than 70 % of its bound; sliding yarns move millimetres per step
 FRICTION_CREEP = 1e-4
-#: a yarn that slid more than this through a crossing in a step is reported as slipping (it then
-#: uses more than 99.5 % of its friction bound), m
+#: friction memory: the friction term of the next step is centred where the yarn's friction force
+#: carries over (``ZoneState.offset``), up to this fraction of the bound (a yarn slipping on its
+#: bound starts the next step at 95 % of it, three FRICTION_CREEP from the centre; a yarn that
+#: stops slipping moves back by at most that to lower its friction force): elastic-plastic
+#: Coulomb friction, as contact codes regularise it. A sticking yarn then creeps only while its
+#: force grows, not again at every step; and a slipping one starts each step with its friction
+#: force instead of none, so Newton does not find its way out of the stick region anew
+FRICTION_MEMORY = 0.95
+#: a yarn whose material lies more than this from its friction centre at a crossing is reported
+#: as slipping (it then uses more than 99.5 % of its friction bound), m
 SLIP_REPORT = 10 * FRICTION_CREEP
 #: tiny stiffness (N/m) that pins the material coordinate of a slack segment; changes a tension
 #: jump by at most KAPPA0 x (slide in a step, < 0.1 m) = 1e-8 N
@@ -420,6 +431,8 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE,
     net = _Network(state, bc, f_top)
     if s_old is not None:
         net.s_old = np.array(s_old[:m], dtype=float)
+    else:
+        net.s_old -= state.offset[:m]
     if m == 0:
         net.f_top = net.bounds()[2]
         f_top[:] = net.f_top
@@ -498,7 +511,16 @@ def _accept(state, net, f_top):
     state.g[:m] = net.g
     slide = state.s[:m] - net.s_old
     state.slip[:m] = np.where(np.abs(slide) > SLIP_REPORT, np.sign(slide), 0)
+    cap = memory_cap()
+    state.offset[:m] = np.clip(slide, -cap, cap)
     f_top[:] = net.f_top
+
+
+def memory_cap():
+    """Largest friction offset carried to the next step (m): where the smoothed friction force
+    g x / sqrt(x^2 + eps^2) reaches FRICTION_MEMORY g."""
+    r = FRICTION_MEMORY
+    return FRICTION_CREEP * r / np.sqrt(1.0 - r * r)
 
 
 def axial_stiffness(f_spool):

@@ -179,7 +179,8 @@ class InteractionZone:
         The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
         are in balance with the exported fell points."""
         st = _copy_state(self.state)
-        anchor = dict(zip(st.uid[: st.m].tolist(), st.s[: st.m].copy()))
+        # each yarn's friction centre at each crossing (``frontal.solve_zone``)
+        anchor = dict(zip(st.uid[: st.m].tolist(), st.s[: st.m] - st.offset[: st.m]))
         fell = np.array(F_machine, dtype=float)
         f_top = self.f_top.copy()
         theta = getattr(self, "ring_theta", None)

@@ -23,6 +23,9 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``slip (cap, 2) int8``: friction state per yarn in the last step: 0 stick, +1 slipping with the
   tension below the crossing larger (the yarn slides towards the mandrel through the crossing), -1
   the other way (the crossing runs down the yarn faster than the yarn is drawn);
+- ``offset (cap, 2) float64, m``: the elastic part of the friction slip that carries the friction
+  force of each yarn over to the next step (``interaction/frontal.py``, FRICTION_MEMORY): the
+  next step's friction term is centred at ``s - offset``;
 - ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
   mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
   point below / the supply side above;
@@ -49,6 +52,7 @@ _FIELDS = {
     "s": ((2,), np.float64, 0.0),
     "g": ((2,), np.float64, np.nan),
     "slip": ((2,), np.int8, 0),
+    "offset": ((2,), np.float64, 0.0),
     "low": ((2,), np.int64, -1),
     "up": ((2,), np.int64, -1),
     "tension": ((2,), np.float64, 0.0),
@@ -97,6 +101,7 @@ class ZoneState:
         self.normal[c] = normal
         self.over[c] = 1.0 if over else -1.0
         self.slip[c] = 0
+        self.offset[c] = 0.0
         self.s[c] = 0.0
         self.g[c] = np.nan
         self.tension[c] = 0.0
