@@ -5,7 +5,8 @@ convergence length against braided length.
     python examples/studies.py case_a_position        # M_int = 0.2 ... 0.8 m, mu_y = 0.3
     python examples/studies.py case_b_friction        # mu_y = 0, 0.25, 0.5, H_int = 0.2 m
     options: --model kinematic|interaction (default interaction), --length M (braided length),
-             --carriers N (fewer carriers for a quick look), --out DIR
+             --carriers N (fewer carriers for a quick look), --values V [V ...] (some of the
+             study's values only), --out DIR
 
 Each study writes ``<out>/<study>.png`` and ``<out>/<study>.csv`` (braided length, then the
 braid angle and convergence length of every run).
@@ -34,9 +35,18 @@ def _replace(cfg, section, key, value):
     return dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **{key: value})})
 
 
-def study_configs(name, model="interaction", length=None, carriers=None):
-    """(label, Config) per value of the study."""
-    toml, section, key, values, fixed = STUDIES[name]
+def study_configs(name, model="interaction", length=None, carriers=None, values=None):
+    """(label, Config) per value of the study (``values``: a subset of them, default all)."""
+    toml, section, key, all_values, fixed = STUDIES[name]
+    if values is None:
+        values = all_values
+    else:
+        values = [float(v) for v in values]
+        unknown = [v for v in values if not any(np.isclose(v, a) for a in all_values)]
+        if unknown:
+            raise SystemExit(f"--values {' '.join(f'{v:g}' for v in unknown)}: not among the "
+                             f"values of {name} ({', '.join(f'{a:g}' for a in all_values)})")
+        values = [next(a for a in all_values if np.isclose(v, a)) for v in values]
     base = pf.load_config(HERE / toml)
     for k, v in fixed.items():
         base = _replace(base, "yarn" if k == "friction" else "process", k, v)
@@ -51,12 +61,14 @@ def study_configs(name, model="interaction", length=None, carriers=None):
     return [(f"{key} = {v}", _replace(base, section, key, v)) for v in values]
 
 
-def run_study(name, out, model="interaction", length=None, carriers=None, progress=True):
-    """Run every case of a study; write the plot and the table; return {label: Result}."""
+def run_study(name, out, model="interaction", length=None, carriers=None, progress=True,
+              values=None):
+    """Run every case of a study (or those of ``values``); write the plot and the table; return
+    {label: Result}."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results = {}
-    for label, cfg in study_configs(name, model, length, carriers):
+    for label, cfg in study_configs(name, model, length, carriers, values):
         results[label] = pf.simulate(cfg, progress=progress)
         if results[label].status != "done":
             print(f"{name}, {label}: {results[label].status}: {results[label].message}")
@@ -105,9 +117,10 @@ def main(argv=None):
     ap.add_argument("--model", default="interaction", choices=["kinematic", "interaction"])
     ap.add_argument("--length", type=float, help="braided length (m)")
     ap.add_argument("--carriers", type=int, help="override the carrier count")
+    ap.add_argument("--values", type=float, nargs="+", help="some of the study's values only")
     ap.add_argument("--out", default=str(HERE / "results" / "studies"))
     args = ap.parse_args(argv)
-    run_study(args.study, args.out, args.model, args.length, args.carriers)
+    run_study(args.study, args.out, args.model, args.length, args.carriers, values=args.values)
     print(f"{args.study}: {Path(args.out) / (args.study + '.png')}")
 
 

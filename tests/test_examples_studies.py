@@ -37,3 +37,12 @@ def test_study_runs_and_plots(tmp_path):
     assert png.stat().st_size > 10_000
     table = np.loadtxt(tmp_path / "case_b_friction.csv", delimiter=",", skiprows=1)
     assert table.shape[1] == 1 + 2 * 3 and np.all(np.isfinite(table))
+
+
+def test_study_values_subset():
+    s = _studies()
+    labels = [label for label, _ in s.study_configs("case_a_friction", model="kinematic",
+                                                     values=[0, 0.1 + 0.2, 0.5])]
+    assert labels == ["friction = 0.0", "friction = 0.3", "friction = 0.5"]
+    with pytest.raises(SystemExit, match="--values 0.25: not among the values of case_a_friction"):
+        s.study_configs("case_a_friction", model="kinematic", values=[0.25])
