@@ -113,7 +113,13 @@ MAX_ITERATIONS = 1
 #: frontal iterations for a snapshot: the exported crossings satisfy Psi to FRICTION_TOLERANCE
 #: where the iteration converges within them, else to its last change, relative to the tensions
 #: (benchmarks/bench_interaction.py plots it: most steps settle in 30-170 iterations, some hover
-#: near 5e-4)
+#: near 5e-4). Where it hovers, the largest change sits at a crossing where both yarns slip: its
+#: balance ties its deflection to its tension jump, so a larger bound deflects it just enough to
+#: raise the bound again by as much (the map has slope 1 there) and the bound drifts, by about
+#: the change per iteration, until the crossing sticks. Anderson mixing of the last 5 iterates
+#: (the paper's eq. 17 in a general form) and a Gauss-Seidel sweep of the bounds from the supply
+#: side were tried: neither shortens that drift, since the residual does not depend on the bound
+#: along it
 SNAPSHOT_ITERATIONS = 100
 #: Newton steps per inner solve
 NEWTON_STEPS = 80
