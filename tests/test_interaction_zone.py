@@ -413,3 +413,20 @@ def test_friction_memory_keeps_a_loaded_sticking_yarn_in_place(memory, monkeypat
         assert moved.max() < 1e-2 * frontal.FRICTION_CREEP
     else:
         assert np.median(moved) > 0.2 * frontal.FRICTION_CREEP
+
+
+def test_lower_pattern_kernel_matches_numpy_unique():
+    """``K.lower_pattern`` (O(nnz)) against the obvious NumPy: unique keys c n + r of the
+    permuted lower triplets, and each triplet's entry."""
+    rng = np.random.default_rng(3)
+    n, nnz = 60, 900
+    rows = rng.integers(0, n, nnz)
+    cols = rng.integers(0, n, nnz)
+    rank = rng.permutation(n)
+    slot, er, ec, size = K.lower_pattern(nnz, rows, cols, rank, n)
+    r, c = rank[rows], rank[cols]
+    lower = r >= c
+    key, inverse = np.unique(c[lower] * n + r[lower], return_inverse=True)
+    assert size == key.size
+    assert np.array_equal(er, key % n) and np.array_equal(ec, key // n)
+    assert np.array_equal(slot[lower], inverse) and np.all(slot[~lower] == -1)

@@ -330,6 +330,56 @@ def accumulate(nnz, slot, vals, out):
 
 
 @njit(cache=True)
+def lower_pattern(nnz, rows, cols, rank, n):
+    """The lower triangle's pattern of the n x n matrix of COO triplets ``rows``, ``cols`` after
+    the symmetric permutation ``rank`` (row i goes to rank[i]): (slot, er, ec, size), the
+    ``size`` distinct entries at (er, ec) sorted by column then row, and slot (nnz,) the entry of
+    each triplet, -1 for the triplets above the diagonal (what ``np.unique`` of the keys
+    ``c n + r`` gives, in O(nnz))."""
+    count = np.zeros(n + 1, dtype=np.int64)
+    for i in range(nnz):
+        r, c = rank[rows[i]], rank[cols[i]]
+        if r >= c:
+            count[c + 1] += 1
+    for j in range(n):
+        count[j + 1] += count[j]
+    fill = count[:n].copy()
+    bucket = np.empty(count[n], dtype=np.int64)        # lower triplets grouped by column
+    for i in range(nnz):
+        r, c = rank[rows[i]], rank[cols[i]]
+        if r >= c:
+            bucket[fill[c]] = i
+            fill[c] += 1
+    slot = np.full(nnz, -1, dtype=np.int64)
+    er = np.empty(count[n], dtype=np.int64)
+    ec = np.empty(count[n], dtype=np.int64)
+    where = np.full(n, -1, dtype=np.int64)             # entry of row r in the current column
+    size = 0
+    for c in range(n):
+        first = size
+        for b in range(count[c], count[c + 1]):        # distinct rows of the column
+            r = rank[rows[bucket[b]]]
+            if where[r] < first:
+                where[r] = size
+                er[size] = r
+                size += 1
+        for a in range(first + 1, size):               # sort them (a column has ~25)
+            v = er[a]
+            b = a - 1
+            while b >= first and er[b] > v:
+                er[b + 1] = er[b]
+                b -= 1
+            er[b + 1] = v
+        for a in range(first, size):
+            where[er[a]] = a
+            ec[a] = c
+        for b in range(count[c], count[c + 1]):
+            i = bucket[b]
+            slot[i] = where[rank[rows[i]]]
+    return slot, er[:size].copy(), ec[:size].copy(), size
+
+
+@njit(cache=True)
 def triplet_capacity(m, n_yarns):
     """Length of the rows/cols/vals arrays ``assemble`` needs."""
     return m * (2 * (64 + 36) + 2 + 9) + n_yarns * 9

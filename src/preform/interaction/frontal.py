@@ -255,15 +255,10 @@ class _Network:
         if p is not None and p.nnz == nnz:
             return p
         n = 5 * self.st.m
-        r = self.rank[self.rows[:nnz]]
-        c = self.rank[self.cols[:nnz]]
-        lower = r >= c
-        key, inverse = np.unique(c[lower] * n + r[lower], return_inverse=True)
-        slot = np.full(nnz, -1, dtype=np.int64)
-        slot[lower] = inverse
-        er, ec = (key % n).astype(np.intp), (key // n).astype(np.intp)
-        A = cvx.spmatrix(cvx.matrix(np.zeros(key.size)), cvx.matrix(er), cvx.matrix(ec), (n, n))
-        self._pattern = p = _Pattern(nnz=nnz, slot=slot, size=key.size, r=er, c=ec, A=A)
+        slot, er, ec, size = K.lower_pattern(nnz, self.rows, self.cols, self.rank, n)
+        er, ec = er.astype(np.intp), ec.astype(np.intp)
+        A = cvx.spmatrix(cvx.matrix(np.zeros(size)), cvx.matrix(er), cvx.matrix(ec), (n, n))
+        self._pattern = p = _Pattern(nnz=nnz, slot=slot, size=size, r=er, c=ec, A=A)
         self.symbolic = None
         return p
 
