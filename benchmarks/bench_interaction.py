@@ -50,7 +50,8 @@ def _count_newton_steps():
 
 
 def synthetic(carriers, steps, mu=0.25):
-    """Run a zone with fixed fell points; (wall s, crossing-iterations, residual histories)."""
+    """Run a zone with fixed fell points; (wall s, crossing-iterations, residual histories,
+    crossings at the end, mean Newton steps per timed step)."""
     from preform.config import MachineConfig
     from preform.interaction import frontal
     from preform.interaction.model import InteractionZone
@@ -66,7 +67,7 @@ def synthetic(carriers, steps, mu=0.25):
     F = np.stack([0.075 * np.cos(phi), 0.075 * np.sin(phi), np.full_like(phi, 0.6)], 1)
     zone.start(0.0, F, _Identity())
     dt = 0.01 / machine.omega
-    t, work, wall, hist = 0.0, 0, 0.0, []
+    t, work, wall, hist, newton, timed = 0.0, 0, 0.0, [], 0, 0
     count = _count_newton_steps()
     defaults = frontal.solve_zone.__kwdefaults__
     for i in range(steps):
@@ -84,8 +85,10 @@ def synthetic(carriers, steps, mu=0.25):
         else:
             wall += time.perf_counter() - t0
             work += zs.contacts * (count[0] - before)
+            newton += count[0] - before
+            timed += 1
         t += dt
-    return wall, work, hist, zone.state.m
+    return wall, work, hist, zone.state.m, newton / max(timed, 1)
 
 
 def full(carriers, mu, length):
@@ -121,10 +124,11 @@ def main(argv=None):
     synthetic(16, 5)   # JIT warm-up
     hists = {}
     for n in (48, 96, 144):
-        wall, work, hist, m = synthetic(n, args.steps)
+        wall, work, hist, m, per_step = synthetic(n, args.steps)
         hists[n] = hist
         print(f"{n} carriers: {args.steps} steps, {m} crossings at the end, wall {wall:.2f} s, "
-              f"{1e9 * wall / max(work, 1):.1f} ns per crossing per Newton step")
+              f"{1e9 * wall / max(work, 1):.1f} ns per crossing per Newton step, "
+              f"{per_step:.1f} Newton steps per step")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
