@@ -129,8 +129,9 @@ CONTINUATION = (0.0, 0.25, 0.5, 0.75, 1.0)
 TOW_STRAIN = 1e-3
 #: smoothing of |s - s_old| in the friction term, m of yarn per step (module docstring). Newton's
 #: cost falls steeply with it: on a case A step (432 crossings, mu = 0.25) 1e-5 does not converge
-#: in 80 steps, 3e-5 takes 67, 1e-4 takes 9. A sticking yarn creeps below 0.1 mm per step while
-#: it uses less than 70 % of its bound; sliding yarns move millimetres per step
+#: in 80 steps, 3e-5 takes 67, 1e-4 takes 9 (7.5 with FRICTION_MEMORY; 3e-4 would save one
+#: more). A sticking yarn gives less than 0.1 mm while its force grows to 70 % of its bound;
+#: sliding yarns move millimetres per step
 FRICTION_CREEP = 1e-4
 #: friction memory: the friction term of the next step is centred where the yarn's friction force
 #: carries over (``ZoneState.offset``), up to this fraction of the bound (a yarn slipping on its
