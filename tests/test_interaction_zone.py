@@ -430,3 +430,35 @@ def test_lower_pattern_kernel_matches_numpy_unique():
     assert size == key.size
     assert np.array_equal(er, key % n) and np.array_equal(ec, key // n)
     assert np.array_equal(slot[lower], inverse) and np.all(slot[~lower] == -1)
+
+
+@pytest.mark.parametrize("offset", [1e-9, 1e-4])
+def test_newton_step_below_the_energys_round_off_is_taken_whole(offset, monkeypatch):
+    """Where the decrease of E that Newton predicts is below E's round-off, E cannot judge the
+    step (``frontal.ROUNDOFF_SLOPE``): the full step is taken, else Newton stalls (case A with
+    friction 0 stopped at step 278 with the residual at 1.3e-6). Here E's evaluations are made
+    pure noise (always a little higher): near balance (1e-9 m off) the step is still taken
+    whole; far from it (1e-4 m) the line search refuses it, as it must."""
+    zone, F, t, _ = run_zone(mu=0.0, steps=40)
+    st = zone.state
+    m = st.m
+    bc = zone.boundary(t, F)
+    st.s[:m] += 1e3            # m of yarn: E ~ 1e5 J (the spool's work), physics unchanged
+    frontal.anchor_fell(st, bc)
+    frontal.solve_zone(st, bc, zone.f_top.copy())
+    st.pos[:m] += offset * np.random.default_rng(4).normal(size=(m, 3))
+    net = frontal._Network(st, bc, zone.f_top.copy())
+    E, nnz = net.assemble()
+    g = net.grad[:m].ravel().copy()
+    dx = frontal._newton_direction(net, nnz, g)
+    near = -float(g @ dx) < frontal.ROUNDOFF_SLOPE * frontal.ROUNDOFF * abs(E)
+    assert near == (offset < 1e-6)
+    monkeypatch.setattr(net, "energy", lambda pos, s: E + 1e-6 * abs(E))
+    pos0 = st.pos[:m].copy()
+    frontal._newton_step(net, E, nnz)
+    moved = np.abs(st.pos[:m] - pos0).max()
+    full = np.abs(dx.reshape(m, 5)[:, :3]).max()
+    if near:
+        assert moved == pytest.approx(full, rel=1e-6)
+    else:
+        assert moved < 1e-9 * full
