@@ -88,6 +88,8 @@ def _plot(name, results, path):
     for label, r in results.items():
         h = r.history
         L = h["braided_length_m"]
+        if r.status != "done":
+            label = f"{label} ({r.status} at {L[-1]:.2f} m)" if len(L) else f"{label} ({r.status})"
         ax_a.plot(L, 0.5 * (h["braid_angle_warp_deg"] + h["braid_angle_weft_deg"]), label=label)
         ax_h.plot(L, h["convergence_length_mean_m"], label=label)
     ax_a.set(xlabel="braided length L (m)", ylabel="braid angle (deg)", title=name)
@@ -106,7 +108,10 @@ def _table(results, path):
     for label, r in results.items():
         h = r.history
         angle = 0.5 * (h["braid_angle_warp_deg"] + h["braid_angle_weft_deg"])
-        cols += [np.interp(L, h["braided_length_m"], angle), np.interp(L, h["braided_length_m"], h["convergence_length_mean_m"])]
+        # a run that stopped early has no values beyond where it stopped
+        right = None if r.status == "done" else np.nan
+        cols += [np.interp(L, h["braided_length_m"], angle, right=right),
+                 np.interp(L, h["braided_length_m"], h["convergence_length_mean_m"], right=right)]
         header += [f"braid_angle_deg[{label}]", f"convergence_length_m[{label}]"]
     np.savetxt(path, np.column_stack(cols), delimiter=",", header=",".join(header), comments="")
 

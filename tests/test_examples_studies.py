@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 from pathlib import Path
+from types import SimpleNamespace as NS
 
 import numpy as np
 import pytest
@@ -46,3 +47,18 @@ def test_study_values_subset():
     assert labels == ["friction = 0.0", "friction = 0.3", "friction = 0.5"]
     with pytest.raises(SystemExit, match="--values 0.25: not among the values of case_a_friction"):
         s.study_configs("case_a_friction", model="kinematic", values=[0.25])
+
+
+def test_study_table_leaves_a_stopped_run_empty_beyond_its_end(tmp_path):
+    s = _studies()
+    full = {"braided_length_m": np.linspace(0.0, 1.0, 11), "braid_angle_warp_deg": np.full(11, 30.0),
+            "braid_angle_weft_deg": np.full(11, 30.0), "convergence_length_mean_m": np.full(11, 0.2)}
+    part = {k: v[:4] for k, v in full.items()}
+    results = {"friction = 0.0": NS(status="failed", history=part),
+               "friction = 0.5": NS(status="done", history=full)}
+    s._table(results, tmp_path / "t.csv")
+    table = np.loadtxt(tmp_path / "t.csv", delimiter=",", skiprows=1)
+    assert np.all(np.isfinite(table[:4])) and np.all(np.isnan(table[4:, 1:3]))
+    assert np.all(np.isfinite(table[:, 3:]))
+    s._plot("case_a_friction", results, tmp_path / "t.png")
+    assert (tmp_path / "t.png").stat().st_size > 10_000
