@@ -462,3 +462,16 @@ def test_newton_step_below_the_energys_round_off_is_taken_whole(offset, monkeypa
         assert moved == pytest.approx(full, rel=1e-6)
     else:
         assert moved < 1e-9 * full
+
+
+def test_zone_state_from_an_older_checkpoint_gets_its_new_fields():
+    """A checkpoint pickled before a field existed (here ``offset``) resumes with that field at
+    its fill value instead of failing in the middle of the run."""
+    import pickle
+    zone, *_ = run_zone(mu=0.3, steps=20)
+    st = zone.state
+    old = pickle.loads(pickle.dumps(st))
+    del old.__dict__["offset"]
+    back = pickle.loads(pickle.dumps(old))
+    assert back.offset.shape == (st.capacity, 2) and np.all(back.offset == 0.0)
+    assert np.array_equal(back.s[: st.m], st.s[: st.m]) and back.m == st.m

@@ -74,6 +74,15 @@ class ZoneState:
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.s_fell = np.zeros(self.n_yarns)
 
+    def __setstate__(self, state):
+        """Unpickle (checkpoints): a field that a checkpoint of an older version lacks starts
+        at its fill value, as for a new crossing."""
+        self.__dict__.update(state)
+        cap = len(self.uid)
+        for name, (shape, dtype, fill) in _FIELDS.items():
+            if name not in state:
+                setattr(self, name, np.full((cap,) + shape, fill, dtype=dtype))
+
     @property
     def capacity(self) -> int:
         return len(self.uid)
