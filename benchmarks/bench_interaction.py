@@ -9,7 +9,8 @@
   ``interaction/frontal.py``) and writes the residual-vs-iteration plot of a few steps;
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
-  and ``mandrels/case_a.stl``).
+  and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
+  study of ``simulate.default_time_step``.
 """
 
 from __future__ import annotations
@@ -91,22 +92,37 @@ def synthetic(carriers, steps, mu=0.25):
     return wall, work, hist, zone.state.m, newton / max(timed, 1)
 
 
-def full(carriers, mu, length):
+def full(carriers, mu, length, step_factor=None):
+    """Case A through ``preform.simulate``; step_factor: the time step as a multiple of the
+    kinematic model's default step (None: the interaction model's own default)."""
     import preform as pf
+    from preform.machine import Machine
+    from preform.simulate import default_time_step, load_geometry
 
     cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
                               machine=dataclasses.replace(cfg.machine, carriers=carriers),
                               yarn=dataclasses.replace(cfg.yarn, friction=mu),
-                              process=dataclasses.replace(cfg.process, braid_length=length))
+                              process=dataclasses.replace(cfg.process, braid_length=length),
+                              output=dataclasses.replace(cfg.output, snapshots=0))
+    if step_factor is not None:
+        kin = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="kinematic"))
+        dt = step_factor * default_time_step(kin, Machine.from_config(cfg.machine),
+                                             *load_geometry(cfg))
+        cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, time_step=dt))
+    count = _count_newton_steps()
     t0 = time.perf_counter()
     res = pf.simulate(cfg, progress=False)
     wall = time.perf_counter() - t0
     h = res.history
-    print(f"case A, {carriers} carriers, mu {mu}, {length} m: {res.status} {res.message}, wall "
-          f"{wall:.2f} s, {len(h['time_s'])} steps, max {int(h['contacts'].max())} crossings, "
-          f"mean {h['iterations'].mean():.1f} iterations, H end "
-          f"{h['convergence_length_mean_m'][-1]:.4f} m")
+    n = len(h["time_s"])
+    L, H = h["braided_length_m"], h["convergence_length_mean_m"]
+    at = "  ".join(f"{x:g} m: H {np.interp(x, L, H):.4f} m, angle "
+                   f"{np.interp(x, L, h['braid_angle_warp_deg']):.2f} deg"
+                   for x in np.linspace(0.0, length, 4)[1:])
+    print(f"case A, {carriers} carriers, mu {mu}, {length} m, step {step_factor or 'default'}: "
+          f"{res.status} {res.message}, wall {wall:.2f} s, {n} steps, {count[0] / n:.1f} Newton "
+          f"steps per step, max {int(h['contacts'].max())} crossings; {at}")
 
 
 def main(argv=None):
@@ -115,11 +131,16 @@ def main(argv=None):
     ap.add_argument("--mu", type=float, default=0.0)
     ap.add_argument("--length", type=float, default=1.0)
     ap.add_argument("--steps", type=int, default=400)
+    ap.add_argument("--carriers", type=int, nargs="+", default=[144, 96, 48],
+                    help="--full: the carrier counts to run")
+    ap.add_argument("--step-factor", type=float, default=None,
+                    help="--full: time step as a multiple of the kinematic model's default step "
+                         "(default: the interaction model's own)")
     ap.add_argument("--png", default=str(ROOT / "benchmarks" / "frontal_residual.png"))
     args = ap.parse_args(argv)
     if args.full:
-        for n in (144, 96, 48):
-            full(n, args.mu, args.length)
+        for n in args.carriers:
+            full(n, args.mu, args.length, args.step_factor)
         return
     synthetic(16, 5)   # JIT warm-up
     hists = {}

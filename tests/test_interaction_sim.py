@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from preform import simulate
+from preform.machine import Machine
+from preform.simulate import default_time_step, load_geometry
 from preform.analytic import ko_braid_angle
 from preform.geometry import shapes
 from simcase import make_config, write_centerline, write_stl
@@ -39,10 +41,11 @@ def geometry(tmp_path_factory):
 _RUNS = {}
 
 
-def run(geometry, kind="interaction", mu=0.0, tension=4.7, length=0.4, snapshots=0, ring=None):
+def run(geometry, kind="interaction", mu=0.0, tension=4.7, length=0.4, snapshots=0, ring=None,
+        step_factor=None):
     """ring: None, or the yarn-ring friction of a guide ring of radius RING in the spool plane
-    (spool radius RING_SPOOL)."""
-    key = (kind, mu, tension, length, snapshots, ring)
+    (spool radius RING_SPOOL); step_factor: the time step as a multiple of the default one."""
+    key = (kind, mu, tension, length, snapshots, ring, step_factor)
     if key not in _RUNS:
         stl, cl = geometry
         extra = {} if ring is None else {"guide_ring": (RING, 0.0), "ring_friction": ring}
@@ -50,6 +53,10 @@ def run(geometry, kind="interaction", mu=0.0, tension=4.7, length=0.4, snapshots
         cfg = make_config(stl, cl, carriers=16, spool_radius=spool, friction=mu, tension=tension,
                           braid_length=length, initial_position=0.08, snapshots=snapshots, **extra)
         cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind=kind))
+        if step_factor is not None:
+            dt = step_factor * default_time_step(cfg, Machine.from_config(cfg.machine),
+                                                 *load_geometry(cfg))
+            cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, time_step=dt))
         res = simulate(cfg, progress=False)
         assert res.status == "done", res.message
         _RUNS[key] = res
@@ -68,6 +75,21 @@ def test_frictionless_close_to_kinematic_convergence_length(geometry):
     assert inter.history["convergence_length_mean_m"][-1] == pytest.approx(
         kin.history["convergence_length_mean_m"][-1], rel=0.03)
     assert inter.history["contacts"][-1] > 0
+
+
+def test_time_step_convergence(geometry):
+    """The interaction model's default step (``simulate.default_time_step``) against a step four
+    times shorter."""
+    coarse, fine = run(geometry, mu=0.5), run(geometry, mu=0.5, step_factor=0.25)
+    # a step is a quasi-static solve with the friction history of the last: first order in the
+    # step. On this set-up the mean convergence length moves by 0.6 % from the default step to a
+    # quarter of it and by 0.3 % more to an eighth; 1 % bounds the default step's error (twice
+    # the default step is 3 % off: the bound is tight enough to notice a step control gone coarse)
+    assert _mean_H(coarse) == pytest.approx(_mean_H(fine), rel=0.01)
+    for group in ("warp", "weft"):
+        # the steady angle to 0.1 deg (measured 0.001 deg; issue 4 asks Ko's within 0.5 deg)
+        assert coarse.history[f"braid_angle_{group}_deg"][-1] == pytest.approx(
+            fine.history[f"braid_angle_{group}_deg"][-1], abs=0.1)
 
 
 def test_convergence_length_falls_with_friction(geometry):

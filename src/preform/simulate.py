@@ -96,10 +96,32 @@ def take_up_speed(table, braided_length):
 
 
 def default_time_step(config, machine, mandrel, centerline):
-    """Step control: bound the carrier rotation and the fell-point advance per step."""
+    """Step control: bound the carrier rotation and the fell-point advance per step.
+
+    The kinematic model integrates the fell points' equation of motion (second order in the
+    step: ``max_carrier_rotation``, ``max_fell_advance``). The interaction model is quasi-static:
+    a step is one solve of the zone with the friction history of the last, and its cost is that
+    solve; what it must resolve is the arrival of new crossings (at most
+    ``interaction_pass_fraction`` of the pass period per step: a yarn meets a new crossing every
+    third step at most) and the mandrel's shape under the fell points (``interaction_fell_advance``
+    widths per step). Measured on case A with friction 0.25 against the kinematic model's step
+    (``benchmarks/bench_interaction.py --step-factor``):
+
+    * 144 carriers (this step is 1.7x the kinematic one): twice the kinematic step moves the
+      convergence length by at most 0.5 % and the braid angle by at most 0.35 deg over 0.3 m;
+      four times moves them by 2.5 % and 1.3 deg (a yarn then meets a new crossing almost every
+      step). Newton steps per step 7.4, 9.0, 19.6 for 1, 2, 4 times the step;
+    * 48 carriers (4x, the fell advance binds): 0.9 % and 0.5 deg at 0.4 m, Newton steps per step
+      6.9 and 8.0, wall 31 s and 9 s;
+    * tests/test_interaction_sim.py: 0.6 % of the convergence length against a quarter of the step.
+    """
     omega = machine.omega
     v_max = max(v for _, v in config.process.take_up_speed)
     r_max = float(np.max(centerline.project(mandrel.vertices)[1]))
+    if config.model.kind == "interaction":
+        dt_pass = tol.interaction_pass_fraction * machine.pass_period()
+        dt_adv = tol.interaction_fell_advance * config.yarn.width / (omega * r_max + v_max)
+        return min(dt_pass, dt_adv)
     dt_rot = tol.max_carrier_rotation / omega
     dt_adv = tol.max_fell_advance * config.yarn.width / (omega * r_max + v_max)
     return min(dt_rot, dt_adv)

@@ -19,6 +19,11 @@ class Tolerances:
     max_fell_advance: float = 0.5
     #: maximum carrier rotation per step (rad) (step control)
     max_carrier_rotation: float = 0.01
+    #: interaction model: maximum time step as a fraction of the pass period (the time between two
+    #: passes along one yarn, ``Machine.pass_period``), and maximum fell-point advance per step as
+    #: a fraction of the yarn width (``simulate.default_time_step``)
+    interaction_pass_fraction: float = 1.0 / 3.0
+    interaction_fell_advance: float = 2.0
 
 
 tol = Tolerances()
