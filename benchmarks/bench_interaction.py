@@ -6,7 +6,12 @@
   speeds, spool radius 1.382 m) for 48, 96 and 144 carriers: prints the time per crossing per
   Newton step (assembly, sparse factorisation and line search over positions and material
   coordinates; the unit of work of the solver, see
-  ``interaction/frontal.py``) and writes the residual-vs-iteration plot of a few steps;
+  ``interaction/frontal.py``) and writes the plot of its iterations (``--png``, 144 carriers): the
+  balance residual and the energy per Newton iteration of a few time steps (the energy falls at
+  every iteration, Armijo; the residual does not: the first Newton steps of a time step move the
+  crossings next to the fell points by millimetres across segments a centimetre long, and the
+  tension there jumps before the next steps bring it back) and the friction-bound change per
+  frontal iteration of a few snapshot solves;
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
@@ -52,7 +57,10 @@ def _count_newton_steps():
 
 def synthetic(carriers, steps, mu=0.25):
     """Run a zone with fixed fell points; (wall s, crossing-iterations, residual histories,
-    crossings at the end, mean Newton steps per timed step)."""
+    crossings at the end, mean Newton steps per timed step, Newton traces). The residual
+    histories are the frontal (friction-bound) iterations of five steps solved to convergence;
+    the Newton traces (residual, energy) those of eight ordinary steps from the middle of the
+    run."""
     from preform.config import MachineConfig
     from preform.interaction import frontal
     from preform.interaction.model import InteractionZone
@@ -69,6 +77,7 @@ def synthetic(carriers, steps, mu=0.25):
     zone.start(0.0, F, _Identity())
     dt = 0.01 / machine.omega
     t, work, wall, hist, newton, timed = 0.0, 0, 0.0, [], 0, 0
+    traces = []
     count = _count_newton_steps()
     defaults = frontal.solve_zone.__kwdefaults__
     for i in range(steps):
@@ -88,8 +97,11 @@ def synthetic(carriers, steps, mu=0.25):
             work += zs.contacts * (count[0] - before)
             newton += count[0] - before
             timed += 1
+            if steps // 2 <= i < steps // 2 + 8:
+                rep = zone.last_report
+                traces.append((rep.newton_residual, rep.newton_energy))
         t += dt
-    return wall, work, hist, zone.state.m, newton / max(timed, 1)
+    return wall, work, hist, zone.state.m, newton / max(timed, 1), traces
 
 
 def full(carriers, mu, length, step_factor=None):
@@ -143,24 +155,40 @@ def main(argv=None):
             full(n, args.mu, args.length, args.step_factor)
         return
     synthetic(16, 5)   # JIT warm-up
-    hists = {}
+    hists, traces = {}, {}
     for n in (48, 96, 144):
-        wall, work, hist, m, per_step = synthetic(n, args.steps)
-        hists[n] = hist
+        wall, work, hist, m, per_step, trace = synthetic(n, args.steps)
+        hists[n], traces[n] = hist, trace
         print(f"{n} carriers: {args.steps} steps, {m} crossings at the end, wall {wall:.2f} s, "
               f"{1e9 * wall / max(work, 1):.1f} ns per crossing per Newton step, "
               f"{per_step:.1f} Newton steps per step")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, (ax_r, ax_e, ax_f) = plt.subplots(1, 3, figsize=(15, 4.2))
+    rises = e_rises = 0
+    for res, E in traces[144]:
+        k = np.arange(len(res))
+        ax_r.semilogy(k, res, marker=".")
+        # E's distance to its value at the solution (the last iterate), floored at its round-off
+        ax_e.semilogy(k, np.maximum(E - E[-1], 1e-13 * abs(E[-1])), marker=".")
+        rises += int(np.any(np.diff(res) > 0))
+        # Armijo on E allows a rise of its round-off (frontal.ROUNDOFF |E|)
+        e_rises += int(np.any(np.diff(E) > 1e-13 * np.abs(E[1:])))
+    ax_r.set(xlabel="Newton iteration of a time step", ylabel="relative force imbalance",
+             title="balance residual per Newton iteration")
+    ax_e.set(xlabel="Newton iteration of a time step", ylabel="E - E(solution) (J)",
+             title="energy per Newton iteration")
     for h in hists[144]:
-        ax.semilogy(np.arange(1, len(h) + 1), h, marker=".")
-    ax.set_xlabel("frontal iteration")
-    ax.set_ylabel("change of the friction bounds / tensions")
-    ax.set_title("frontal iteration, synthetic zone, 144 carriers, mu = 0.25")
+        ax_f.semilogy(np.arange(1, len(h) + 1), h, marker=".")
+    ax_f.set(xlabel="frontal iteration (friction bounds)", ylabel="change of the bounds / tensions",
+             title="snapshot: friction-bound iteration")
+    fig.suptitle(f"synthetic zone, 144 carriers, mu = 0.25: {len(traces[144])} time steps (left, "
+                 f"middle), {len(hists[144])} snapshot solves (right)")
     fig.tight_layout()
     fig.savefig(args.png, dpi=100)
+    print(f"144 carriers: the balance residual rose at some Newton iteration in {rises} of "
+          f"{len(traces[144])} plotted steps, the energy in {e_rises}")
     print(f"wrote {args.png}")
 
 

@@ -378,6 +378,20 @@ def test_residual_falls_over_frontal_iterations():
     assert np.all(np.diff(h) < 0)
 
 
+def test_newton_lowers_the_energy_at_every_iteration():
+    """The solve's Newton trace (SolveReport.newton_energy/newton_residual): Armijo backtracking
+    on E never lets it rise (beyond its round-off, frontal.ROUNDOFF), and the last iterate is
+    the balanced one."""
+    zone, F, t, _ = run_zone(mu=0.3, steps=40)
+    st = zone.state
+    st.pos[: st.m] += 1e-3 * np.random.default_rng(3).normal(size=(st.m, 3))
+    rep = frontal.solve_zone(st, zone.boundary(t, F), zone.f_top.copy())
+    E, res = rep.newton_energy, rep.newton_residual
+    assert len(E) == len(res) == rep.newton + 1 > 3
+    assert np.all(np.diff(E) <= frontal.ROUNDOFF * np.abs(E[1:]))
+    assert res[-1] < frontal.BALANCE_TOLERANCE <= res[0]
+
+
 def test_non_convergence_names_step_and_residual():
     zone, F, t, _ = run_zone(mu=0.3, steps=40)
     st = zone.state

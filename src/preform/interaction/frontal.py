@@ -201,13 +201,17 @@ class SolveReport:
     """iterations (frontal), newton (Newton steps in all), residual (the larger of the balance
     residual and the last friction change), history (friction change per frontal iteration);
     lagged: the friction bounds had not settled to ``friction_tol`` after ``max_iter`` iterations
-    (the balance holds; Psi is off by at most the last change, relative to the tensions)."""
+    (the balance holds; Psi is off by at most the last change, relative to the tensions);
+    newton_residual, newton_energy: the balance residual and the energy E (J) at every Newton
+    iterate of the solve, in order (over all its frontal iterations and continuation stages)."""
 
     iterations: int
     residual: float
     history: np.ndarray
     newton: int = 0
     lagged: bool = False
+    newton_residual: np.ndarray | None = None
+    newton_energy: np.ndarray | None = None
 
 
 @dataclass
@@ -248,6 +252,7 @@ class _Network:
         self.rank[self.order] = np.arange(self.order.size)
         self.symbolic = None     # CHOLMOD's analysis of the Hessian's pattern
         self._pattern = None
+        self.trace = []          # (residual, E) at every Newton iterate
 
     def pattern(self, nnz):
         """The lower triangle of the Hessian in the dissection order, from the triplets of
@@ -307,6 +312,7 @@ class _Network:
                 raise SimulationError("a yarn segment between crossings lost its material length")
             self.update_tensions()
             res = K.imbalance(st.m, st.yarn, st.up, self.grad, self.tension, self.f_top)
+            self.trace.append((res, E))
             if res < tol or k == max_steps:
                 return res, k
             _newton_step(self, E, nnz)
@@ -474,19 +480,25 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE,
         history.append(change)
         if change < friction_tol:
             _accept(state, net, f_top)
-            return SolveReport(it, max(float(residual), change), np.array(history), newton)
+            return SolveReport(it, max(float(residual), change), np.array(history), newton,
+                               **_trace(net))
         if it == max_iter:
             # friction bounds lagged: balance holds, Psi to within the last change; the next
             # step starts from the newest bounds
             _accept(state, net, f_top)
             state.g[:m] = g1
             return SolveReport(it, max(float(residual), change), np.array(history), newton,
-                               lagged=True)
+                               lagged=True, **_trace(net))
         net.g, net.f_top = g1, ft1
     raise SimulationError(
         f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
         f"force imbalance (residual) {residual:.3g} after {newton} Newton steps (tolerance "
         f"{tol:.3g}, {m} crossings)")
+
+
+def _trace(net):
+    t = np.array(net.trace, dtype=float).reshape(-1, 2)
+    return dict(newton_residual=t[:, 0], newton_energy=t[:, 1])
 
 
 def _balance_or_continue(net, tol):
