@@ -107,12 +107,13 @@ def default_time_step(config, machine, mandrel, centerline):
     widths per step). Measured on case A with friction 0.25 against the kinematic model's step
     (``benchmarks/bench_interaction.py --step-factor``):
 
-    * 144 carriers (this step is 1.7x the kinematic one): twice the kinematic step moves the
+    * 144 carriers (this step is 1.45x the kinematic one): twice the kinematic step moves the
       convergence length by at most 0.5 % and the braid angle by at most 0.35 deg over 0.3 m;
       four times moves them by 2.5 % and 1.3 deg (a yarn then meets a new crossing almost every
-      step). Newton steps per step 7.4, 9.0, 19.6 for 1, 2, 4 times the step;
-    * 48 carriers (4x, the fell advance binds): 0.9 % and 0.5 deg at 0.4 m, Newton steps per step
-      6.9 and 8.0, wall 31 s and 9 s;
+      step). Newton steps per step 7.4, 9.0, 19.6 for 1, 2, 4 times the step. The full 1 m took
+      1891 steps of 10.0 Newton steps instead of 2751 of 7.5: 8 % fewer Newton steps;
+    * 48 carriers (4.4x): four times the kinematic step moves them by 0.9 % and 0.5 deg at 0.4 m,
+      with 8.0 Newton steps per step instead of 6.9: 9 s instead of 31 s;
     * tests/test_interaction_sim.py: 0.6 % of the convergence length against a quarter of the step.
     """
     omega = machine.omega
