@@ -209,7 +209,7 @@ class InteractionZone:
         frontal.anchor_fell(st, bc)
         s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
         frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS, where=where,
-                           s_old=s_old)
+                           s_old=s_old, friction_tol=frontal.SNAPSHOT_TOLERANCE)
         return _snapshot(st, bc, f_top, t, self.machine)
 
     def slide_rings(self, st, bc, theta):
