@@ -77,6 +77,23 @@ def test_frictionless_close_to_kinematic_convergence_length(geometry):
     assert inter.history["contacts"][-1] > 0
 
 
+def test_interaction_step_control(geometry):
+    """``simulate.default_time_step``: the interaction model's step is the smaller of a third of
+    the pass period and two yarn widths of fell advance, the kinematic model's its own."""
+    stl, cl = geometry
+    cfg = make_config(stl, cl, carriers=16, spool_radius=SPOOL, braid_length=0.4)
+    machine = Machine.from_config(cfg.machine)
+    mandrel, centerline = load_geometry(cfg)
+    kin = default_time_step(cfg, machine, mandrel, centerline)
+    inter = default_time_step(dataclasses.replace(cfg, model=dataclasses.replace(
+        cfg.model, kind="interaction")), machine, mandrel, centerline)
+    omega, v, w = machine.omega, 0.01, cfg.yarn.width
+    advance = 2.0 * w / (omega * R_MANDREL + v)          # the cylinder: r_max = R_MANDREL
+    assert inter == pytest.approx(min(machine.pass_period() / 3.0, advance), rel=1e-3)
+    assert kin == pytest.approx(min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v)), rel=1e-3)
+    assert inter > 3.0 * kin        # 16 carriers: the fell advance binds, 4x the kinematic step
+
+
 def test_time_step_convergence(geometry):
     """The interaction model's default step (``simulate.default_time_step``) against a step four
     times shorter."""
