@@ -79,7 +79,8 @@ def test_frictionless_close_to_kinematic_convergence_length(geometry):
 
 def test_interaction_step_control(geometry):
     """``simulate.default_time_step``: the interaction model's step is the smaller of a third of
-    the pass period and two yarn widths of fell advance, the kinematic model's its own."""
+    the pass period and two yarn widths of fell advance (without a guide ring), the kinematic
+    model's its own."""
     stl, cl = geometry
     cfg = make_config(stl, cl, carriers=16, spool_radius=SPOOL, braid_length=0.4)
     machine = Machine.from_config(cfg.machine)
@@ -92,6 +93,14 @@ def test_interaction_step_control(geometry):
     assert inter == pytest.approx(min(machine.pass_period() / 3.0, advance), rel=1e-3)
     assert kin == pytest.approx(min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v)), rel=1e-3)
     assert inter > 3.0 * kin        # 16 carriers: the fell advance binds, 4x the kinematic step
+    # behind a guide ring the ring points slide once a step: the kinematic step
+    ring = make_config(stl, cl, carriers=16, spool_radius=RING_SPOOL, guide_ring=(RING, 0.0),
+                       braid_length=0.4)
+    ring = dataclasses.replace(ring, model=dataclasses.replace(ring.model, kind="interaction"))
+    ring_machine = Machine.from_config(ring.machine)
+    assert ring_machine.has_ring
+    assert default_time_step(ring, ring_machine, mandrel, centerline) == pytest.approx(
+        min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v)), rel=1e-3)
 
 
 def test_time_step_convergence(geometry):
