@@ -45,6 +45,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._kernels import frontal as K
+from ..errors import SimulationError
 from ..result import Snapshot
 from ..zone import ZoneStep
 from . import frontal
@@ -65,6 +66,9 @@ RING_ITERATIONS = 20
 RING_TOLERANCE = 1e-9
 #: frontal iterations per pass of that alternation (the last solve iterates to convergence)
 RING_PASS_ITERATIONS = 3
+#: where a step's solve fails, the step is solved again with its boundary moved in these stages
+#: (fractions of the move; ``InteractionZone._staged``)
+BOUNDARY_STAGES = (0.25, 0.5, 0.75, 1.0)
 
 
 class MandrelDistance:
@@ -114,6 +118,8 @@ class InteractionZone:
         self.lowest_uid_prev = None
         self.last_report = None
         self.fell = None
+        self.fell_ref = None
+        self.staged = 0            # steps solved in stages (``_staged``)
         self.t = 0.0
         self.pose_end = None
 
@@ -122,6 +128,7 @@ class InteractionZone:
         """Tie points (machine frame) at time t; the zone starts without crossings."""
         self.t = float(t)
         self.fell = np.array(F_machine, dtype=float)
+        self.fell_ref = self.fell.copy()
         self.G_prev = self.machine.supply_points(t)
         self.lowest_uid_prev = np.full(self.machine.n_yarns, -1, dtype=np.int64)
         self.pending = []
@@ -153,12 +160,24 @@ class InteractionZone:
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
         K.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
-        bc = self._with_wall(bc)
-        self.last_report = frontal.solve_zone(st, bc, self.f_top, where=where)
+        s_old = st.s[: st.m] - st.offset[: st.m]    # the step's friction centres
+        start = _copy_state(st)
+        try:
+            self.last_report = frontal.solve_zone(st, self._with_wall(bc), self.f_top,
+                                                  where=where, s_old=s_old)
+            bc = self._with_wall(bc)
+        except SimulationError:
+            if getattr(self, "fell_ref", None) is None or not BOUNDARY_STAGES:
+                raise
+            self.state = st = start
+            bc = self._staged(t0, t1, bc, where, s_old)
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
         deposits = self._deposit(pose_end)
+        self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
+        for k, p in deposits:
+            self.fell_ref[k] = p
         G_end = self.lowest_points(bc.top)
         uid = np.where(st.lowest >= 0, st.uid[np.maximum(st.lowest, 0)], -1)
         same = (uid >= 0) & (uid == self.lowest_uid_prev)
@@ -172,6 +191,37 @@ class InteractionZone:
         return ZoneStep(G_mid=G_mid, G_end=G_end, deposits=deposits, contacts=st.m,
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
+
+    def _staged(self, t0, t1, bc, where, s_old):
+        """The step solved again with its boundary moved in BOUNDARY_STAGES (fell points from
+        where the last step left them, supply or ring points from their last places, each solve
+        warm-started from the last; the same friction centres ``s_old``): where the boundary's
+        move in one go takes Newton out of its reach. Returns the final boundary (with the wall)."""
+        st = self.state
+        m = self.machine
+        where = f"{where}, also with the boundary moved in {len(BOUNDARY_STAGES)} stages"
+        report, bcl = None, bc
+
+        def at(lam):
+            fell = self.fell_ref + lam * (bc.fell - self.fell_ref)
+            theta = (self.ring_anchor + lam * (self.ring_theta - self.ring_anchor)
+                     if m.has_ring else None)
+            return self.boundary(t0 + lam * (t1 - t0), fell, theta)
+
+        # the fell points' material moves with them: from where the last step's fell points
+        # hold the lowest segments' tensions to the step's own anchoring (``anchor_fell``), so
+        # the last stage is the step's problem itself
+        s_fell_end = st.s_fell.copy()
+        frontal.anchor_fell(st, at(0.0))
+        s_fell_start = st.s_fell.copy()
+        for lam in BOUNDARY_STAGES:
+            bcl = at(lam) if lam < 1.0 else bc
+            st.s_fell[:] = s_fell_start + lam * (s_fell_end - s_fell_start)
+            bcl = self._with_wall(bcl)
+            report = frontal.solve_zone(st, bcl, self.f_top, where=where, s_old=s_old)
+        self.staged = getattr(self, "staged", 0) + 1
+        self.last_report = report
+        return bcl
 
     def snapshot(self, t, F_machine) -> Snapshot:
         """Polyline per yarn: fell point, its crossings upwards, ring point, spool point.
