@@ -93,3 +93,25 @@ def test_resume_without_checkpoint_is_a_clear_error(tmp_path):
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 2
     assert "no checkpoint" in err.decode() and "Traceback" not in err.decode()
+
+
+def test_a_checkpoint_keeps_its_time_step(tmp_path, monkeypatch):
+    """A run resumed by a version whose step control gives another step goes on with the step it
+    started with (``simulate._STATE`` holds ``dt`` and the snapshot stride)."""
+    import dataclasses
+    import importlib
+
+    from preform.config import load_config
+
+    sim = importlib.import_module("preform.simulate")
+    cfg = load_config(_case(tmp_path, "kept"))
+    cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, time_step=None))
+    mandrel, centerline = sim.load_geometry(cfg)
+    machine = sim.Machine.from_config(cfg.machine)
+    first = sim._Stepper(cfg, machine, mandrel, centerline)
+    first.save(tmp_path / "c.pkl")
+    monkeypatch.setattr(sim, "default_time_step", lambda *a: 3.0 * first.dt)
+    second = sim._Stepper(cfg, machine, mandrel, centerline)
+    assert second.dt == pytest.approx(3.0 * first.dt)
+    second.restore(tmp_path / "c.pkl")
+    assert second.dt == first.dt and second.snapshot_stride == first.snapshot_stride

@@ -215,8 +215,10 @@ def _graceful_interrupt(stepper):
 #: seconds of wall time between checkpoints
 CHECKPOINT_EVERY_S = 30.0
 #: attributes of _Stepper that make its state (saved and restored by checkpoints)
+#: what a checkpoint holds; the time step and the snapshot stride too, so that a run resumed by a
+#: version with another step control goes on with the step it started with
 _STATE = ("clock", "F", "face", "tie", "laid_steps", "laid_extra", "rows", "fell_hist", "face_hist",
-          "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided")
+          "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided", "dt", "snapshot_stride")
 
 
 class _Stepper:
