@@ -163,9 +163,9 @@ class InteractionZone:
         s_old = st.s[: st.m] - st.offset[: st.m]    # the step's friction centres
         start = _copy_state(st)
         try:
-            self.last_report = frontal.solve_zone(st, self._with_wall(bc), self.f_top,
-                                                  where=where, s_old=s_old)
-            bc = self._with_wall(bc)
+            wall = self._with_wall(bc)
+            self.last_report = frontal.solve_zone(st, wall, self.f_top, where=where, s_old=s_old)
+            bc = wall
         except SimulationError:
             if getattr(self, "fell_ref", None) is None or not BOUNDARY_STAGES:
                 raise
