@@ -161,7 +161,7 @@ class InteractionZone:
         K.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
         s_old = st.s[: st.m] - st.offset[: st.m]    # the step's friction centres
-        start = _copy_state(st)
+        start = st.pos[: st.m].copy(), st.s[: st.m].copy()   # what a failed solve leaves moved
         try:
             wall = self._with_wall(bc)
             self.last_report = frontal.solve_zone(st, wall, self.f_top, where=where, s_old=s_old)
@@ -169,7 +169,7 @@ class InteractionZone:
         except SimulationError:
             if getattr(self, "fell_ref", None) is None or not BOUNDARY_STAGES:
                 raise
-            self.state = st = start
+            st.pos[: st.m], st.s[: st.m] = start
             bc = self._staged(t0, t1, bc, where, s_old)
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
