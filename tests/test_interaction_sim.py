@@ -91,7 +91,8 @@ def test_interaction_step_control(geometry):
     omega, v, w = machine.omega, 0.01, cfg.yarn.width
     advance = 2.0 * w / (omega * R_MANDREL + v)          # the cylinder: r_max = R_MANDREL
     assert inter == pytest.approx(min(machine.pass_period() / 3.0, advance), rel=1e-3)
-    assert kin == pytest.approx(min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v)), rel=1e-3)
+    kinematic = min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v))
+    assert kin == pytest.approx(kinematic, rel=1e-3)
     assert inter > 3.0 * kin        # 16 carriers: the fell advance binds, 4x the kinematic step
     # behind a guide ring the ring points slide once a step: the kinematic step
     ring = make_config(stl, cl, carriers=16, spool_radius=RING_SPOOL, guide_ring=(RING, 0.0),
@@ -100,7 +101,7 @@ def test_interaction_step_control(geometry):
     ring_machine = Machine.from_config(ring.machine)
     assert ring_machine.has_ring
     assert default_time_step(ring, ring_machine, mandrel, centerline) == pytest.approx(
-        min(0.01 / omega, 0.5 * w / (omega * R_MANDREL + v)), rel=1e-3)
+        kinematic, rel=1e-3)
 
 
 def test_time_step_convergence(geometry):

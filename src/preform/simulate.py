@@ -124,13 +124,11 @@ def default_time_step(config, machine, mandrel, centerline):
     omega = machine.omega
     v_max = max(v for _, v in config.process.take_up_speed)
     r_max = float(np.max(centerline.project(mandrel.vertices)[1]))
+    per_width = config.yarn.width / (omega * r_max + v_max)   # s for the fell points to advance a width
     if config.model.kind == "interaction" and not machine.has_ring:
-        dt_pass = tol.interaction_pass_fraction * machine.pass_period()
-        dt_adv = tol.interaction_fell_advance * config.yarn.width / (omega * r_max + v_max)
-        return min(dt_pass, dt_adv)
-    dt_rot = tol.max_carrier_rotation / omega
-    dt_adv = tol.max_fell_advance * config.yarn.width / (omega * r_max + v_max)
-    return min(dt_rot, dt_adv)
+        return min(tol.interaction_pass_fraction * machine.pass_period(),
+                   tol.interaction_fell_advance * per_width)
+    return min(tol.max_carrier_rotation / omega, tol.max_fell_advance * per_width)
 
 
 def _tie_points(config, machine, mandrel, centerline, pose, rng):
@@ -214,9 +212,9 @@ def _graceful_interrupt(stepper):
 
 #: seconds of wall time between checkpoints
 CHECKPOINT_EVERY_S = 30.0
-#: attributes of _Stepper that make its state (saved and restored by checkpoints)
-#: what a checkpoint holds; the time step and the snapshot stride too, so that a run resumed by a
-#: version with another step control goes on with the step it started with
+#: attributes of _Stepper that make its state (saved and restored by checkpoints); the time step
+#: and the snapshot stride too, so that a run resumed by a version with another step control goes
+#: on with the step it started with
 _STATE = ("clock", "F", "face", "tie", "laid_steps", "laid_extra", "rows", "fell_hist", "face_hist",
           "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided", "dt", "snapshot_stride")
 
