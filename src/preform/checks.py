@@ -174,7 +174,7 @@ def _value_warnings(config) -> list[str]:
         warnings.append('[model] kind = "interaction" is slow on large machines: every time step solves '
                         "for all crossings of the convergence zone at once (case A, 144 carriers: up to "
                         "seconds per step); if a step does not converge, even with its boundary moved in "
-                        "stages and in halves of the step, the run stops and keeps the "
+                        "stages, the run stops and keeps the "
                         "results up to it")
     if y.thickness > y.width:
         warnings.append(f"[yarn] thickness = {y.thickness:g} is larger than [yarn] width = {y.width:g}: "

@@ -102,7 +102,6 @@ class Result:
     status : "done" | "interrupted" | "failed"
     message : why it stopped when not "done"
     wall_time_s : float
-    split_steps : steps whose solve failed and that were made again in halves (interaction model)
     """
 
     config: object
@@ -116,7 +115,6 @@ class Result:
     status: str = "done"
     message: str = ""
     wall_time_s: float = 0.0
-    split_steps: int = 0
 
     @property
     def steps(self) -> int:

@@ -216,8 +216,7 @@ CHECKPOINT_EVERY_S = 30.0
 #: and the snapshot stride too, so that a run resumed by a version with another step control goes
 #: on with the step it started with
 _STATE = ("clock", "F", "face", "tie", "laid_steps", "laid_extra", "rows", "fell_hist", "face_hist",
-          "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided", "dt", "snapshot_stride",
-          "split_steps")
+          "lay_dir_hist", "H_hist", "snapshots", "zone", "step", "braided", "dt", "snapshot_stride")
 
 
 class _Stepper:
@@ -259,7 +258,6 @@ class _Stepper:
         self.braided = self.braided_length_estimate()
         self.stop_requested = False
         self.consistent = True   # False while a step is half applied
-        self.split_steps = 0     # steps made again in halves (``advance_split``)
 
     # -- checkpoints --------------------------------------------------------------------------
     def _fingerprint(self):
@@ -313,7 +311,7 @@ class _Stepper:
                 if self.stop_requested:
                     raise KeyboardInterrupt
                 v = take_up_speed(cfg.process.take_up_speed, self.braided)
-                self.advance_split(v)
+                self.advance(v)
                 if self.step % 10 == 0:
                     self.braided = self.braided_length_estimate()
                     bar(self.braided)
@@ -328,39 +326,10 @@ class _Stepper:
         finally:
             bar(None)
 
-    def advance_split(self, v):
-        """One time step of ``self.dt``; where it fails (:class:`SimulationError`: the
-        interaction model's solve found no balance, also with its boundary moved in stages), it
-        is made again as two halves, each split again where it fails, down to
-        ``tol.step_halvings`` halvings, before the run stops. A zone without ``save`` (the
-        kinematic one) is not split."""
-        halvings = tol.step_halvings if hasattr(self.zone, "save") else 0
-        try:
-            self._advance_split(v, self.dt, halvings)
-        except SimulationError as err:
-            if halvings == 0:
-                raise
-            raise SimulationError(f"{err}; the step was also split into halves down to "
-                                  f"{self.dt / 2 ** halvings:.3g} s") from err
-
-    def _advance_split(self, v, dt, halvings):
-        saved = self.zone.save() if halvings > 0 else None
-        try:
-            self.advance(v, dt)
-        except SimulationError:
-            if saved is None:
-                raise
-            self.zone.restore(saved)
-            self.split_steps += 1
-            self._advance_split(v, 0.5 * dt, halvings - 1)
-            self._advance_split(v, 0.5 * dt, halvings - 1)
-
-    def advance(self, v, dt=None):
-        """One time step of dt (default ``self.dt``); the run's state changes only at the end (an
-        error leaves the last good step; the zone's, if it has any, is the caller's to restore)."""
+    def advance(self, v):
+        """One time step; the state changes only at the end (an error leaves the last good step)."""
         self.consistent = False   # a zone with state (interaction) changes during its step
-        t0 = self.clock.t
-        dt = self.dt if dt is None else dt
+        t0, dt = self.clock.t, self.dt
         travel_end = self.clock.travel + v * dt
         pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
         pose_end = self.pose(travel_end)
@@ -430,7 +399,7 @@ class _Stepper:
         return Result(config=self.config, mandrel=self.mandrel, centerline=self.centerline,
                       yarns=yarns, history=history, snapshots=self.snapshots, fell_s=fell_s,
                       convergence_length=np.array(self.H_hist), status=status, message=message,
-                      wall_time_s=wall, split_steps=self.split_steps)
+                      wall_time_s=wall)
 
     def _yarn_paths(self):
         ny = len(self.F)

@@ -24,9 +24,6 @@ class Tolerances:
     #: a fraction of the yarn width (``simulate.default_time_step``)
     interaction_pass_fraction: float = 1.0 / 3.0
     interaction_fell_advance: float = 2.0
-    #: a step whose solve fails is made again as two halves, each split again where it fails,
-    #: down to this many halvings (1/8 of the step) before the run stops (``Run.advance_split``)
-    step_halvings: int = 3
 
 
 tol = Tolerances()

@@ -39,7 +39,6 @@ Distances to the mandrel use the nearest face centroid's plane (KD-tree), good t
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 
 import numpy as np
@@ -223,20 +222,6 @@ class InteractionZone:
         self.staged = getattr(self, "staged", 0) + 1
         self.last_report = report
         return bcl
-
-    #: attributes a step does not change (``save``): shared, not copied
-    _SHARED = ("config", "machine", "distance")
-
-    def save(self):
-        """A copy of what a step changes (the crossings, friction history, ring points, fell
-        points, counters), for ``restore``: the run splits a step whose solve fails
-        (``simulate.Run.advance_split``)."""
-        return {k: v if k in self._SHARED else copy.deepcopy(v) for k, v in vars(self).items()}
-
-    def restore(self, saved):
-        """The zone as ``save`` found it (``saved`` stays usable for another restore)."""
-        self.__dict__.update({k: v if k in self._SHARED else copy.deepcopy(v)
-                              for k, v in saved.items()})
 
     def snapshot(self, t, F_machine) -> Snapshot:
         """Polyline per yarn: fell point, its crossings upwards, ring point, spool point.

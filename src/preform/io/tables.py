@@ -156,7 +156,6 @@ def summary_dict(result, extra=None) -> dict:
         "message": result.message,
         "steps": int(result.steps),
         "wall_time_s": float(result.wall_time_s),
-        "split_steps": int(getattr(result, "split_steps", 0)),
         "braided_length_m": _final(result, "braided_length_m"),
         "braid_angle_deg": {
             "final": {"warp": _final(result, "braid_angle_warp_deg"),
