@@ -121,10 +121,11 @@ def default_time_step(config, machine, mandrel, centerline):
     between solves, and case B (96 carriers, friction 0.25) with 2.2x the kinematic step stopped
     at 0.48 m, its Newton solve failing (residual 0.9) where the kinematic step runs through
     (the staged re-solve of a failed step now takes it through). The bent tube (96 carriers,
-    guide ring) with 2.2x the kinematic step stops at t = 26.5 s, also with the staged re-solve
-    and with the step split down to 1/8: a weft yarn has gone slack over its whole zone (0.005
-    to 0.1 N below a top tension of 4.3 N), a state no step length solves. With the kinematic
-    step no segment of its snapshots falls below 2.4 N.
+    guide ring) with 2.2x the kinematic step stops at t = 26.5 s, also with the staged re-solve,
+    and did so too when an experiment made the failed step again in halves down to 1/8: a weft
+    yarn has gone slack over its whole zone (0.005 to 0.1 N below a top tension of 4.3 N), a
+    state no step length solves. With the kinematic step no segment of its snapshots falls
+    below 2.4 N.
     """
     omega = machine.omega
     v_max = max(v for _, v in config.process.take_up_speed)
