@@ -165,16 +165,17 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from preform.interaction import frontal
     fig, (ax_r, ax_e, ax_f) = plt.subplots(1, 3, figsize=(15, 4.2))
     rises = e_rises = 0
     for res, E in traces[144]:
         k = np.arange(len(res))
         ax_r.semilogy(k, res, marker=".")
         # E's distance to its value at the solution (the last iterate), floored at its round-off
-        ax_e.semilogy(k, np.maximum(E - E[-1], 1e-13 * abs(E[-1])), marker=".")
+        ax_e.semilogy(k, np.maximum(E - E[-1], frontal.ROUNDOFF * abs(E[-1])), marker=".")
         rises += int(np.any(np.diff(res) > 0))
         # Armijo on E allows a rise of its round-off (frontal.ROUNDOFF |E|)
-        e_rises += int(np.any(np.diff(E) > 1e-13 * np.abs(E[1:])))
+        e_rises += int(np.any(np.diff(E) > frontal.ROUNDOFF * np.abs(E[1:])))
     ax_r.set(xlabel="Newton iteration of a time step", ylabel="relative force imbalance",
              title="balance residual per Newton iteration")
     ax_e.set(xlabel="Newton iteration of a time step", ylabel="E - E(solution) (J)",

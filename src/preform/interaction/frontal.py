@@ -447,15 +447,12 @@ def solve_zone(state, bc: Boundary, f_top, *, tol=BALANCE_TOLERANCE,
     """Bring every crossing of ``state`` to balance with its friction law (module docstring), in
     place: positions, material coordinates, tensions, friction bounds and slip states of the
     crossings; f_top (2n,) receives the top tensions. ``state.s_fell`` must be anchored
-    (``anchor_fell``). ``s_old`` (m, 2): where each yarn's material sticks (default: where it is
-    now, the end of the last step). ``where`` names the step and time in the error message;
+    (``anchor_fell``). ``s_old`` (m, 2): where each yarn's material sticks (default:
+    ``friction_centres(state)``). ``where`` names the step and time in the error message;
     :class:`SimulationError` if the residual stays above the tolerances."""
     m = state.m
     net = _Network(state, bc, f_top)
-    if s_old is not None:
-        net.s_old = np.array(s_old[:m], dtype=float)
-    else:
-        net.s_old -= state.offset[:m]
+    net.s_old = np.array((friction_centres(state) if s_old is None else s_old)[:m], dtype=float)
     if m == 0:
         net.f_top = net.bounds()[2]
         f_top[:] = net.f_top
@@ -543,6 +540,13 @@ def _accept(state, net, f_top):
     cap = memory_cap()
     state.offset[:m] = np.clip(slide, -cap, cap)
     f_top[:] = net.f_top
+
+
+def friction_centres(state):
+    """(m, 2) m: where each yarn's friction term at each crossing is centred for the next solve,
+    its material coordinate less the friction offset the last step carried over
+    (``FRICTION_MEMORY``)."""
+    return state.s[: state.m] - state.offset[: state.m]
 
 
 def memory_cap():

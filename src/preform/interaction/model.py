@@ -160,7 +160,7 @@ class InteractionZone:
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
         K.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
-        s_old = st.s[: st.m] - st.offset[: st.m]    # the step's friction centres
+        s_old = frontal.friction_centres(st)
         start = st.pos[: st.m].copy(), st.s[: st.m].copy()   # what a failed solve leaves moved
         try:
             wall = self._with_wall(bc)
@@ -230,7 +230,7 @@ class InteractionZone:
         are in balance with the exported fell points."""
         st = _copy_state(self.state)
         # each yarn's friction centre at each crossing (``frontal.solve_zone``)
-        anchor = dict(zip(st.uid[: st.m].tolist(), st.s[: st.m] - st.offset[: st.m]))
+        anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
         fell = np.array(F_machine, dtype=float)
         f_top = self.f_top.copy()
         theta = getattr(self, "ring_theta", None)
