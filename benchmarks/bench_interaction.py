@@ -15,7 +15,7 @@
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
-  study of ``simulate.default_time_step``.
+  study of ``stepping.default_time_step``.
 """
 
 from __future__ import annotations
@@ -109,7 +109,8 @@ def full(carriers, mu, length, step_factor=None):
     kinematic model's default step (None: the interaction model's own default)."""
     import preform as pf
     from preform.machine import Machine
-    from preform.simulate import default_time_step, load_geometry
+    from preform.simulation import load_geometry
+    from preform.stepping import default_time_step
 
     cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"),

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import naive_frontal as naive
-import pyvista as pv
 from preform._kernels import frontal as K
 from preform.config import MachineConfig
 from preform.errors import SimulationError
@@ -23,6 +22,7 @@ from preform.interaction.model import InteractionZone, creation_point
 from preform.io.vtk_yarns import write_convergence
 from preform.interaction.zone_state import ZoneState
 from preform.machine import Machine
+from snapshot_checks import balance_and_psi, read_snapshot
 
 R_MANDREL = 0.075
 
@@ -271,68 +271,14 @@ def test_tension_and_bound_kernels_match_numpy_twins():
                        rtol=1e-9)
 
 
-def _read_snapshot(path):
-    """Per yarn (points, segment tensions, contact ids) from a written .vtp (one line cell per
-    segment, DESIGN.md §1; cells of a yarn in order)."""
-    poly = pv.read(path)
-    lines = np.asarray(poly.lines).reshape(-1, 3)[:, 1:]
-    ten = np.asarray(poly.cell_data["tension_N"])
-    yid = np.asarray(poly.cell_data["yarn_id"])
-    cid = np.asarray(poly.point_data["contact_id"])
-    pts = np.asarray(poly.points, dtype=float)
-    out = []
-    for k in np.unique(yid):
-        cells = np.nonzero(yid == k)[0]
-        idx = np.concatenate([[lines[cells[0], 0]], lines[cells, 1]])
-        assert np.all(lines[cells[1:], 0] == lines[cells[:-1], 1])
-        out.append((pts[idx], ten[cells], cid[idx]))
-    return out
-
-
-def _balance_and_psi(yarns, mu):
-    """Max relative force imbalance and max Psi / tension over the crossings of a snapshot."""
-    forces = {}
-    psis = []
-    for pts, ten, cid in yarns:
-        for i in range(1, len(pts) - 1):
-            if cid[i] < 0:
-                continue
-            lo, hi = pts[i - 1] - pts[i], pts[i + 1] - pts[i]
-            f_lo, f_hi = ten[i - 1], ten[i]
-            u_lo, u_hi = lo / np.linalg.norm(lo), hi / np.linalg.norm(hi)
-            forces.setdefault(cid[i], []).append((f_lo * u_lo + f_hi * u_hi, f_lo + f_hi))
-            cb = u_lo @ u_hi
-            c, s = np.sqrt(max(0, (1 - cb) / 2)), np.sqrt(max(0, (1 + cb) / 2))
-            psis.append((abs(f_lo - f_hi) * c - mu * (f_lo + f_hi) * s) / max(f_lo, f_hi))
-    assert all(len(v) == 2 for v in forces.values())
-    err = [np.linalg.norm(v[0][0] + v[1][0]) / (v[0][1] + v[1][1]) for v in forces.values()]
-    return max(err), max(psis)
-
-
-def checked_snapshot_files(snapshots, out_dir, mu):
-    """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance and
-    the friction law at every crossing (issue 4); the yarns (``_read_snapshot``) of every file
-    that has crossings."""
-    out = []
-    for p in write_convergence(snapshots, out_dir)[1:]:
-        yarns = _read_snapshot(p)
-        if not any(np.any(c >= 0) for _, _, c in yarns):
-            continue
-        err, psi = _balance_and_psi(yarns, mu)
-        assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
-        assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
-        out.append(yarns)
-    return out
-
-
 @pytest.mark.parametrize("mu", [0.0, 0.3])
 def test_snapshot_file_crossings_in_balance(mu, tmp_path):
     zone, F, t, _ = run_zone(mu=mu, steps=90)
     snap = zone.snapshot(t, F)
     paths = write_convergence([snap], tmp_path)
-    yarns = _read_snapshot(paths[1])
+    yarns = read_snapshot(paths[1])
     assert sum(int(np.sum(c >= 0)) for _, _, c in yarns) == 2 * zone.state.m > 0
-    err, psi = _balance_and_psi(yarns, mu)
+    err, psi = balance_and_psi(yarns, mu)
     assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
     assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
 
@@ -515,16 +461,3 @@ def test_newton_step_below_the_energys_round_off_is_taken_whole(offset, monkeypa
         assert moved == pytest.approx(full, rel=1e-6)
     else:
         assert moved < 1e-9 * full
-
-
-def test_zone_state_from_an_older_checkpoint_gets_its_new_fields():
-    """A checkpoint pickled before a field existed (here ``offset``) resumes with that field at
-    its fill value instead of failing in the middle of the run."""
-    import pickle
-    zone, *_ = run_zone(mu=0.3, steps=20)
-    st = zone.state
-    old = pickle.loads(pickle.dumps(st))
-    del old.__dict__["offset"]
-    back = pickle.loads(pickle.dumps(old))
-    assert back.offset.shape == (st.capacity, 2) and np.all(back.offset == 0.0)
-    assert np.array_equal(back.s[: st.m], st.s[: st.m]) and back.m == st.m

@@ -8,39 +8,26 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from pathlib import Path
 
-from . import __version__
+from ._version import __version__
 from .errors import MandrelError, PreformError
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
-def _optional(module: str, name: str):
-    """``module.name`` if that module exists yet, else None (the package grows in parallel)."""
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as err:
-        if err.name is not None and module.startswith(err.name):
-            return None
-        raise
-    return getattr(mod, name, None)
-
-
 def _checked_geometry(config):
     """Load the mandrel and centerline of ``config`` and run the pre-flight checks
-    (``preform.checks.preflight``, when present): impossible set-ups raise PreformError, doubtful
-    ones are printed as warnings. Returns (Mandrel, Centerline)."""
-    from .simulate import load_geometry
+    (``preform.checks.preflight``): impossible set-ups raise PreformError, doubtful ones are
+    printed as warnings. Returns (Mandrel, Centerline)."""
+    from .checks import preflight
+    from .simulation import load_geometry
 
     mandrel, centerline = load_geometry(config)
-    for repair in getattr(mandrel, "repairs", ()):
+    for repair in mandrel.repairs:
         print(f"mandrel: {repair}", file=sys.stderr)
-    preflight = _optional("preform.checks", "preflight")
-    if preflight is not None:
-        _print_warnings(preflight(config, mandrel, centerline))
+    _print_warnings(preflight(config, mandrel, centerline))
     return mandrel, centerline
 
 
@@ -88,28 +75,26 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
 
 
 #: the state of a running simulation, saved periodically and on Ctrl-C, removed when it is done
-CHECKPOINT = "checkpoint.pkl"
+CHECKPOINT = "checkpoint.npz"
 
 
 def cmd_run(args) -> int:
     from .config import load_config
 
     config = load_config(args.config)  # bad input fails here, before the heavy imports
-    if getattr(args, "model", None):
+    if args.model:
         import dataclasses
 
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
     mandrel, centerline = _checked_geometry(config)  # impossible set-ups fail here, before simulating
+    from .fields import map_to_surface
     from .io import write_results
-    from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
+    from .simulation import simulate
 
     out_dir = _out_dir(config, args.out)
     result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline,
                       checkpoint=out_dir / CHECKPOINT, resume=args.resume)
-    fields = None
-    map_to_surface = _optional("preform.fields", "map_to_surface")
-    if map_to_surface is not None and len(result.yarns.points):
-        fields = map_to_surface(result)
+    fields = map_to_surface(result) if len(result.yarns.points) else None
     try:
         written = write_results(result, fields, out_dir)
     except OSError as err:
@@ -155,12 +140,8 @@ def cmd_mandrel_info(args) -> int:
     stl = _existing_file(args.file, "mandrel STL")
     auto = args.centerline == "auto"
     centerline = "auto" if auto else _existing_file(args.centerline, "centerline CSV")
-    mandrel_info = _optional("preform.geometry.info", "mandrel_info")
-    if mandrel_info is None:
-        print("error: preform.geometry.info is not available in this build", file=sys.stderr)
-        return EXIT_FAILED
     from .geometry import write_centerline_csv
-    from .geometry.info import format_mandrel_info
+    from .geometry.info import format_mandrel_info, mandrel_info
 
     info = mandrel_info(stl, unit=args.unit, centerline=centerline)
     print(format_mandrel_info(info))

@@ -1,5 +1,5 @@
 """The yarn-interaction convergence zone (paper §2; DESIGN.md §3.3) behind ``[model] kind =
-"interaction"``: the same interface as :class:`preform.zone.KinematicZone`.
+"interaction"``: a :class:`preform.zone.Zone`, like the kinematic model's.
 
 Each step (``step``):
 
@@ -45,6 +45,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._kernels import frontal as K
+from .. import plain
 from ..errors import SimulationError
 from ..result import Snapshot
 from ..zone import ZoneStep
@@ -122,6 +123,9 @@ class InteractionZone:
         self.staged = 0            # steps solved in stages (``_staged``)
         self.t = 0.0
         self.pose_end = None
+        self.pending = []          # carrier passes whose crossings wait (``_ready_passes``)
+        self.ring_theta = None     # ring-point angles (2n,), rad, behind a guide ring
+        self.ring_anchor = None    # the ring angles the last step started from
 
     # -- interface --------------------------------------------------------------------------
     def start(self, t, F_machine, pose):
@@ -228,7 +232,7 @@ class InteractionZone:
 
         The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
         are in balance with the exported fell points."""
-        st = _copy_state(self.state)
+        st = self.state.copy()
         # each yarn's friction centre at each crossing (``frontal.solve_zone``)
         anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
         fell = np.array(F_machine, dtype=float)
@@ -277,6 +281,67 @@ class InteractionZone:
                        self.mu_r, -1.0, out, status)
         ok = status == RK.RING_OK
         return np.where(ok, out[:, RK.RING_OUT_THETA], theta)
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def export_state(self) -> dict:
+        """What the zone carries from step to step, as plain arrays (``preform.checkpoint``): the
+        crossings (``ZoneState.to_arrays``, names ``state.*``), top tensions, fell points, the
+        last step's lowest points, waiting passes, ring angles and pose. (``last_report`` is
+        not state: each step sets it before reading it.)"""
+        out = plain.prefixed("state.", self.state.to_arrays())
+        pending = self.pending
+        out.update(
+            f_top=self.f_top, fell=self.fell, fell_ref=self.fell_ref, G_prev=self.G_prev,
+            lowest_uid_prev=self.lowest_uid_prev, t=np.float64(self.t),
+            step_index=np.int64(self.step_index), staged=np.int64(self.staged),
+            pending_time=np.array([p[0] for p in pending], dtype=np.float64),
+            pending_yarns=np.array([p[1:3] for p in pending], dtype=np.int64).reshape(-1, 2),
+            pending_over=np.array([p[3] for p in pending], dtype=bool))
+        if self.pose_end is not None:
+            out.update(pose_R=self.pose_end.R, pose_t=self.pose_end.t)
+        if self.ring_theta is not None:
+            out.update(ring_theta=self.ring_theta, ring_anchor=self.ring_anchor)
+        return {k: np.array(v) for k, v in out.items()}
+
+    def import_state(self, arrays) -> None:
+        """Replace the state by one ``export_state`` gave, checked first (ValueError)."""
+        from ..geometry.pose import Pose
+
+        ny, n = self.machine.n_yarns, self.machine.n_per_group
+        f64 = np.float64
+
+        def points(name):
+            return plain.finite(name, plain.take(arrays, name, (ny, 3), f64))
+
+        state = ZoneState.from_arrays(plain.unprefixed("state.", arrays), ny)
+        f_top = plain.finite("f_top", plain.take(arrays, "f_top", (ny,), f64))
+        fell, fell_ref, G_prev = points("fell"), points("fell_ref"), points("G_prev")
+        uid_prev = plain.in_range("lowest_uid_prev",
+                                  plain.take(arrays, "lowest_uid_prev", (ny,), np.int64), -1, 2**62)
+        t = plain.finite("t", plain.take(arrays, "t", (), f64)).item()
+        step_index = plain.scalar(arrays, "step_index", np.int64)
+        staged = plain.scalar(arrays, "staged", np.int64)
+        times = plain.finite("pending_time", plain.take(arrays, "pending_time", (None,), f64))
+        yarns = plain.take(arrays, "pending_yarns", (len(times), 2), np.int64)
+        plain.in_range("pending_yarns (warp)", yarns[:, 0], 0, n)
+        plain.in_range("pending_yarns (weft)", yarns[:, 1], n, 2 * n)
+        over = plain.take(arrays, "pending_over", (len(times),), bool)
+        pose = None
+        if "pose_R" in arrays:
+            pose = Pose(R=plain.finite("pose_R", plain.take(arrays, "pose_R", (3, 3), f64)),
+                        t=plain.finite("pose_t", plain.take(arrays, "pose_t", (3,), f64)))
+        if self.machine.has_ring != ("ring_theta" in arrays):
+            raise ValueError("the ring angles do not match the machine's guide ring")
+        theta = anchor = None
+        if self.machine.has_ring:
+            theta = plain.finite("ring_theta", plain.take(arrays, "ring_theta", (ny,), f64))
+            anchor = plain.finite("ring_anchor", plain.take(arrays, "ring_anchor", (ny,), f64))
+        self.ring_theta, self.ring_anchor = theta, anchor
+        self.state, self.f_top, self.fell, self.fell_ref, self.G_prev = state, f_top, fell, fell_ref, G_prev
+        self.lowest_uid_prev, self.t, self.step_index, self.staged = uid_prev, t, step_index, staged
+        self.pending = [(float(tp), int(kx), int(ko), bool(o))
+                        for tp, (kx, ko), o in zip(times, yarns, over)]
+        self.pose_end = pose
 
     # -- pieces -----------------------------------------------------------------------------
     def _with_wall(self, bc, state=None):
@@ -407,13 +472,6 @@ def creation_point(px, gx, po, go, lowest=0.0):
     if N[0] * C[0] + N[1] * C[1] < 0:
         N = -N
     return C, N
-
-
-def _copy_state(st):
-    new = ZoneState.__new__(ZoneState)
-    for key, value in vars(st).items():
-        setattr(new, key, value.copy() if isinstance(value, np.ndarray) else value)
-    return new
 
 
 def _snapshot(st, bc, f_top, t, machine) -> Snapshot:

@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import plain
+
 #: initial capacity (crossings); the arrays double when full
 INITIAL_CAPACITY = 256
 
@@ -74,18 +76,86 @@ class ZoneState:
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.s_fell = np.zeros(self.n_yarns)
 
-    def __setstate__(self, state):
-        """Unpickle (checkpoints): a field that a checkpoint of an older version lacks starts
-        at its fill value, as for a new crossing."""
-        self.__dict__.update(state)
-        cap = len(self.uid)
-        for name, (shape, dtype, fill) in _FIELDS.items():
-            if name not in state:
-                setattr(self, name, np.full((cap,) + shape, fill, dtype=dtype))
-
     @property
     def capacity(self) -> int:
         return len(self.uid)
+
+    def copy(self) -> "ZoneState":
+        """An independent copy (same capacity; every array copied)."""
+        new = ZoneState(self.n_yarns, capacity=self.capacity)
+        new.m, new.next_uid = self.m, self.next_uid
+        for name in (*_FIELDS, "lowest", "highest", "s_fell"):
+            setattr(new, name, getattr(self, name).copy())
+        return new
+
+    def to_arrays(self) -> dict:
+        """The state as plain arrays (checkpoints): every field of ``_FIELDS`` for the ``m``
+        crossings, the per-yarn arrays, and ``next_uid`` (0-d int64). Rows past ``m`` are not
+        state (``add`` sets every field of a new crossing), nor is the capacity."""
+        out = {name: getattr(self, name)[: self.m].copy() for name in _FIELDS}
+        out.update(lowest=self.lowest.copy(), highest=self.highest.copy(), s_fell=self.s_fell.copy(),
+                   next_uid=np.int64(self.next_uid))
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    @classmethod
+    def from_arrays(cls, arrays, n_yarns: int) -> "ZoneState":
+        """The state ``to_arrays`` gave, checked before any kernel sees it: shapes and dtypes of
+        ``_FIELDS``, finite floats (NaN only in a field whose fill is NaN: not yet solved), yarn
+        indices on their side (warp ``0 .. n-1``, weft ``n .. 2n-1``), links within the crossings
+        and consistent with the chains (module docstring). ValueError names what is wrong."""
+        n_yarns = int(n_yarns)
+        m = len(plain.take(arrays, "uid", (None,), np.int64))
+        capacity = INITIAL_CAPACITY
+        while capacity < m:
+            capacity *= 2
+        st = cls(n_yarns, capacity=capacity)
+        for name, (shape, dtype, fill) in _FIELDS.items():
+            a = plain.take(arrays, name, (m,) + shape, dtype)
+            if a.dtype.kind == "f":
+                plain.finite(name, a, allow_nan=bool(np.isnan(fill)))
+            getattr(st, name)[:m] = a
+        st.m = m
+        st.next_uid = plain.scalar(arrays, "next_uid", np.int64)
+        for name in ("lowest", "highest"):
+            setattr(st, name, plain.in_range(name, plain.take(arrays, name, (n_yarns,), np.int64), -1, m))
+        st.s_fell = plain.finite("s_fell", plain.take(arrays, "s_fell", (n_yarns,), np.float64))
+        st._validate()
+        return st
+
+    def _validate(self) -> None:
+        """ValueError unless indices and links are those of a state ``add`` and ``remove`` make."""
+        m, n = self.m, self.n_yarns // 2
+        yarn = self.yarn[:m]
+        plain.in_range("yarn (warp)", yarn[:, 0], 0, n)
+        plain.in_range("yarn (weft)", yarn[:, 1], n, 2 * n)
+        uid = self.uid[:m]
+        plain.in_range("uid", uid, 0, max(self.next_uid, 0))
+        if len(np.unique(uid)) != m:
+            raise ValueError("array 'uid' repeats a crossing id")
+        if not np.all(np.abs(self.over[:m]) == 1.0):
+            raise ValueError("array 'over' holds values other than +1 and -1")
+        if not np.all(np.isin(self.slip[:m], (-1, 0, 1))):
+            raise ValueError("array 'slip' holds values other than -1, 0 and +1")
+        c = np.arange(m)
+        for side in range(2):
+            for name, links, older in (("low", self.low, True), ("up", self.up, False)):
+                v = plain.in_range(name, links[:m, side], -1, m)
+                linked = v >= 0
+                # creation order: a crossing's neighbour towards the mandrel is older, its
+                # neighbour towards the supply newer, both on the same yarn, linked back to it
+                back = (self.up if older else self.low)[v[linked], side]
+                if (np.any((v[linked] < c[linked]) != older) or np.any(back != c[linked])
+                        or np.any(yarn[v[linked], side] != yarn[linked, side])):
+                    raise ValueError(f"array {name!r} does not link crossings along their yarns")
+                ends = self.lowest if older else self.highest
+                if np.any(ends[yarn[~linked, side]] != c[~linked]):
+                    raise ValueError(f"the {'lowest' if older else 'highest'} crossings do not "
+                                     f"match the links {name!r}")
+        for name, ends, links in (("lowest", self.lowest, self.low), ("highest", self.highest, self.up)):
+            k = np.nonzero(ends >= 0)[0]
+            side = (k >= n).astype(np.int64)
+            if np.any(yarn[ends[k], side] != k) or np.any(links[ends[k], side] != -1):
+                raise ValueError(f"array {name!r} names crossings that are not the ends of its yarns")
 
     def _grow(self, need: int):
         cap = self.capacity

@@ -145,7 +145,7 @@ def flag_counts(yarns) -> dict:
 
 def summary_dict(result, extra=None) -> dict:
     """Everything summary.json holds, as JSON-able data (non-finite numbers become null)."""
-    from .. import __version__
+    from .._version import __version__
 
     config = result.config
     model = getattr(getattr(config, "model", None), "kind", None)
