@@ -176,7 +176,7 @@ def test_example_mandrel_files_exist_or_are_being_built():
 
 @pytest.fixture
 def stubbed_run(small_result, tmp_path, monkeypatch):
-    """A valid case file, with preform.simulate / checks / fields replaced by stubs that return
+    """A valid case file, with preform.simulation / checks / fields replaced by stubs that return
     the synthetic Result: tests the command's plumbing, not the physics."""
     import dataclasses
     import types
