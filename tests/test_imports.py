@@ -161,3 +161,21 @@ def test_the_function_simulate_is_not_shadowed_by_a_module():
     from preform.simulation import simulate
 
     assert preform.simulate is simulate
+
+
+def test_both_zones_implement_the_zone_protocol():
+    """The kinematic and the interaction zone have every method of ``preform.zone.Zone`` with
+    its parameters, and ``simulation.ZONES`` maps both model kinds."""
+    import inspect
+
+    from preform.config import MODEL_KINDS
+    from preform.simulation import ZONES
+    from preform.zone import Zone
+
+    assert sorted(ZONES) == sorted(MODEL_KINDS)
+    methods = [name for name, _ in inspect.getmembers(Zone, inspect.isfunction) if not name.startswith("_")]
+    assert sorted(methods) == ["export_state", "import_state", "snapshot", "start", "step"]
+    for cls in ZONES.values():
+        for name in methods:
+            want = list(inspect.signature(getattr(Zone, name)).parameters)
+            assert list(inspect.signature(getattr(cls, name)).parameters) == want, (cls, name)

@@ -110,11 +110,12 @@ class Recording:
                 self.laid[name].append(value)
 
     # -- packing ------------------------------------------------------------------------------
-    def yarn_paths(self, surface, project, centerline, group, mu) -> YarnPaths:
+    def yarn_paths(self, surface, project, centerline, group, mu, curvature_tol) -> YarnPaths:
         """Deposited yarn per yarn: its tie point, then per step the points laid inside the step
         in order and its end point, with the braid angle and slip tendency of the laid yarn
         (``analysis.laid_braid_angles``; surface: kinematic.SurfaceArrays, project:
-        analysis.CenterlineProjector, group (ny,) 0 warp 1 weft, mu: yarn-mandrel friction)."""
+        analysis.CenterlineProjector, group (ny,) 0 warp 1 weft, mu: yarn-mandrel friction,
+        curvature_tol: ``Tolerances.slip_curvature``)."""
         ny = self.n_yarns
         fell, face = self.fell.array, self.face.array
         step_i, k = np.nonzero(self.moved.array)        # step-major, yarns ascending
@@ -130,7 +131,8 @@ class Recording:
         flags = np.concatenate([np.zeros(ny, dtype=np.uint8), self.end_flag.array[step_i, k],
                                 laid["flag"]])[sort].astype(np.uint8)
         offsets = np.searchsorted(yarn[sort], np.arange(ny + 1)).astype(np.int64)
-        angles, slip = laid_braid_angles(surface, project, centerline, points, faces, offsets, mu)
+        angles, slip = laid_braid_angles(surface, project, centerline, points, faces, offsets, mu,
+                                         curvature_tol)
         flags = flags | np.where(slip, FLAG_SLIP, 0).astype(np.uint8)
         return YarnPaths(points=points, offsets=offsets, time_s=times, braid_angle_deg=angles,
                          face=faces, flags=flags, group=np.asarray(group).astype(np.int8))

@@ -241,7 +241,7 @@ class Stepper:
         surface = self.depositor.surface
         group = self.machine.group
         yarns = rec.yarn_paths(surface, self.project, self.centerline, group,
-                               mandrel_friction(self.config))
+                               mandrel_friction(self.config), self.tolerances.slip_curvature)
         history, fell_s = rec.history(surface, self.project, self.centerline, group)
         return Result(config=self.config, mandrel=self.mandrel, centerline=self.centerline,
                       yarns=yarns, history=history, snapshots=list(rec.snapshots), fell_s=fell_s,

@@ -12,7 +12,7 @@ run to their lowest crossing, DESIGN.md §3.3). The run picks one by ``[model] k
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -41,6 +41,7 @@ class ZoneStep:
         return cls(G_mid=supply, G_end=supply)
 
 
+@runtime_checkable
 class Zone(Protocol):
     """A convergence zone: built as ``Zone(config, machine, mandrel)``, then driven by the stepper.
 
