@@ -416,3 +416,13 @@ def test_no_pickle_in_the_package():
     for path in src.rglob("*.py"):
         text = path.read_text()
         assert "import pickle" not in text and "__setstate__" not in text, path
+
+
+def test_a_compressed_archive_is_refused_before_it_is_expanded(made, capsys):
+    """np.savez_compressed members (what a zip bomb needs) are refused: preform stores arrays."""
+    path, _, data = made
+    arrays = _arrays(data)
+    checkpoint = _plant(path, b"")
+    with open(checkpoint, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    _refused(path, capsys, "compressed")

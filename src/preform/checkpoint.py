@@ -17,7 +17,10 @@ belong to different saves (a sidecar file would need two renames). The header ho
 - ``arrays_sha256``: SHA-256 over every array's name, dtype, shape and bytes, in name order, so
   damaged bytes are refused even where the zip's own CRC-32 would let them through.
 
-What the arrays hold is checked by their owners before any computation
+Reading checks, in order: a regular file, not a link; a zip archive whose members are stored
+uncompressed (as ``np.savez`` writes them: reading needs no more memory than the file's size);
+numeric arrays only; the header's format version and inputs; the checksum. What the arrays hold
+is then checked by their owners before any computation
 (``Stepper.restore``, ``Recording.from_arrays``, ``ZoneState.from_arrays``; ``preform.plain``).
 
 Writing: a temporary file created exclusively (``O_CREAT | O_EXCL``, random name) in the target
@@ -33,6 +36,7 @@ import json
 import os
 import secrets
 import stat
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -164,6 +168,8 @@ class Checkpoint:
                 raise CheckpointError(f"{where} is not a preform checkpoint (not an .npz archive); "
                                       "remove it and run without --resume")
             fh.seek(0)
+            self._check_stored(fh, where)
+            fh.seek(0)
             try:
                 with np.load(fh, allow_pickle=False) as npz:
                     arrays = {name: npz[name] for name in npz.files}
@@ -180,6 +186,21 @@ class Checkpoint:
             raise CheckpointError(f"{where} is damaged: its arrays do not match their checksum; "
                                   "run without --resume")
         return arrays
+
+    @staticmethod
+    def _check_stored(fh, where):
+        """Refuse compressed members or members larger than the file: ``np.savez`` stores its
+        arrays uncompressed, so reading a checkpoint never needs more memory than its size
+        (a crafted archive of compressed members could expand without bound)."""
+        try:
+            with zipfile.ZipFile(fh) as archive:
+                members = archive.infolist()
+        except (zipfile.BadZipFile, OSError, ValueError) as exc:
+            raise CheckpointError(f"{where} cannot be read ({exc}); run without --resume") from None
+        size = os.fstat(fh.fileno()).st_size
+        if any(m.compress_type != zipfile.ZIP_STORED for m in members) or sum(m.file_size for m in members) > size:
+            raise CheckpointError(f"{where} holds compressed or oversized members, which preform "
+                                  "never writes; run without --resume")
 
     def _open(self, where):
         """The checkpoint opened for reading, never through a symbolic link."""
