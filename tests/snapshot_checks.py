@@ -1,6 +1,5 @@
-"""Checks of written convergence-zone snapshots (DESIGN.md §1 ``convergence.pvd``): read the
-files back and verify force balance and the friction law at every crossing from them alone
-(issue 4). Shared by the interaction-model tests."""
+"""Force balance and the friction law of written convergence-zone snapshots, read back from their
+.vtp files (issue 4); shared by the interaction tests."""
 
 from __future__ import annotations
 
