@@ -80,11 +80,16 @@ class ZoneState:
     def capacity(self) -> int:
         return len(self.uid)
 
+    def _yarn_arrays(self) -> list[str]:
+        """Names of the per-yarn arrays (``lowest``, ``highest``, the fell points' material
+        coordinates): every array attribute that is not a crossing field of ``_FIELDS``."""
+        return [k for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in _FIELDS]
+
     def copy(self) -> "ZoneState":
         """An independent copy (same capacity; every array copied)."""
         new = ZoneState(self.n_yarns, capacity=self.capacity)
         new.m, new.next_uid = self.m, self.next_uid
-        for name in (*_FIELDS, "lowest", "highest", "s_fell"):
+        for name in (*_FIELDS, *self._yarn_arrays()):
             setattr(new, name, getattr(self, name).copy())
         return new
 
@@ -93,16 +98,17 @@ class ZoneState:
         crossings, the per-yarn arrays, and ``next_uid`` (0-d int64). Rows past ``m`` are not
         state (``add`` sets every field of a new crossing), nor is the capacity."""
         out = {name: getattr(self, name)[: self.m].copy() for name in _FIELDS}
-        out.update(lowest=self.lowest.copy(), highest=self.highest.copy(), s_fell=self.s_fell.copy(),
-                   next_uid=np.int64(self.next_uid))
+        out.update({name: getattr(self, name).copy() for name in self._yarn_arrays()})
+        out["next_uid"] = np.int64(self.next_uid)
         return {k: np.asarray(v) for k, v in out.items()}
 
     @classmethod
     def from_arrays(cls, arrays, n_yarns: int) -> "ZoneState":
         """The state ``to_arrays`` gave, checked before any kernel sees it: shapes and dtypes of
-        ``_FIELDS``, finite floats (NaN only in a field whose fill is NaN: not yet solved), yarn
-        indices on their side (warp ``0 .. n-1``, weft ``n .. 2n-1``), links within the crossings
-        and consistent with the chains (module docstring). ValueError names what is wrong."""
+        ``_FIELDS`` and of the per-yarn arrays of a new state, finite floats (NaN only in a field
+        whose fill is NaN: not yet solved), yarn indices on their side (warp ``0 .. n-1``, weft
+        ``n .. 2n-1``), links within the crossings and consistent with the chains (module
+        docstring). ValueError names what is wrong."""
         n_yarns = int(n_yarns)
         m = len(plain.take(arrays, "uid", (None,), np.int64))
         capacity = INITIAL_CAPACITY
@@ -116,9 +122,14 @@ class ZoneState:
             getattr(st, name)[:m] = a
         st.m = m
         st.next_uid = plain.scalar(arrays, "next_uid", np.int64)
+        for name in st._yarn_arrays():
+            like = getattr(st, name)
+            a = plain.take(arrays, name, like.shape, like.dtype)
+            if a.dtype.kind == "f":
+                plain.finite(name, a)
+            setattr(st, name, a)
         for name in ("lowest", "highest"):
-            setattr(st, name, plain.in_range(name, plain.take(arrays, name, (n_yarns,), np.int64), -1, m))
-        st.s_fell = plain.finite("s_fell", plain.take(arrays, "s_fell", (n_yarns,), np.float64))
+            plain.in_range(name, getattr(st, name), -1, m)
         st._validate()
         return st
 
