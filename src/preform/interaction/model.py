@@ -45,8 +45,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._kernels import frontal as K
-from .. import plain
 from ..errors import SimulationError
+from .. import plain
 from ..result import Snapshot
 from ..zone import ZoneStep
 from . import frontal
@@ -122,10 +122,10 @@ class InteractionZone:
         self.fell_ref = None
         self.staged = 0            # steps solved in stages (``_staged``)
         self.t = 0.0
-        self.pose_end = None
-        self.pending = []          # carrier passes whose crossings wait (``_ready_passes``)
-        self.ring_theta = None     # ring-point angles (2n,), rad, behind a guide ring
-        self.ring_anchor = None    # the ring angles the last step started from
+        self.pose_end = None          # the mandrel's pose at the end of the last step
+        self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
+        self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
+        self.ring_anchor = None       # (2n,) rad, ring angles at the start of the last step
 
     # -- interface --------------------------------------------------------------------------
     def start(self, t, F_machine, pose):
