@@ -82,7 +82,7 @@ def test_frictionless_close_to_kinematic_convergence_length(run):
     assert inter.history["contacts"][-1] > 0
 
 
-def test_interaction_step_control(geometry):
+def test_interaction_step_is_a_third_pass_period_or_two_widths_of_fell_advance(geometry):
     """``simulate.default_time_step``: the interaction model's step is the smaller of a third of
     the pass period and two yarn widths of fell advance (without a guide ring), the kinematic
     model's its own."""
@@ -109,7 +109,7 @@ def test_interaction_step_control(geometry):
         kinematic, rel=1e-3)
 
 
-def test_time_step_convergence(run):
+def test_default_step_within_one_percent_of_a_quarter_step(run):
     """The interaction model's default step (``simulate.default_time_step``) against a step four
     times shorter."""
     coarse, fine = run(mu=0.5), run(mu=0.5, step_factor=0.25)

@@ -40,7 +40,7 @@ def deflection(A, R, B):
 
 
 @pytest.mark.parametrize("capstan_sign", [-1, 1])
-def test_capstan_ratio(capstan_sign):
+def test_tension_ratio_is_the_capstan_factor(capstan_sign):
     for A, B, f, th, mu in problems(60, seed=1):
         s = solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=capstan_sign)
         assert s.ok, s.message
