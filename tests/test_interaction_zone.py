@@ -328,6 +328,21 @@ def test_newton_direction_solves_the_assembled_system(solver):
     assert net.pattern(nnz) is pattern
 
 
+def test_linear_solver_auto_is_cholmod_when_cvxopt_imports_else_superlu():
+    """``linalg.backend``: "auto" is CHOLMOD where cvxopt is installed, else SuperLU; asking for
+    CHOLMOD without it, or for an unknown backend, is an error that names the value and the fix."""
+    assert linalg.backend("auto") == linalg.DEFAULT == linalg.AVAILABLE[0]
+    assert linalg.backend("splu") == "splu"
+    with pytest.raises(ValueError, match="'bogus'.*'auto', 'cholmod' or 'splu'"):
+        linalg.backend("bogus")
+    if "cholmod" in linalg.AVAILABLE:
+        assert linalg.DEFAULT == "cholmod"
+    else:
+        assert linalg.DEFAULT == "splu"
+        with pytest.raises(ValueError, match=r"cvxopt is not installed.*preform\[cholmod\]"):
+            linalg.backend("cholmod")
+
+
 def test_tension_bound_and_psi_kernels_match_numpy_twins():
     """Segment tensions, friction bounds and Psi / (f_int + f_ext) of the kernels against the
     NumPy twins (Psi from the vectorised tension form ``interaction.contact.psi``)."""
