@@ -51,7 +51,6 @@ import numpy as np
 from numba import njit
 
 
-
 @njit(cache=True)
 def yarn_point(pos, normal, over, c, side, h, out):
     """Centerline point (m) of yarn ``side`` at crossing ``c`` into out (3,)."""

@@ -49,7 +49,6 @@ RING_OUT_ITERATIONS = 18
 RING_OUT_SIZE = 19
 
 
-
 @njit(cache=True)
 def ring_state(theta, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign):
     """(ok, F^t, |F^n|, f_int, eta) of the ring point at ``theta``; ok False if A or B sits on R."""
