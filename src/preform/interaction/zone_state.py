@@ -16,16 +16,17 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``over (cap,) float64``: +1 if the warp is the outer (over) yarn at this crossing, else -1. The
   yarn centerline points are ``C + over * h * N`` (warp) and ``C - over * h * N`` (weft),
   ``h = thickness / 2`` (paper eq. 16, with one normal per crossing);
-- ``s (cap, 2) float64, m``: material coordinate of each yarn at the crossing (m of yarn from a
-  point of the yarn's deposited part; ``interaction/frontal.py``): what a sticking yarn keeps;
-- ``g (cap, 2) float64, N``: friction bound of each yarn at the crossing from the last solve (NaN
-  before the first), the start of the next;
+- ``material (cap, 2) float64, m``: material coordinate of each yarn at the crossing (m of yarn
+  from a point of the yarn's deposited part; ``interaction/frontal.py``): what a sticking yarn
+  keeps;
+- ``bound (cap, 2) float64, N``: friction bound of each yarn at the crossing from the last solve
+  (NaN before the first), the start of the next;
 - ``slip (cap, 2) int8``: friction state per yarn in the last step: 0 stick, +1 slipping with the
   tension below the crossing larger (the yarn slides towards the mandrel through the crossing), -1
   the other way (the crossing runs down the yarn faster than the yarn is drawn);
 - ``offset (cap, 2) float64, m``: the elastic part of the friction slip that carries the friction
-  force of each yarn over to the next step (``interaction/frontal.py``, FRICTION_MEMORY): the
-  next step's friction term is centred at ``s - offset``;
+  force of each yarn over to the next step (``interaction/frontal.py``, ``friction_memory``): the
+  next step's friction term is centred at ``material - offset``;
 - ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
   mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
   point below / the supply side above;
@@ -33,7 +34,7 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
 Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
--1 when it has none; ``s_fell[k]``: material coordinate of its fell point (m).
+-1 when it has none; ``material_fell[k]``: material coordinate of its fell point (m).
 """
 
 from __future__ import annotations
@@ -51,8 +52,8 @@ _FIELDS = {
     "pos": ((3,), np.float64, 0.0),
     "normal": ((3,), np.float64, 0.0),
     "over": ((), np.float64, 1.0),
-    "s": ((2,), np.float64, 0.0),
-    "g": ((2,), np.float64, np.nan),
+    "material": ((2,), np.float64, 0.0),
+    "bound": ((2,), np.float64, np.nan),
     "slip": ((2,), np.int8, 0),
     "offset": ((2,), np.float64, 0.0),
     "low": ((2,), np.int64, -1),
@@ -74,7 +75,7 @@ class ZoneState:
             setattr(self, name, np.full((capacity,) + shape, fill, dtype=dtype))
         self.lowest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
-        self.s_fell = np.zeros(self.n_yarns)
+        self.material_fell = np.zeros(self.n_yarns)
 
     @property
     def capacity(self) -> int:
@@ -192,8 +193,8 @@ class ZoneState:
         self.over[c] = 1.0 if over else -1.0
         self.slip[c] = 0
         self.offset[c] = 0.0
-        self.s[c] = 0.0
-        self.g[c] = np.nan
+        self.material[c] = 0.0
+        self.bound[c] = np.nan
         self.tension[c] = 0.0
         self.uid[c] = self.next_uid
         self.next_uid += 1
@@ -223,8 +224,8 @@ class ZoneState:
 
     def centerline_point(self, c: int, side: int, half_thickness: float) -> np.ndarray:
         """Yarn centerline point of side ``side`` at crossing ``c`` (module docstring), (3,)."""
-        s = self.over[c] if side == 0 else -self.over[c]
-        return self.pos[c] + s * half_thickness * self.normal[c]
+        o = self.over[c] if side == 0 else -self.over[c]
+        return self.pos[c] + o * half_thickness * self.normal[c]
 
     def remove(self, dead) -> None:
         """Remove crossings (array indices ``dead``, each the lowest on both its yarns once the
