@@ -84,7 +84,7 @@ def test_frictionless_close_to_kinematic_convergence_length(run):
 
 
 def test_interaction_step_is_a_third_pass_period_or_two_widths_of_fell_advance(geometry):
-    """``simulate.default_time_step``: the interaction model's step is the smaller of a third of
+    """``stepping.default_time_step``: the interaction model's step is the smaller of a third of
     the pass period and two yarn widths of fell advance (without a guide ring), the kinematic
     model's its own."""
     stl, cl = geometry
@@ -111,7 +111,7 @@ def test_interaction_step_is_a_third_pass_period_or_two_widths_of_fell_advance(g
 
 
 def test_default_step_within_one_percent_of_a_quarter_step(run):
-    """The interaction model's default step (``simulate.default_time_step``) against a step four
+    """The interaction model's default step (``stepping.default_time_step``) against a step four
     times shorter."""
     coarse, fine = run(mu=0.5), run(mu=0.5, step_factor=0.25)
     # a step is a quasi-static solve with the friction history of the last: first order in the
