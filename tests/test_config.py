@@ -400,3 +400,22 @@ def test_section_that_is_not_a_table(tmp_path):
     path.write_text("yarn = 3\n" + path.read_text())
     with pytest.raises(ConfigError, match=r"\[yarn\] must be a table"):
         load_config(path)
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = make_case(tmp_path)
+    plain = load_config(path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())   # what Notepad writes
+    assert load_config(path).machine == plain.machine
+
+
+def test_a_folder_given_as_config_is_said_so(tmp_path):
+    with pytest.raises(ConfigError, match="is a folder: give the path of a .toml"):
+        load_config(tmp_path)
+
+
+def test_a_config_not_in_utf8_names_the_byte(tmp_path):
+    path = make_case(tmp_path)
+    path.write_bytes(path.read_bytes() + b"# caf\xe9\n")
+    with pytest.raises(ConfigError, match="not UTF-8 text.*save the config as UTF-8"):
+        load_config(path)

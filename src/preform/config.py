@@ -137,15 +137,23 @@ def load_config(path) -> Config:
     and are stored absolute. ``[output] dir`` defaults to ``results/<config stem>`` there.
     """
     path = Path(path).expanduser().resolve()
+    if path.is_dir():
+        raise ConfigError(f"config file {path} is a folder: give the path of a .toml case file "
+                          "(e.g. examples/case_a.toml)")
     if not path.is_file():
         raise ConfigError(f"config file {path} not found")
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
+        raw = path.read_bytes()
+        # a UTF-8 byte-order mark (Notepad writes one) is not TOML; accept it
+        text = raw.decode("utf-8-sig")
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: cannot be read: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {err.start}: {raw[err.start:err.start + 1]!r}); "
+                          "save the config as UTF-8") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot be read: {err.strerror or err}") from None
     return config_from_dict(data, base_dir=path.parent, name=path.stem, source=path)
 
 
