@@ -91,3 +91,37 @@ def test_titles_name_case_model_and_an_unfinished_status(small_result):
     assert "kinematic model" in ax.get_title() and "INTERRUPTED: partial results" in ax.get_title()
     ax = convergence_length_figure(_history_result(small_result)).axes[0]
     assert ax.get_title().endswith("· done")
+
+
+def test_braided_mandrel_png_shows_the_mandrel_and_the_yarns(small_result, tmp_path):
+    """The pyvista render: non-blank, the mandrel grey and both yarn colours present, mode 0644."""
+    import dataclasses
+    import os
+    import stat
+
+    import trimesh
+
+    from preform.geometry import mandrel_from_arrays
+
+    tube = trimesh.creation.cylinder(radius=0.05, height=0.4, sections=64)
+    mandrel = mandrel_from_arrays(tube.vertices, tube.faces)
+    t = np.linspace(0.0, 1.0, 200)
+    paths = [np.column_stack([0.051 * np.cos(sign * 12 * t + k), 0.051 * np.sin(sign * 12 * t + k),
+                              -0.2 + 0.4 * t]) for sign in (1, -1) for k in range(4)]
+    yarns = dataclasses.replace(
+        small_result.yarns, points=np.vstack(paths), offsets=np.arange(9) * 200,
+        group=np.repeat(np.array([0, 1], dtype=np.int8), 4))
+    result = dataclasses.replace(small_result, mandrel=mandrel, yarns=yarns)
+    old = os.umask(0o022)
+    try:
+        path = plot_yarns_3d(result, tmp_path / "braided_mandrel.png")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    from PIL import Image
+
+    img = np.asarray(Image.open(path).convert("RGB")).reshape(-1, 3).astype(int)
+    blue = np.sum((img[:, 2] > img[:, 0] + 60) & (img[:, 2] > 120))
+    red = np.sum((img[:, 0] > img[:, 2] + 60) & (img[:, 0] > 120))
+    grey = np.sum((np.ptp(img, axis=1) < 12) & (img[:, 0] > 100) & (img[:, 0] < 235))
+    assert blue > 500 and red > 500 and grey > 5000

@@ -6,6 +6,7 @@ they work headless whatever ``MPLBACKEND`` says and leave no global figure state
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -193,5 +194,23 @@ def yarns_figure(result) -> Figure:
 
 
 def plot_yarns_3d(result, path) -> Path:
-    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``)."""
-    return _save(yarns_figure(result), path)
+    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``).
+
+    The mandrel with its yarns rendered from two sides (``io.render3d``); where off-screen
+    rendering fails (no OpenGL) or there is no mandrel, a matplotlib picture of the yarns alone
+    with a warning saying why.
+    """
+    title = run_title(result, "Braided mandrel").replace("\n", " – ")
+    if result.mandrel is not None:
+        from .render3d import render_braided_mandrel
+
+        try:
+            with atomic_path(path) as tmp:
+                render_braided_mandrel(result, tmp, title)
+            return Path(path)
+        except Exception as error:  # noqa: BLE001 - any VTK/GL failure: fall back to matplotlib
+            warnings.warn(f"{path}: off-screen rendering failed ({type(error).__name__}: {error}); "
+                          "drew the yarns without the mandrel", RuntimeWarning, stacklevel=2)
+    fig = yarns_figure(result)
+    fig.axes[0].set_title(title)
+    return _save(fig, path)
