@@ -55,6 +55,12 @@ def write_results(result, fields, out_dir) -> list[Path]:
                *write_convergence(result.snapshots, out_dir)]
     if fields is not None:
         written += _write_surface(fields, out_dir)
+        if result.centerline is not None:
+            from .maps import MAP, write_surface_map
+            from .plots import run_title
+
+            written.append(write_surface_map(fields, result.centerline, out_dir / PLOTS / MAP,
+                                             run_title(result, "Surface fields, unrolled")))
     if result.steps:
         written += plot_history(result, out_dir / PLOTS)
     written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
