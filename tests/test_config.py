@@ -82,7 +82,7 @@ def test_minimal_config_defaults(tmp_path):
     assert cfg.mandrel.roll_reference is None
     assert cfg.machine.pattern == "regular" and cfg.machine.guide_ring is None
     assert (cfg.yarn.tension, cfg.yarn.friction, cfg.yarn.ring_friction) == (4.7, 0.0, 0.0)
-    assert cfg.process.eccentricity == (0.0, 0.0) and cfg.process.pose_lead == 0.0
+    assert cfg.process.eccentricity == (0.0, 0.0) and cfg.process.pose_lead is None   # "auto"
     assert cfg.model.kind == "kinematic" and cfg.model.time_step is None
     assert (cfg.model.start, cfg.model.seed) == ("tip", 0)
     assert cfg.output.dir == (tmp_path / "results" / "case").resolve()
@@ -419,3 +419,9 @@ def test_a_config_not_in_utf8_names_the_byte(tmp_path):
     path.write_bytes(path.read_bytes() + b"# caf\xe9\n")
     with pytest.raises(ConfigError, match="not UTF-8 text.*save the config as UTF-8"):
         load_config(path)
+
+
+def test_pose_lead_auto_is_the_default_and_can_be_said(tmp_path):
+    assert load_config(make_case(tmp_path, process={"pose_lead": "auto"})).process.pose_lead is None
+    with pytest.raises(ConfigError, match=r'pose_lead.*or "auto"'):
+        load_config(make_case(tmp_path, name="bad", process={"pose_lead": "far"}))

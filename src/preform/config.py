@@ -67,8 +67,9 @@ class ProcessConfig:
     braid_length: float             # m of centerline to braid
     eccentricity: tuple[float, float] = (0.0, 0.0)   # m, machine x, y
     #: axial distance (m) ahead of the supply plane where the pose puts the centerline on the axis
-    #: (DESIGN.md §2; see geometry/pose.py). 0: at the supply plane.
-    pose_lead: float = 0.0
+    #: (DESIGN.md §2; see geometry/pose.py). None: "auto", chosen from the machine and the mandrel
+    #: when the run is composed (``preform.reference.resolve_pose_lead``).
+    pose_lead: float | None = None
 
 
 @dataclass(frozen=True)
@@ -418,8 +419,15 @@ def _process(sec: _Section) -> ProcessConfig:
                                     minimum=0.0),
         braid_length=sec.number("braid_length", "m of centerline", positive=True),
         eccentricity=sec.vector("eccentricity", 2, "m, machine x and y", default=(0.0, 0.0)),
-        pose_lead=sec.number("pose_lead", "m", default=0.0, minimum=0.0),
+        pose_lead=_pose_lead(sec),
     )
+
+
+def _pose_lead(sec: _Section) -> float | None:
+    """``"auto"`` (the default) -> None; else a non-negative number (m)."""
+    if sec.table.get("pose_lead", "auto") == "auto":
+        return None
+    return sec.number("pose_lead", 'm, or "auto"', minimum=0.0)
 
 
 def _take_up_speed(sec: _Section) -> tuple[tuple[float, float], ...]:
@@ -496,7 +504,8 @@ def dump_config(config: Config) -> dict:
                  "friction": y.friction, "ring_friction": y.ring_friction},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
-                    "braid_length": p.braid_length, "pose_lead": p.pose_lead},
+                    "braid_length": p.braid_length,
+                    "pose_lead": "auto" if p.pose_lead is None else p.pose_lead},
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},

@@ -84,3 +84,61 @@ def check_lines(config, refs: References) -> list[str]:
                      "Popper): this run will not reach steady state; braid longer, or start nearer "
                      "H_inf ([process] initial_position)")
     return lines
+
+
+#: sections sampled along the braided part for the automatic pose lead
+POSE_SECTIONS = 21
+#: a centerline whose points stray less than this fraction of its length from its chord is
+#: straight: any lead gives the same pose, and 0 keeps the arithmetic of a plain axial feed
+STRAIGHT_TOLERANCE = 1e-9
+
+
+def is_straight(centerline) -> bool:
+    pts = np.asarray(centerline.points, dtype=float)
+    chord = pts[-1] - pts[0]
+    length = float(np.linalg.norm(chord))
+    if length == 0.0:
+        return True
+    u = chord / length
+    rel = pts - pts[0]
+    off = rel - np.outer(rel @ u, u)
+    return float(np.max(np.linalg.norm(off, axis=1))) <= STRAIGHT_TOLERANCE * length
+
+
+def automatic_pose_lead(config, mandrel, centerline) -> float:
+    """The pose lead (m) for ``[process] pose_lead = "auto"``.
+
+    The pose keeps the centerline on the machine axis ``lead`` ahead of the supply plane
+    (``geometry.pose_at``). What must stay near the axis is the stretch of centerline inside the
+    convergence zone: from the supply plane (where the unbraided mandrel passes the ring) to the
+    fell front, about ``H`` ahead of it. On a bend of radius ``R_b``, centring that chord (lead
+    ``H / 2``) keeps it within ``H^2 / (8 R_b)`` of the axis, where aligning one end keeps the other
+    within ``H^2 / (2 R_b)``, four times as far, and a far end that swings off the axis makes the
+    yarns bridge and catch. ``H`` is the kinematic steady ``H_inf`` (the median over the braided
+    part's perimeter-equivalent sections); the interaction model's zone is shorter (friction
+    shortens it), so ``H_inf / 2`` errs towards the fell front. A straight centerline gets 0: any
+    lead poses it the same.
+    """
+    if is_straight(centerline):
+        return 0.0
+    from .geometry.centerline import section_perimeters
+
+    end = min(config.process.braid_length, float(centerline.length))
+    s = np.linspace(0.0, end, POSE_SECTIONS)
+    perimeter = section_perimeters(mandrel, centerline, s)
+    ok = perimeter > 0
+    if not np.any(ok):
+        return 0.0
+    h_inf = references(config, s[ok], perimeter[ok]).h_inf
+    h_inf = h_inf[np.isfinite(h_inf)]
+    return 0.5 * float(np.median(h_inf)) if len(h_inf) else 0.0
+
+
+def resolve_pose_lead(config, mandrel, centerline):
+    """``config`` with ``[process] pose_lead`` a number (the automatic one where it is "auto")."""
+    import dataclasses
+
+    if config.process.pose_lead is not None:
+        return config
+    lead = automatic_pose_lead(config, mandrel, centerline)
+    return dataclasses.replace(config, process=dataclasses.replace(config.process, pose_lead=lead))

@@ -27,6 +27,7 @@ from .errors import ConfigError, SimulationError
 from .kinematic import Depositor, smooth_normals
 from .zone import ZoneStep, make_zone
 from .machine import Machine
+from .reference import resolve_pose_lead
 from .result import HISTORY_COLUMNS, FLAG_SLIP, Result, YarnPaths
 from .tolerances import tol
 
@@ -172,6 +173,7 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
     wall0 = _time.perf_counter()
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
+    config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     machine = Machine.from_config(config.machine)
     stepper = _Stepper(config, machine, mandrel, centerline)
     if resume:
