@@ -425,3 +425,19 @@ def test_pose_lead_auto_is_the_default_and_can_be_said(tmp_path):
     assert load_config(make_case(tmp_path, process={"pose_lead": "auto"})).process.pose_lead is None
     with pytest.raises(ConfigError, match=r'pose_lead.*or "auto"'):
         load_config(make_case(tmp_path, name="bad", process={"pose_lead": "far"}))
+
+
+def test_mandrel_body_key(tmp_path):
+    assert load_config(make_case(tmp_path, mandrel={"body": "largest"})).mandrel.body == "largest"
+    assert load_config(make_case(tmp_path, name="one", mandrel={"body": 1})).mandrel.body == 1
+    with pytest.raises(ConfigError, match=r'\[mandrel\] body.*expected "largest" or the index'):
+        load_config(make_case(tmp_path, name="bad", mandrel={"body": -1}))
+
+
+def test_yarn_min_width_defaults_to_half_the_width(tmp_path):
+    cfg = load_config(make_case(tmp_path))
+    assert cfg.yarn.min_width is None and cfg.yarn.least_width == 0.5 * cfg.yarn.width
+    cfg = load_config(make_case(tmp_path, name="w", yarn={"min_width": 1e-3}))
+    assert cfg.yarn.least_width == 1e-3
+    with pytest.raises(ConfigError, match=r"min_width.*expected at most \[yarn\] width"):
+        load_config(make_case(tmp_path, name="wide", yarn={"min_width": 1.0}))

@@ -28,6 +28,9 @@ class MandrelConfig:
     centerline: str | Path = "auto"  # "auto" or absolute path of a CSV (x,y,z in the STL's unit, tip first)
     #: optional direction (STL frame) that the pose maps to machine +x at the tip; None: automatic
     roll_reference: tuple[float, float, float] | None = None
+    #: which body of a multi-body STL is the mandrel: None (the STL must be one body), "largest"
+    #: (by bounding-box diagonal), or an index into the bodies as the refusal lists them
+    body: str | int | None = None
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,15 @@ class YarnConfig:
     tension: float = 4.7            # N, spool tension
     friction: float = 0.0           # yarn-yarn mu_y
     ring_friction: float = 0.0      # yarn-ring mu_r
+    #: least width (m) a yarn narrows to where its neighbours leave it less room (paper §2.4.2);
+    #: below it the yarns jam. None: half the width, the order a flat tow of spread filaments
+    #: narrows to before they bunch into a round bundle
+    min_width: float | None = None
+
+    @property
+    def least_width(self) -> float:
+        """``min_width``, or its default of half the width (m)."""
+        return 0.5 * self.width if self.min_width is None else self.min_width
 
 
 @dataclass(frozen=True)
@@ -104,9 +116,9 @@ class Config:
 
 #: known keys per section, in the order of DESIGN.md §1
 KEYS = {
-    "mandrel": ("stl", "stl_unit", "centerline", "roll_reference"),
+    "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
-    "yarn": ("width", "thickness", "tension", "friction", "ring_friction"),
+    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed"),
     "output": ("dir", "field_edge_length", "snapshots"),
@@ -351,7 +363,21 @@ def _mandrel(sec: _Section, base_dir: Path) -> MandrelConfig:
     roll = sec.vector("roll_reference", 3, "a direction in the STL frame", default=None)
     if roll is not None and not any(roll):
         raise sec.error("roll_reference", list(roll), "expected a non-zero direction [x, y, z]")
-    return MandrelConfig(stl=stl, stl_unit=unit, centerline=centerline, roll_reference=roll)
+    return MandrelConfig(stl=stl, stl_unit=unit, centerline=centerline, roll_reference=roll,
+                         body=_body(sec))
+
+
+def _body(sec: _Section) -> str | int | None:
+    """``[mandrel] body``: "largest" or a non-negative index; absent: None."""
+    if "body" not in sec.table:
+        return None
+    value = sec.table["body"]
+    if value == "largest":
+        return "largest"
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+        return value
+    raise sec.error("body", value, 'expected "largest" or the index (0, 1, ...) of a body in the '
+                    "list the mandrel check prints")
 
 
 def _machine(sec: _Section) -> MachineConfig:
@@ -399,7 +425,12 @@ def _yarn(sec: _Section) -> YarnConfig:
     _implausible(sec, "thickness", thickness, MAX_YARN_THICKNESS, "m", "mm? divide by 1000")
     tension = sec.number("tension", "N", default=YarnConfig.tension, positive=True)
     frictions = {key: _friction(sec, key) for key in ("friction", "ring_friction")}
-    return YarnConfig(width=width, thickness=thickness, tension=tension, **frictions)
+    min_width = sec.number("min_width", "m", default=None, positive=True)
+    if min_width is not None and min_width > width:
+        raise sec.error("min_width", min_width, f"expected at most [yarn] width = {_fmt(width)} (m): "
+                        "the least width a yarn narrows to")
+    return YarnConfig(width=width, thickness=thickness, tension=tension, min_width=min_width,
+                      **frictions)
 
 
 def _friction(sec: _Section, key: str) -> float:
@@ -496,12 +527,13 @@ def dump_config(config: Config) -> dict:
     return {
         "source": _str_or_none(config.source),
         "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
-                    "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference)},
+                    "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
+                    "body": mc.body},
         "machine": {"carriers": ma.carriers, "spool_radius": ma.spool_radius,
                     "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
                     "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset}},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
-                 "friction": y.friction, "ring_friction": y.ring_friction},
+                 "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
                     "braid_length": p.braid_length,
