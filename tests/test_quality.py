@@ -23,6 +23,7 @@ def du_popper_history(n=400, L_end=1.0, H_inf=0.6, H0=0.2, decay=5.0, alpha_inf=
 
 def test_a_clean_run_has_no_reasons():
     assert history_reasons(du_popper_history()) == []
+    assert history_reasons(du_popper_history(L_end=5.0, decay=1.0 / 0.6)) == []
     assert verdict([]) == {"verdict": "ok", "reasons": []}
 
 
@@ -77,17 +78,28 @@ def test_fields_beyond_the_braided_length_and_holes_are_suspect():
 
 
 def test_steady_values_only_where_reached():
-    reached = steady_state(du_popper_history())
+    # a physical transient: it decays over one convergence length (Du & Popper)
+    decay = 1.0 / 0.6
+    reached = steady_state(du_popper_history(L_end=5.0, decay=decay))
     assert reached["reached"]
-    # H decides: |H - H(1)| = 0.4 (exp(-5 L) - exp(-5)) <= 1 % of H(1) = 0.6 - 0.4 exp(-5)
-    # (the angle, 10 (exp(-5 L) - exp(-5)) <= 0.25, is met earlier); to the grid's 1/399 m
-    e5 = np.exp(-5.0)
-    L_star = -np.log((0.01 * (0.6 - 0.4 * e5) + 0.4 * e5) / 0.4) / 5.0
-    assert reached["braided_length_m"] == pytest.approx(L_star, abs=1.0 / 399)
+    # H decides: |H - H(5)| = 0.4 (exp(-L/0.6) - exp(-5/0.6)) <= 1 % of H(5) = 0.6 - 0.4 exp(-5/0.6)
+    # (the angle, 10 (exp(-L/0.6) - exp(-5/0.6)) <= 0.25, is met earlier); to the grid's 5/399 m
+    e5 = np.exp(-5.0 * decay)
+    L_star = -np.log((0.01 * (0.6 - 0.4 * e5) + 0.4 * e5) / 0.4) / decay
+    assert reached["braided_length_m"] == pytest.approx(L_star, abs=5.0 / 399)
     assert reached["braid_angle_deg"]["warp"] == pytest.approx(60.0, abs=0.25)
     assert "drift" not in reached
-    short = steady_state(du_popper_history(L_end=0.3))
+    short = steady_state(du_popper_history(L_end=1.5, decay=decay))
     assert not short["reached"] and "braid_angle_deg" not in short
-    # drift: d/dL (60 + 10 exp(-5 L)) = -50 exp(-5 L), -11 to -12 deg/m over the last 10 %
-    assert -14.0 < short["drift"]["braid_angle_warp_deg_per_m"] < -10.0
-    assert steady_state(du_popper_history(L_end=0.3), SteadySettings(angle_deg=50.0, rel_H=1.0))["reached"]
+    # drift: d/dL (60 + 10 exp(-L/0.6)) = -(10/0.6) exp(-L/0.6): -1.4 to -1.9 deg/m over the tail
+    assert -2.0 < short["drift"]["braid_angle_warp_deg_per_m"] < -1.3
+    loose = SteadySettings(angle_deg=50.0, rel_H=1.0)
+    assert steady_state(du_popper_history(L_end=1.5, decay=decay), loose)["reached"]
+
+
+def test_a_run_shorter_than_half_a_convergence_length_is_never_steady():
+    # flat to the eye over 4 cm, but the transient decays over H = 0.6 m
+    flat = du_popper_history(L_end=0.04, decay=1.0 / 0.6, H0=0.6, alpha_inf=60.0)
+    flat["braid_angle_warp_deg"] = flat["braid_angle_weft_deg"] = np.full(400, 60.0)
+    assert steady_state(flat) == {"reached": False, "definition": steady_state(flat)["definition"],
+                                  "drift": None}

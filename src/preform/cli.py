@@ -171,6 +171,22 @@ def cmd_mandrel_info(args) -> int:
     return EXIT_DONE
 
 
+# ---------------------------------------------------------------- preform sweep
+
+def cmd_sweep(args) -> int:
+    from .sweep import SWEEP_CSV, load_sweep, sweep
+
+    spec = load_sweep(args.sweep)   # bad input fails here, before a cluster starts
+    rows = sweep(args.sweep, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                 progress=not args.no_progress)
+    failed = [r for r in rows if r.get("status") != "done"]
+    print(f"sweep: {len(rows) - len(failed)} of {len(rows)} points done; table: {spec.out_dir / SWEEP_CSV}")
+    for r in failed:
+        print(f"error: point {r['point']} ({r['results']}): {r.get('status')}: {r.get('message', '')}",
+              file=sys.stderr)
+    return EXIT_FAILED if failed else EXIT_DONE
+
+
 # ---------------------------------------------------------------- parser and main
 
 def build_parser() -> argparse.ArgumentParser:
@@ -192,6 +208,16 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="validate a case and its mandrel without simulating")
     check.add_argument("config", metavar="CONFIG", help="case file (TOML)")
     check.set_defaults(func=cmd_check)
+
+    sw = sub.add_parser("sweep", help="run a parameter sweep on Dask (a LocalCluster or --scheduler)")
+    sw.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: base config, [grid] and/or [[points]]")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="an existing Dask scheduler, tcp://host:port (default: a LocalCluster here)")
+    sw.add_argument("--workers", type=int, metavar="N",
+                    help="worker processes of the LocalCluster (default: one per core)")
+    sw.add_argument("--resume", action="store_true", help="skip the points already finished")
+    sw.add_argument("--no-progress", action="store_true", help="no progress lines")
+    sw.set_defaults(func=cmd_sweep)
 
     mandrel = sub.add_parser("mandrel", help="mandrel tools")
     msub = mandrel.add_subparsers(dest="mandrel_command", metavar="COMMAND", required=True)

@@ -3,7 +3,8 @@
 In a finite run "steady" is read with tolerances: the braided length from which the mean
 convergence length stays within ``rel_H`` of its final value and both braid angles within
 ``angle_deg`` of theirs, provided the run ends flat (over its last ``tail`` fraction of braided
-length H changes by less than ``rel_H / 2`` and the angles by less than ``angle_deg / 2``);
+length, and at least ``tail_convergence_lengths`` convergence lengths, H changes by less than
+``rel_H / 2`` and the angles by less than ``angle_deg / 2``);
 otherwise the run ended before steady state (or on a changing cross-section), and what is
 reported instead is how fast the run was still changing at its end (the drift: least-squares
 slopes over the tail, per metre braided).
@@ -26,6 +27,9 @@ class SteadySettings:
     angle_deg: float = 0.25
     #: fraction of the braided length at the end of the run that must be flat
     tail: float = 0.1
+    #: ... and at least this many convergence lengths of braid: the start-up transient decays
+    #: over one convergence length (Du & Popper), so a shorter flat stretch proves nothing
+    tail_convergence_lengths: float = 0.5
 
 
 STEADY = SteadySettings()
@@ -59,7 +63,10 @@ def steady_state(history, settings: SteadySettings = STEADY) -> dict:
            "drift": None}
     if len(L) < 3 or L[-1] <= L[0]:
         return out
-    end = L >= L[-1] - tail * (L[-1] - L[0])
+    window = max(tail * (L[-1] - L[0]), settings.tail_convergence_lengths * abs(H[-1]))
+    if window > L[-1] - L[0]:
+        return out   # the run is shorter than the stretch that must be flat
+    end = L >= L[-1] - window
     if np.count_nonzero(end) < MIN_TAIL_ROWS:
         return out   # too few steps at the end to say whether it is flat
     flat = (np.ptp(H[end]) <= 0.5 * rel_H * abs(H[-1]) and np.ptp(warp[end]) <= 0.5 * angle_deg
