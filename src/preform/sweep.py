@@ -3,6 +3,8 @@
 A sweep file names a base config and the values to vary, as a full grid and/or a list of points::
 
     base = "case_a.toml"                      # relative to this file
+    [set]                                     # the same for every point (not varied)
+    "model.kind" = "interaction"
     [grid]                                    # every combination, in the order written
     "yarn.friction" = [0.0, 0.25, 0.5]
     "process.initial_position" = [0.2, 0.4]
@@ -44,7 +46,7 @@ POINT_JSON = "point.json"
 #: columns of sweep.csv after the varied keys
 COLUMNS = ("status", "verdict", "braid_angle_final_deg", "braid_angle_steady_deg",
            "convergence_length_final_m", "wall_time_s", "results", "message")
-SWEEP_KEYS = ("base", "grid", "points", "output")
+SWEEP_KEYS = ("base", "set", "grid", "points", "output")
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,11 @@ def load_sweep(path) -> SweepSpec:
                           'config, relative to the sweep file (e.g. base = "case_a.toml")')
     base = (path.parent / data["base"]).resolve()
     base_data = _read_toml(base, "base config")
+    fixed = data.get("set", {})
+    if not isinstance(fixed, dict):
+        raise ConfigError(f'{path}: [set] must be a table of "section.key" = value')
+    for key, value in fixed.items():
+        _set(base_data, key, value, f"{path}: [set]")
     grid = data.get("grid", {})
     if not isinstance(grid, dict):
         raise ConfigError(f"{path}: [grid] must be a table of \"section.key\" = [values]")
