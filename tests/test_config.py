@@ -441,3 +441,19 @@ def test_yarn_min_width_defaults_to_half_the_width(tmp_path):
     assert cfg.yarn.least_width == 1e-3
     with pytest.raises(ConfigError, match=r"min_width.*expected at most \[yarn\] width"):
         load_config(make_case(tmp_path, name="wide", yarn={"min_width": 1.0}))
+
+
+def test_rtm_material_and_section(tmp_path):
+    cfg = load_config(make_case(tmp_path, yarn={"linear_density_tex": 800.0, "fibre_density": 1780.0,
+                                                "fibre_radius": 3.5e-6},
+                                rtm={"cavity_thickness": 1.2e-3, "packing": "quadratic"}))
+    assert cfg.yarn.has_material and cfg.yarn.fibre_density == 1780.0
+    assert cfg.rtm.cavity_thickness == 1.2e-3 and cfg.rtm.permeability == "gebart"
+    assert not load_config(make_case(tmp_path, name="plain")).yarn.has_material
+    with pytest.raises(ConfigError, match="go together: give fibre_density, fibre_radius too"):
+        load_config(make_case(tmp_path, name="half", yarn={"linear_density_tex": 800.0}))
+    with pytest.raises(ConfigError, match=r"fibre_density = 1.78.*g/cm\^3\? multiply by 1000"):
+        load_config(make_case(tmp_path, name="unit", yarn={"linear_density_tex": 800.0,
+                                                           "fibre_density": 1.78, "fibre_radius": 3.5e-6}))
+    with pytest.raises(ConfigError, match="needs k_ref"):
+        load_config(make_case(tmp_path, name="kc", rtm={"permeability": "kozeny_carman"}))

@@ -65,6 +65,16 @@ class YarnConfig:
     #: narrows to before they bunch into a round bundle
     min_width: float | None = None
 
+    #: tow material data for the RTM hand-off (all three or none): linear density (g/km = tex),
+    #: fibre density (kg/m^3), fibre radius (m)
+    linear_density_tex: float | None = None
+    fibre_density: float | None = None
+    fibre_radius: float | None = None
+
+    @property
+    def has_material(self) -> bool:
+        return self.linear_density_tex is not None
+
     @property
     def least_width(self) -> float:
         """``min_width``, or its default of half the width (m)."""
@@ -100,6 +110,21 @@ class OutputConfig:
 
 
 @dataclass(frozen=True)
+class RtmConfig:
+    """The RTM hand-off (preform.rtm): how fibre content and permeability are read."""
+
+    #: m, the mould cavity the preform is compressed to; None: the preform's own thickness
+    cavity_thickness: float | None = None
+    permeability: str = "gebart"    # "gebart" | "kozeny_carman" | "table"
+    packing: str = "hexagonal"      # Gebart's fibre packing: "hexagonal" | "quadratic"
+    #: kozeny_carman: measured (K along, K across the fibres) in m^2 at fibre fraction vf_ref
+    k_ref: tuple[float, float] | None = None
+    vf_ref: float | None = None
+    #: table: CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 on a full grid
+    table: Path | None = None
+
+
+@dataclass(frozen=True)
 class Config:
     mandrel: MandrelConfig
     machine: MachineConfig
@@ -108,6 +133,7 @@ class Config:
     model: ModelConfig = field(default_factory=ModelConfig)
     output: OutputConfig | None = None
     source: Path | None = None      # the TOML file this came from
+    rtm: RtmConfig = field(default_factory=RtmConfig)
 
 
 # --------------------------------------------------------------------------------------------
@@ -118,10 +144,12 @@ class Config:
 KEYS = {
     "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
-    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width"),
+    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
+             "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed"),
     "output": ("dir", "field_edge_length", "snapshots"),
+    "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
 REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
@@ -186,6 +214,7 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         model=_model(_Section("model", data)),
         output=_output(_Section("output", data), base_dir, name),
         source=None if source is None else Path(source),
+        rtm=_rtm(_Section("rtm", data), base_dir),
     )
 
 
@@ -429,8 +458,57 @@ def _yarn(sec: _Section) -> YarnConfig:
     if min_width is not None and min_width > width:
         raise sec.error("min_width", min_width, f"expected at most [yarn] width = {_fmt(width)} (m): "
                         "the least width a yarn narrows to")
+    material = _material(sec)
     return YarnConfig(width=width, thickness=thickness, tension=tension, min_width=min_width,
-                      **frictions)
+                      **frictions, **material)
+
+
+#: material keys of [yarn] (given together) and their plausible ranges with a unit hint
+MATERIAL = {
+    "linear_density_tex": ("g/km (tex)", 1.0, 1e5, "a 12K carbon tow is 800 tex"),
+    "fibre_density": ("kg/m^3", 500.0, 5000.0, "carbon 1760-1800, glass 2550-2600 kg/m^3; g/cm^3? multiply by 1000"),
+    "fibre_radius": ("m", 5e-7, 1e-4, "carbon 3.5e-6 m; um? multiply by 1e-6"),
+}
+
+
+def _material(sec: _Section) -> dict:
+    given = [k for k in MATERIAL if k in sec.table]
+    if given and len(given) < len(MATERIAL):
+        missing = [k for k in MATERIAL if k not in sec.table]
+        raise sec.error(given[0], sec.table[given[0]],
+                        f"the RTM material data go together: give {', '.join(missing)} too")
+    out = {}
+    for key, (unit, lo, hi, hint) in MATERIAL.items():
+        if key not in sec.table:
+            continue
+        value = sec.number(key, unit, positive=True)
+        if not lo <= value <= hi:
+            raise sec.error(key, value, f"expected {lo:g} to {hi:g} {unit} ({hint})")
+        out[key] = value
+    return out
+
+
+RTM_MODELS = ("gebart", "kozeny_carman", "table")
+PACKINGS = ("hexagonal", "quadratic")
+
+
+def _rtm(sec: _Section, base_dir: Path) -> RtmConfig:
+    model = sec.choice("permeability", RTM_MODELS, default="gebart")
+    k_ref = sec.vector("k_ref", 2, "m^2, along and across the fibres", default=None)
+    vf_ref = sec.number("vf_ref", "fibre volume fraction", default=None, positive=True)
+    if model == "kozeny_carman" and (k_ref is None or vf_ref is None):
+        raise sec.error("permeability", model, "needs k_ref = [K_along, K_across] (m^2) and vf_ref")
+    if k_ref is not None and min(k_ref) <= 0:
+        raise sec.error("k_ref", list(k_ref), "expected two positive permeabilities (m^2)")
+    if vf_ref is not None and vf_ref >= 1:
+        raise sec.error("vf_ref", vf_ref, "expected a fibre volume fraction below 1")
+    table = sec.path("table", base_dir, "the path of a CSV") if "table" in sec.table else None
+    if model == "table" and table is None:
+        raise sec.error("permeability", model, 'needs table = "K1_K2.csv" (braid_angle_deg, '
+                        "fibre_volume_fraction, k1_m2, k2_m2)")
+    return RtmConfig(cavity_thickness=sec.number("cavity_thickness", "m", default=None, positive=True),
+                     permeability=model, packing=sec.choice("packing", PACKINGS, default="hexagonal"),
+                     k_ref=k_ref, vf_ref=vf_ref, table=table)
 
 
 def _friction(sec: _Section, key: str) -> float:
@@ -533,7 +611,9 @@ def dump_config(config: Config) -> dict:
                     "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
                     "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset}},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
-                 "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width},
+                 "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width,
+                 "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
+                 "fibre_radius": y.fibre_radius},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
                     "braid_length": p.braid_length,
@@ -541,6 +621,10 @@ def dump_config(config: Config) -> dict:
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},
+        "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,
+                "packing": config.rtm.packing,
+                "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
+                "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
 
 
