@@ -21,6 +21,7 @@ from .errors import ConfigError, SimulationError
 from .interaction.model import InteractionZone
 from .kinematic import KinematicZone
 from .machine import Machine
+from .reference import resolve_pose_lead
 from .result import Result
 from .stepping import Stepper
 from .tolerances import Tolerances, tol
@@ -79,6 +80,7 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
     wall0 = _time.perf_counter()
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
+    config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     ckpt = None if checkpoint is None else Checkpoint(checkpoint, config)
     stepper = make_stepper(config, mandrel, centerline, tolerances)
     if resume:
