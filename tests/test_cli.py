@@ -187,7 +187,8 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     state = {"status": "done", "preflight": [],
              "mandrel": types.SimpleNamespace(repairs=("filled 1 small hole",))}
 
-    def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False):
+    def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
+                 keep_checkpoint=False):
         state["progress"] = progress
         return dataclasses.replace(small_result, config=cfg, status=state["status"],
                                    message="" if state["status"] == "done" else "stopped")
@@ -200,6 +201,12 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
         simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
     monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
     monkeypatch.setitem(sys.modules, "preform.fields", types.SimpleNamespace(map_to_surface=lambda r: None))
+    import preform.pipeline
+    from preform.budget import WorkEstimate
+
+    # the placeholder mandrel has no geometry to estimate the work or the references from
+    monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))
+    monkeypatch.setattr(preform.pipeline, "reference_lines", lambda *a: [])
     return config, state
 
 
@@ -209,7 +216,7 @@ def test_run_writes_results_and_prints_summary(stubbed_run, tmp_path, capsys):
     assert main(["run", str(config), "--out", str(out), "--no-progress"]) == 0
     captured = capsys.readouterr()
     lines = captured.out.strip().splitlines()
-    assert len(lines) == 3 and lines[0].startswith(f"results: {out}")
+    assert len(lines) == 4 and lines[0].startswith(f"results: {out}") and lines[3].startswith("quality: ")
     assert "warning: guide ring is tight" in captured.err
     assert "mandrel: filled 1 small hole" in captured.err
     assert state["preflight"] == [(state["mandrel"], "centerline")] and state["progress"] is False

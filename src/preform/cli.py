@@ -13,27 +13,9 @@ from pathlib import Path
 
 from ._version import __version__
 from .errors import MandrelError, PreformError
+from .pipeline import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
-
-
-def _checked_geometry(config):
-    """Load the mandrel and centerline of ``config`` and run the pre-flight checks
-    (``preform.checks.preflight``): impossible set-ups raise PreformError, doubtful ones are
-    printed as warnings. Returns (Mandrel, Centerline)."""
-    from .checks import preflight
-    from .simulation import load_geometry
-
-    mandrel, centerline = load_geometry(config)
-    for repair in mandrel.repairs:
-        print(f"mandrel: {repair}", file=sys.stderr)
-    _print_warnings(preflight(config, mandrel, centerline))
-    return mandrel, centerline
-
-
-def _print_warnings(warnings):
-    for w in warnings:
-        print(f"warning: {w}", file=sys.stderr)
 
 
 # ---------------------------------------------------------------- preform run
@@ -74,50 +56,78 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
     ]
 
 
-#: the state of a running simulation, saved periodically and on Ctrl-C, removed when it is done
-CHECKPOINT = "checkpoint.npz"
+#: the exit code of a run stopped by a signal: 128 + the signal number, as shells report it
+SIGNAL_EXIT = {"SIGINT": EXIT_INTERRUPTED, "SIGTERM": 143, "SIGHUP": 129}
+
+
+def _with_model(config, model):
+    if not model:
+        return config
+    import dataclasses
+
+    return dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
 
 
 def cmd_run(args) -> int:
     from .config import load_config
+    from .pipeline import checked_geometry, run_case
 
-    config = load_config(args.config)  # bad input fails here, before the heavy imports
-    if args.model:
-        import dataclasses
-
-        config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
-    mandrel, centerline = _checked_geometry(config)  # impossible set-ups fail here, before simulating
-    from .fields import map_to_surface
-    from .io import write_results
-    from .simulation import simulate
-
+    config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
-    result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline,
-                      checkpoint=out_dir / CHECKPOINT, resume=args.resume)
-    fields = map_to_surface(result) if len(result.yarns.points) else None
-    try:
-        written = write_results(result, fields, out_dir)
-    except OSError as err:
-        print(f"error: cannot write results to {out_dir}: {err}", file=sys.stderr)
-        return EXIT_FAILED
-    for line in summary_lines(result, out_dir, len(written)):
+    mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+    _print_notes(notes)
+    outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
+                       force=args.force, geometry=(mandrel, centerline, []))
+    _print_notes(outcome.notes)
+    result = outcome.result
+    for line in summary_lines(result, out_dir, len(outcome.written)):
         print(line)
+    quality = _quality_line(out_dir)
+    if quality:
+        print(quality)
     if result.status == "interrupted":
-        print(f"interrupted: partial results in {out_dir}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(f"interrupted: partial results in {out_dir}; the state is kept in "
+              f"{out_dir / CHECKPOINT}: --resume goes on from it", file=sys.stderr)
+        return SIGNAL_EXIT.get(result.stop_signal, EXIT_INTERRUPTED)
     if result.status != "done":
         print(f"error: simulation {result.status}: {result.message}", file=sys.stderr)
         return EXIT_FAILED
+    if args.strict and quality.startswith("quality: suspect"):
+        print("error: --strict: the run is suspect (see the reasons above)", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_DONE
+
+
+def _print_notes(notes):
+    for note in notes:
+        print(note, file=sys.stderr)
+
+
+def _quality_line(out_dir) -> str:
+    """``quality: ok`` or ``quality: suspect: reason; reason`` from the written summary."""
+    import json
+
+    try:
+        quality = json.loads((Path(out_dir) / "summary.json").read_text(encoding="utf-8"))["quality"]
+    except (OSError, ValueError, KeyError):
+        return ""
+    if quality["verdict"] == "ok":
+        return "quality: ok"
+    return "quality: suspect: " + "; ".join(quality["reasons"])
 
 
 # ---------------------------------------------------------------- preform check
 
 def cmd_check(args) -> int:
     from .config import load_config
+    from .pipeline import checked_geometry, estimate
 
-    config = load_config(args.config)
-    _checked_geometry(config)
+    config = _with_model(load_config(args.config), getattr(args, "model", None))
+    mandrel, centerline, notes = checked_geometry(config)
+    _print_notes(notes)
+    work = estimate(config, mandrel, centerline, force=args.force)
+    for line in work.lines():
+        print(f"note: {line}", file=sys.stderr)
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 
@@ -180,7 +190,10 @@ def cmd_design(args) -> int:
     if args.model:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
     target = args.target_angle if args.target_table is None else read_target_table(args.target_table)
-    mandrel, centerline = _checked_geometry(config)
+    from .pipeline import checked_geometry
+
+    mandrel, centerline, notes = checked_geometry(config)
+    _print_notes(notes)
     design = design_speed(config, target, mandrel=mandrel, centerline=centerline,
                           progress=lambda k, e: print(f"design: forward run {k}: largest error "
                                                       f"{e:.2f} deg beyond the start-up transient",
@@ -216,11 +229,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--model", choices=("kinematic", "interaction"),
                      help="the model to run, in place of the config's [model] kind")
     run.add_argument("--resume", action="store_true",
-                     help=f"continue an interrupted run from its checkpoint (<out>/{CHECKPOINT})")
+                     help="continue an interrupted run from its checkpoint (<out>/checkpoint.npz), or "
+                          "write the results of a finished one whose writing failed")
+    run.add_argument("--force", action="store_true",
+                     help="run even beyond the work limits (field faces, time steps)")
+    run.add_argument("--strict", action="store_true",
+                     help="exit 1 when the run's quality verdict is suspect")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser("check", help="validate a case and its mandrel without simulating")
     check.add_argument("config", metavar="CONFIG", help="case file (TOML)")
+    check.add_argument("--force", action="store_true", help="do not refuse work beyond the limits")
     check.set_defaults(func=cmd_check)
 
     sw = sub.add_parser("sweep", help="run a parameter sweep on Dask (a LocalCluster or --scheduler)")
@@ -259,8 +278,67 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings as ``warning:`` lines for people, never a raw ``file:line: Category`` dump."""
+    text = str(message)
+    if issubclass(category, RuntimeWarning) and "preform" not in filename:
+        text = f"numerical warning from {Path(filename).parent.name}: {text} (results are checked for it)"
+    print(f"warning: {text}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     """Entry point of the ``preform`` command; returns the exit code."""
+    import warnings
+
+    previous, warnings.showwarning = warnings.showwarning, _show_warning
+    try:
+        return _main(argv)
+    finally:
+        warnings.showwarning = previous
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP outside the time stepping (while mapping or writing): stop like Ctrl-C."""
+
+    def __init__(self, name):
+        super().__init__(name)
+        self.name = name
+
+
+def _stop_on_signals():
+    """SIGTERM (batch schedulers, docker stop) and SIGHUP stop the command as Ctrl-C does; the
+    simulation installs its own graceful handler while it steps."""
+    import signal
+
+    def handler(signum, frame):
+        raise Stopped(signal.Signals(signum).name)
+
+    previous = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            try:
+                previous[name] = signal.signal(getattr(signal, name), handler)
+            except ValueError:   # not the main thread (a test runner's worker): leave it
+                pass
+    return previous
+
+
+def _restore_signals(previous):
+    import signal
+
+    for name, old in previous.items():
+        signal.signal(getattr(signal, name), old)
+
+
+def _main(argv):
+    previous = _stop_on_signals()
+    try:
+        return _run_command(argv)
+    finally:
+        _restore_signals(previous)
+
+
+def _run_command(argv):
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -271,9 +349,11 @@ def main(argv=None) -> int:
     except PreformError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as stop:
+        name = stop.name if isinstance(stop, Stopped) else "SIGINT"
+        print(f"interrupted ({name}); a results folder keeps its checkpoint: --resume finishes it",
+              file=sys.stderr)
+        return SIGNAL_EXIT.get(name, EXIT_INTERRUPTED)
 
 
 if __name__ == "__main__":  # pragma: no cover

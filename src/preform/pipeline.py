@@ -1,25 +1,46 @@
 """One case from config to result files: what ``preform run`` does, callable from a sweep worker.
 
-``run_case`` loads and checks the geometry, simulates (with a checkpoint in the results folder),
-maps the fields and writes every result file. It returns a :class:`CaseOutcome` instead of
-printing, so the CLI and a sweep's workers run exactly the same path.
+:func:`run_case` does, in this order, so that nothing is lost and nothing is written elsewhere:
+
+1. load and check the geometry (impossible set-ups raise before anything runs);
+2. estimate the work (field faces, steps, result size: ``preform.budget``) and refuse what is
+   beyond its limits unless ``force``;
+3. check that the results folder can be created and written and has room (``io.folder``), and
+   take its lock (one run per folder);
+4. simulate, with the checkpoint in the results folder; when the run is done its final state is
+   saved there too;
+5. map the fields and write every result file; only then is the checkpoint removed. If writing
+   fails, the checkpoint stays and the error says how to finish: ``--resume`` on a finished
+   checkpoint writes the results without simulating again.
+
+It returns a :class:`CaseOutcome` instead of printing, so the CLI and a sweep's workers run
+exactly the same path.
 """
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
+
+from .errors import PreformError
 
 #: the state of a running simulation, saved periodically and on a stop, removed once the results
 #: are written
 CHECKPOINT = "checkpoint.npz"
 
 
+class ResultsWriteError(PreformError):
+    """The results could not be written; the simulation is kept in the checkpoint."""
+
+    exit_code = 1
+
+
 @dataclass
 class CaseOutcome:
     """result: preform.result.Result; written: paths written (summary.json last); notes: the
-    repairs and pre-flight warnings, in order, for the caller to show."""
+    repairs, pre-flight warnings and estimates, in order, for the caller to show."""
 
     result: object
     out_dir: Path
@@ -34,8 +55,8 @@ class CaseOutcome:
 def checked_geometry(config):
     """(mandrel, centerline, notes): the geometry of ``config`` after the pre-flight checks.
 
-    Impossible set-ups raise PreformError; the mandrel's repairs and the doubtful points come back
-    as notes ("mandrel: ...", "warning: ...").
+    Impossible set-ups raise PreformError; the mandrel's repairs, the doubtful points and the
+    quasi-static references (Ko, H_inf, whether the braid can settle) come back as notes.
     """
     from .checks import preflight
     from .simulation import load_geometry
@@ -43,26 +64,72 @@ def checked_geometry(config):
     mandrel, centerline = load_geometry(config)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
+    notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
     return mandrel, centerline, notes
 
 
-def run_case(config, out_dir, *, progress=False, resume=False, geometry=None) -> CaseOutcome:
+def reference_lines(config, mandrel, centerline) -> list[str]:
+    """``preform.reference.check_lines`` over the part to braid (sections every ~2 cm)."""
+    from .geometry.centerline import section_perimeters
+    from .reference import check_lines, references
+
+    end = min(float(config.process.braid_length), float(centerline.length))
+    s = np.linspace(0.0, end, 25)
+    perimeter = section_perimeters(mandrel, centerline, s)
+    ok = perimeter > 0
+    if np.count_nonzero(ok) < 2:
+        return []
+    return check_lines(config, references(config, s[ok], perimeter[ok]))
+
+
+def estimate(config, mandrel, centerline, *, force=False):
+    """The work estimate of a run (``preform.budget``), refused beyond its limits unless ``force``."""
+    from .budget import check_work, estimate_work
+    from .machine import Machine
+    from .reference import resolve_pose_lead
+    from .stepping import default_time_step
+
+    config = resolve_pose_lead(config, mandrel, centerline)
+    dt = config.model.time_step or default_time_step(config, Machine.from_config(config.machine),
+                                                     mandrel, centerline)
+    tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
+    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+    work = estimate_work(config, area, dt)
+    max_radius = float(np.max(centerline.project(mandrel.vertices)[1]))
+    check_work(config, work, max_radius, force=force)
+    return work
+
+
+def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
-    Raises PreformError for bad input (before simulating) and OSError when writing fails.
+    Raises PreformError for bad input or an unusable folder (before simulating) and
+    ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
+    from .checkpoint import Checkpoint
     from .fields import map_to_surface
     from .io import write_results
+    from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
-    result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
-                      checkpoint=out_dir / CHECKPOINT, resume=resume)
-    fields = map_to_surface(result) if len(result.yarns.points) else None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        written = write_results(result, fields, out_dir)
-    notes += [f"warning: {w.message}" for w in caught]
+    work = estimate(config, mandrel, centerline, force=force)
+    notes = [*notes, *(f"note: {line}" for line in work.lines())]
+    check_results_folder(out_dir, work.result_bytes)
+    checkpoint = out_dir / CHECKPOINT
+    with RunLock(out_dir):
+        result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
+                          checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        fields = map_to_surface(result) if len(result.yarns.points) else None
+        try:
+            written = write_results(result, fields, out_dir)
+        except OSError as err:
+            raise ResultsWriteError(
+                f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "
+                f"is kept in {checkpoint}: once the folder is writable, `preform run CONFIG "
+                "--resume` writes the results without simulating again") from None
+        if result.status == "done":
+            Checkpoint(checkpoint, result.config).remove()
     return CaseOutcome(result=result, out_dir=out_dir, written=written, notes=notes)

@@ -102,6 +102,7 @@ class Result:
     status : "done" | "interrupted" | "failed"
     message : why it stopped when not "done"
     wall_time_s : float
+    stop_signal : the signal that stopped an interrupted run ("SIGINT", "SIGTERM", "SIGHUP"), or ""
     """
 
     config: object
@@ -115,6 +116,7 @@ class Result:
     status: str = "done"
     message: str = ""
     wall_time_s: float = 0.0
+    stop_signal: str = ""
 
     @property
     def steps(self) -> int:

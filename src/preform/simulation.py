@@ -10,7 +10,9 @@ computed up to the last good step, with ``status`` saying so. The model is chose
 
 from __future__ import annotations
 
+import dataclasses
 import signal
+import sys
 import threading
 import time as _time
 from contextlib import contextmanager
@@ -55,13 +57,14 @@ def make_zone(config, machine, mandrel):
 
 def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:
     """The stepper of a run at its start (yarns tied, nothing braided yet)."""
+    config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     machine = Machine.from_config(config.machine)
     return Stepper(config, machine, mandrel, centerline, make_zone(config, machine, mandrel),
                    tolerances)
 
 
 def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
-             tolerances: Tolerances = tol) -> Result:
+             tolerances: Tolerances = tol, keep_checkpoint=False) -> Result:
     """Run the configured model and return a Result (see module docstring).
 
     config : preform.config.Config
@@ -74,13 +77,16 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
         stopped; a checkpoint of other inputs, another format or damaged is refused
         (CheckpointError, naming what differs)
     tolerances : step control and geometry settings (``preform.tolerances``)
+    keep_checkpoint : when the run is done, save its final state instead of removing the
+        checkpoint, so that a caller writing results can remove it only once they are complete
+        (``--resume`` on a finished checkpoint makes the results without simulating again)
 
-    Ctrl-C stops after the current step (a second Ctrl-C stops at once).
+    Ctrl-C, SIGTERM (batch schedulers, ``docker stop``) and SIGHUP (a closed terminal) stop after
+    the current step, saying so at once; a second one stops at once.
     """
     wall0 = _time.perf_counter()
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
-    config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     ckpt = None if checkpoint is None else Checkpoint(checkpoint, config)
     stepper = make_stepper(config, mandrel, centerline, tolerances)
     if resume:
@@ -98,22 +104,31 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
             stepper.run(progress=progress, checkpoint=ckpt)
         except KeyboardInterrupt:
             status = "interrupted"
-            message = f"interrupted by the user at t = {stepper.clock.t:.4g} s"
-            if ckpt is not None and stepper.consistent:
-                ckpt.save(stepper.state_arrays())
+            who = "the user (Ctrl-C)" if stepper.stop_signal in ("", "SIGINT") else stepper.stop_signal
+            message = f"interrupted by {who} at t = {stepper.clock.t:.4g} s"
+            if ckpt is not None and stepper.consistent and stepper.save_checkpoint(ckpt):
                 message += "; resume with --resume"
             elif ckpt is not None and ckpt.exists():
                 message += "; stopped inside a step: --resume continues from the last checkpoint"
         except SimulationError as exc:
             status, message = "failed", str(exc)
     if status == "done" and ckpt is not None:
-        ckpt.remove()
-    return stepper.result(status, message, _time.perf_counter() - wall0)
+        if keep_checkpoint:
+            stepper.save_checkpoint(ckpt)
+        else:
+            ckpt.remove()
+    result = stepper.result(status, message, _time.perf_counter() - wall0)
+    return dataclasses.replace(result, stop_signal=stepper.stop_signal if status == "interrupted" else "")
+
+
+#: the signals that stop a run after its current step (SIGHUP where the platform has it)
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextmanager
 def _graceful_interrupt(stepper):
-    """First Ctrl-C: stop after the current step (state stays consistent); second: at once."""
+    """First Ctrl-C / SIGTERM / SIGHUP: say so at once, stop after the current step (the state
+    stays consistent); a second one: stop at once."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -122,9 +137,14 @@ def _graceful_interrupt(stepper):
         if stepper.stop_requested:
             raise KeyboardInterrupt
         stepper.stop_requested = True
+        stepper.stop_signal = signal.Signals(signum).name
+        sys.stderr.write(f"\n{stepper.stop_signal}: stopping after this step and saving the "
+                         "results so far (press Ctrl-C again to stop at once)\n")
+        sys.stderr.flush()
 
-    previous = signal.signal(signal.SIGINT, handler)
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, old in previous.items():
+            signal.signal(sig, old)

@@ -10,6 +10,7 @@ each free yarn runs to, and the depositor walks the fell points over the mandrel
 from __future__ import annotations
 
 import time as _time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,10 @@ from .recording import Recording
 from .result import Result
 from .tolerances import Tolerances, tol
 from .zone import ZoneStep
+
+
+class CheckpointWriteWarning(UserWarning):
+    """A checkpoint could not be written; the run goes on."""
 
 #: seconds of wall time between checkpoints
 CHECKPOINT_EVERY_S = 30.0
@@ -129,6 +134,8 @@ class Stepper:
         self.step = 0
         self.braided = self.braided_length_estimate()
         self.stop_requested = False
+        self.stop_signal = ""        # the signal that asked for the stop ("SIGINT", "SIGTERM", ...)
+        self.checkpoint_failed = False
         self.consistent = True   # False while a step is half applied
 
     # -- process kinematics -------------------------------------------------------------------
@@ -167,10 +174,25 @@ class Stepper:
                         f"{target} m were braided ({self.braided:.4g} m): shorten [process] braid_length "
                         "or lengthen the mandrel")
                 if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every_s:
-                    checkpoint.save(self.state_arrays())
+                    self.save_checkpoint(checkpoint)
                     last_save = _time.perf_counter()
         finally:
             bar(None)
+
+    def save_checkpoint(self, checkpoint) -> bool:
+        """Save the state; a write that fails (disk full, read-only) does not stop the run: the
+        first failure warns (CheckpointWriteWarning), the partial file is already removed
+        (``checkpoint.write_exclusive``), and later saves are tried again. True if it saved."""
+        try:
+            checkpoint.save(self.state_arrays())
+            return True
+        except OSError as err:
+            if not self.checkpoint_failed:
+                warnings.warn(f"could not save the checkpoint {checkpoint.path} ({err.strerror or err}); "
+                              "the run goes on, but an interruption now loses the work since the "
+                              "last good checkpoint", CheckpointWriteWarning, stacklevel=2)
+            self.checkpoint_failed = True
+            return False
 
     def advance(self, v):
         """One time step; the state changes only at the end (an error leaves the last good step)."""
