@@ -156,7 +156,7 @@ class Stepper:
         cfg = self.config
         target = cfg.process.braid_length
         L = self.centerline.length
-        bar = progress_bar(target, progress)
+        bar = progress_bar(target, progress, start=self.braided)
         last_save = _time.perf_counter()
         try:
             bar(self.braided)
@@ -308,20 +308,35 @@ class Stepper:
         self.dt, self.snapshot_stride, self.recording = dt, stride, recording
 
 
-def progress_bar(total, enabled):
-    """A callable updated with the braided length; None closes it."""
+#: what the bar says until the first steps are done: a first run compiles its numba kernels
+#: there (cached for later runs), which takes seconds with no braided length to show
+STARTING = "starting (compiling the kernels on a first run)"
+
+
+def progress_bar(total, enabled, start=0.0):
+    """A callable updated with the braided length; None closes it.
+
+    ``start``: the braided length a resumed run starts from; the remaining time is estimated from
+    the length braided since (tqdm's ``initial``), not as if the resumed part took no time.
+    """
     if not enabled:
         return lambda value: None
     from tqdm import tqdm
 
-    bar = tqdm(total=round(total, 6), unit="m", desc="braiding", leave=True,
+    start = round(min(max(start, 0.0), total), 6)
+    bar = tqdm(total=round(total, 6), initial=start, unit="m", desc=STARTING, leave=True,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.3f}/{total:.3f} m braided [{elapsed}<{remaining}]")
+    calls = [0]
 
     def update(value):
         if value is None:
             bar.close()
             return
+        calls[0] += 1
+        if calls[0] == 2:   # the first steps are done: kernels compiled, braiding under way
+            bar.set_description_str("braiding", refresh=False)
         bar.n = round(min(value, total), 6)
         bar.refresh()
 
+    update.bar = bar
     return update
