@@ -307,3 +307,44 @@ def test_case_b_perimeter_equal_at_both_ends(shipped):
     assert square == pytest.approx(circle, rel=0.02)
     exact = shapes.rounded_square_perimeter(0.09, 0.015)
     assert square == pytest.approx(exact, rel=0.02) and circle == pytest.approx(exact, rel=0.02)
+
+
+@pytest.mark.parametrize("sections", [16, 24, 100, 128, 200, 256])
+@pytest.mark.parametrize("encoding", ["stl", "stl_ascii"])
+@pytest.mark.parametrize("scale", [1.0, 1000.0])
+def test_auto_centerline_on_trimesh_capped_cylinders(tmp_path, sections, encoding, scale):
+    # trimesh's capped cylinders: long side slivers, so no side face centroid is near the tip; the
+    # tip direction used to come from the sign of a dot product of two perpendicular vectors and
+    # refused 7 of these 12 ("no cross-section near the tip"); scale 1000 is an STL in mm read
+    # as m, which must reach the unit check (preflight) instead of failing here
+    import trimesh
+
+    m = trimesh.creation.cylinder(radius=0.04, height=1.6, sections=sections)
+    m.apply_translation([0.0, 0.0, 0.8])
+    m.apply_scale(scale)
+    path = tmp_path / "cyl.stl"
+    m.export(path, file_type=encoding)
+    cl = auto_centerline(load_mandrel(path))
+    # on the axis, tip (z = 0) first, the full length, to the STL's float32 rounding (6e-8 relative)
+    # and ASCII's 6 significant digits (1e-6 relative)
+    assert np.hypot(cl.points[:, 0], cl.points[:, 1]).max() < 1.6e-6 * scale
+    assert cl.points[0, 2] == pytest.approx(0.0, abs=1.6e-6 * scale)
+    assert cl.length == pytest.approx(1.6 * scale, rel=1e-6)
+
+
+def test_auto_centerline_does_not_depend_on_the_triangulation():
+    # the same cylinder as slivers, as a well-shaped sweep and with its faces split 4-way
+    import trimesh
+
+    from preform.geometry import shapes
+
+    m = trimesh.creation.cylinder(radius=0.04, height=1.6, sections=128)
+    m.apply_translation([0.0, 0.0, 0.8])
+    meshes = [(m.vertices, m.faces), shapes.cylinder(0.04, 1.6, n_around=128),
+              trimesh.remesh.subdivide(*shapes.cylinder(0.04, 1.6, n_around=128))]
+    lines = [auto_centerline(mandrel_from_arrays(V, F)) for V, F in meshes]
+    s = np.linspace(0.0, 1.6, 50)
+    ref = lines[0].frames_at(s)[0]
+    for cl in lines[1:]:
+        assert cl.length == pytest.approx(1.6, rel=1e-9)
+        assert np.abs(cl.frames_at(s)[0] - ref).max() < 1e-6

@@ -326,50 +326,64 @@ def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
     return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s))
 
 
-def _face_centroids_areas(mandrel):
-    """Face centroids (nf, 3) m and areas (nf,) m^2."""
+#: surface samples for the principal axes of ``auto_centerline``
+AXIS_SAMPLES = 20_000
+
+
+def surface_samples(mandrel, n: int = AXIS_SAMPLES, seed: int = 0):
+    """Points (n, 3) m spread evenly over the surface: faces drawn with probability proportional
+    to their area, a uniform point in each (``p = a + u (b - a) + v (c - a)``, ``u + v <= 1``).
+
+    Every equal-area patch gets the same expected number of points whatever the triangulation,
+    so statistics of these points (principal axes, the region near the tip) are properties of the
+    surface: face centroids are not (a 1.6 m long CAD sliver of a cylinder's side has its centroid
+    in the middle, so no side face is near either end). The seed is fixed: the same mandrel
+    always gives the same centerline.
+    """
     p = mandrel.vertices[mandrel.faces]
     area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    return p.mean(axis=1), area
+    rng = np.random.default_rng(seed)
+    cdf = np.cumsum(area)
+    face = np.minimum(np.searchsorted(cdf, rng.random(n) * cdf[-1], side="right"), len(area) - 1)
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1.0
+    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+    a = p[face, 0]
+    return a + u[:, None] * (p[face, 1] - a) + v[:, None] * (p[face, 2] - a)
 
 
-def _principal_axis(points, weights):
-    """Unit direction (3,) of largest weighted spread of points (m, 3), and their weighted mean.
-
-    Area weights make the axis a property of the surface, not of how densely it was meshed (a
-    finely meshed fillet would otherwise pull a vertex PCA towards itself).
-    """
-    w = weights / weights.sum()
-    centre = w @ points
+def _principal_axis(points):
+    """Unit direction (3,) of largest spread of points (m, 3) and their mean (3,)."""
+    centre = points.mean(axis=0)
     d = points - centre
-    cov = (d * w[:, None]).T @ d
-    _, vecs = np.linalg.eigh(cov)
+    _, vecs = np.linalg.eigh(d.T @ d)
     return vecs[:, -1], centre
 
 
-def _tip_axis(points, weights, global_axis):
-    """Axis (3,) of the surface near the tip and its weighted centre (3,).
+def _tip_axis(points, global_axis):
+    """Axis (3,) of the surface near the tip, pointing away from the tip, and its centre (3,).
 
     The local principal axis where the tip region is elongated (a bent part's global axis is
     oblique there); the global axis where it is not (a fat tip region is mostly end cap, whose
-    principal axis lies across the mandrel). The trace corrects the tangent from the centroids.
+    principal axis lies across the mandrel). An eigenvector's sign is arbitrary: it is turned to
+    point along ``global_axis`` (tip towards the far end), which a local axis within 90 deg of the
+    global one always can be. The trace corrects the tangent from the centroids.
     """
-    w = weights / weights.sum()
-    centre = w @ points
+    centre = points.mean(axis=0)
     d = points - centre
-    vals, vecs = np.linalg.eigh((d * w[:, None]).T @ d)
-    if vals[-1] > ELONGATED * vals[-2]:
-        return vecs[:, -1], centre
-    return global_axis, centre
+    vals, vecs = np.linalg.eigh(d.T @ d)
+    T = vecs[:, -1] if vals[-1] > ELONGATED * vals[-2] else global_axis
+    return (T if T @ global_axis >= 0 else -T), centre
 
 
 def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None) -> Centerline:
     """Slice centroids traced along the mandrel (``centerline = "auto"``).
 
-    The two ends come from the principal axis of the surface (area-weighted PCA of the face
-    centroids); the tip is the end (on that axis) nearer the STL frame's origin, so a mandrel
-    modelled from its tip at the origin, as the shipped ones are, is fed tip first. To feed the
-    other end first, move the STL's origin or give a centerline CSV.
+    The two ends come from the principal axis of the surface (PCA of points spread evenly over it,
+    :func:`surface_samples`, so the result does not depend on the triangulation); the tip is the
+    end (on that axis) nearer the STL frame's origin, so a mandrel modelled from its tip at the
+    origin, as the shipped ones are, is fed tip first. To feed the other end first, move the STL's
+    origin or give a centerline CSV.
 
     From the tip the trace steps ``h = extent / n_sections`` (default 200 sections), slices the
     mesh normal to the current tangent and takes the area centroid of the section loop nearest
@@ -378,8 +392,8 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     same sections.
     """
     V = mandrel.vertices
-    C, A = _face_centroids_areas(mandrel)
-    axis, centre = _principal_axis(C, A)
+    P = surface_samples(mandrel)
+    axis, centre = _principal_axis(P)
     proj = (V - centre) @ axis
     # the two ends, on the principal axis; the tip is the one nearer the STL origin
     if np.linalg.norm(centre + proj.max() * axis) < np.linalg.norm(centre + proj.min() * axis):
@@ -389,9 +403,8 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     tip = V[np.argmin(proj)]
     # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
-    near_faces = np.linalg.norm(C - tip, axis=1) < 0.25 * extent
-    T, local_centre = _tip_axis(C[near_faces], A[near_faces], axis)
-    T = T if T @ (local_centre - tip) >= 0 else -T
+    near_samples = P[np.linalg.norm(P - tip, axis=1) < 0.25 * extent]
+    T, local_centre = _tip_axis(near_samples, axis) if len(near_samples) >= 3 else (axis, centre)
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
     n = n_sections or 200
     h = extent / n
