@@ -326,41 +326,37 @@ def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
     return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s))
 
 
-#: surface samples for the principal axes of ``auto_centerline``
-AXIS_SAMPLES = 20_000
+#: ``auto_centerline`` cuts faces into pieces no longer than this fraction of the mandrel's
+#: extent before selecting the surface near the tip by piece centroid (a 1.6 m CAD sliver of a
+#: cylinder's side has its centroid mid-length, so no whole side face is near either end)
+PIECE_FRACTION = 0.02
 
 
-def surface_samples(mandrel, n: int = AXIS_SAMPLES, seed: int = 0):
-    """Points (n, 3) m spread evenly over the surface: faces drawn with probability proportional
-    to their area, a uniform point in each (``p = a + u (b - a) + v (c - a)``, ``u + v <= 1``).
+def surface_moments(vertices, faces):
+    """Areas (nf,) m^2, centroids (nf, 3) m and second moments (nf, 3, 3) m^4 of triangles.
 
-    Every equal-area patch gets the same expected number of points whatever the triangulation,
-    so statistics of these points (principal axes, the region near the tip) are properties of the
-    surface: face centroids are not (a 1.6 m long CAD sliver of a cylinder's side has its centroid
-    in the middle, so no side face is near either end). The seed is fixed: the same mandrel
-    always gives the same centerline.
+    Second moment of triangle (a, b, c) over its area: ``A / 12 (a a^T + b b^T + c c^T + s s^T)``
+    with ``s = a + b + c`` (exact for a uniform density), so principal axes computed from them
+    are properties of the surface, not of how it was triangulated.
     """
-    p = mandrel.vertices[mandrel.faces]
+    p = vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    rng = np.random.default_rng(seed)
-    cdf = np.cumsum(area)
-    face = np.minimum(np.searchsorted(cdf, rng.random(n) * cdf[-1], side="right"), len(area) - 1)
-    u, v = rng.random(n), rng.random(n)
-    flip = u + v > 1.0
-    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
-    a = p[face, 0]
-    return a + u[:, None] * (p[face, 1] - a) + v[:, None] * (p[face, 2] - a)
+    s = p.sum(axis=1)
+    second = (np.einsum("fki,fkj->fij", p, p) + np.einsum("fi,fj->fij", s, s)) * (area / 12.0)[:, None, None]
+    return area, s / 3.0, second
 
 
-def _principal_axis(points):
-    """Unit direction (3,) of largest spread of points (m, 3) and their mean (3,)."""
-    centre = points.mean(axis=0)
-    d = points - centre
-    _, vecs = np.linalg.eigh(d.T @ d)
-    return vecs[:, -1], centre
+def _principal_axes(area, centroid, second):
+    """Eigenvalues (3,) ascending, eigenvectors (3, 3) (columns) and centre (3,) of the surface
+    pieces' covariance ``sum M_i / A - c c^T``."""
+    A = area.sum()
+    centre = (area @ centroid) / A
+    cov = second.sum(axis=0) / A - np.outer(centre, centre)
+    vals, vecs = np.linalg.eigh(cov)
+    return vals, vecs, centre
 
 
-def _tip_axis(points, global_axis):
+def _tip_axis(area, centroid, second, global_axis):
     """Axis (3,) of the surface near the tip, pointing away from the tip, and its centre (3,).
 
     The local principal axis where the tip region is elongated (a bent part's global axis is
@@ -369,9 +365,7 @@ def _tip_axis(points, global_axis):
     point along ``global_axis`` (tip towards the far end), which a local axis within 90 deg of the
     global one always can be. The trace corrects the tangent from the centroids.
     """
-    centre = points.mean(axis=0)
-    d = points - centre
-    vals, vecs = np.linalg.eigh(d.T @ d)
+    vals, vecs, centre = _principal_axes(area, centroid, second)
     T = vecs[:, -1] if vals[-1] > ELONGATED * vals[-2] else global_axis
     return (T if T @ global_axis >= 0 else -T), centre
 
@@ -379,8 +373,9 @@ def _tip_axis(points, global_axis):
 def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None) -> Centerline:
     """Slice centroids traced along the mandrel (``centerline = "auto"``).
 
-    The two ends come from the principal axis of the surface (PCA of points spread evenly over it,
-    :func:`surface_samples`, so the result does not depend on the triangulation); the tip is the
+    The two ends come from the principal axis of the surface (exact second moments of its
+    triangles, :func:`surface_moments`, so the result does not depend on the triangulation); the
+    tip is the
     end (on that axis) nearer the STL frame's origin, so a mandrel modelled from its tip at the
     origin, as the shipped ones are, is fed tip first. To feed the other end first, move the STL's
     origin or give a centerline CSV.
@@ -391,9 +386,12 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     are extended to the mesh's extremes along the end tangents. ``perimeter`` is filled from the
     same sections.
     """
+    from .remesh import subdivide_long_edges
+
     V = mandrel.vertices
-    P = surface_samples(mandrel)
-    axis, centre = _principal_axis(P)
+    area, C, M = surface_moments(V, mandrel.faces)
+    _, vecs, centre = _principal_axes(area, C, M)
+    axis = vecs[:, -1]
     proj = (V - centre) @ axis
     # the two ends, on the principal axis; the tip is the one nearer the STL origin
     if np.linalg.norm(centre + proj.max() * axis) < np.linalg.norm(centre + proj.min() * axis):
@@ -403,8 +401,10 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     tip = V[np.argmin(proj)]
     # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
-    near_samples = P[np.linalg.norm(P - tip, axis=1) < 0.25 * extent]
-    T, local_centre = _tip_axis(near_samples, axis) if len(near_samples) >= 3 else (axis, centre)
+    Vp, Fp, _ = subdivide_long_edges(V, mandrel.faces, PIECE_FRACTION * extent)
+    area, C, M = surface_moments(Vp, Fp)
+    near_pieces = np.linalg.norm(C - tip, axis=1) < 0.25 * extent
+    T, local_centre = _tip_axis(area[near_pieces], C[near_pieces], M[near_pieces], axis)
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
     n = n_sections or 200
     h = extent / n
