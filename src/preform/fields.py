@@ -280,6 +280,24 @@ def pool(centroids, normals, radius, values, sources=None):
 
 # ------------------------------------------------------------------------------------- fields
 
+def centroid_normals(vertices, faces, normals):
+    """Smooth unit normal at each face centroid (nf, 3): the mean of the face's crease-split,
+    angle-weighted corner normals (as the mandrel's, tolerances.crease_angle_deg).
+
+    A chord face of a curved surface is tilted against the surface under its centroid by up to
+    ``h / (2 r)`` (on a prism the tilt can be about any axis, as the corners sit at different
+    heights), so the centerline tangent projected onto the facet is not its projection onto the
+    surface; the smooth normal is the surface's to second order in ``h``. The braid angle is
+    measured in the frame of this normal (DESIGN.md §2: the angle to the projection of the
+    tangent onto the surface's tangent plane).
+    """
+    from .geometry.mandrel import _corner_normals
+
+    cn = _corner_normals(vertices, faces, normals).sum(axis=1)
+    norm = np.linalg.norm(cn, axis=1)
+    return np.divide(cn, norm[:, None], out=normals.copy(), where=norm[:, None] > 0)
+
+
 def surface_tangent(result, centroids, normals):
     """Unit surface projection of the centerline tangent at each centroid (nf, 3); 0 on end caps."""
     s, _ = result.centerline.project(centroids)
@@ -309,11 +327,26 @@ def local_frames(normals, tangent):
 
 
 def planar_moments(moment, e1, e2):
-    """3D direction moments (nf, 2, 3, 3) in each face's frame: (nf, 2, 3) = (aa, ab, bb), m."""
+    """3D direction moments (nf, 2, 3, 3) in each face's frame: (nf, 2, 3) = (aa, ab, bb), m.
+
+    e1, e2 span the plane normal to ``n = e1 x e2`` (the smooth normal, :func:`centroid_normals`).
+    A yarn direction ``d = a e1 + b e2 + c n`` with ``c != 0`` (the yarn, on the mandrel, is not
+    quite tangent to the smooth plane of a chord face) is unfolded into the plane keeping its
+    angle to e1: ``b' = sign(b) sqrt(b^2 + c^2)``, so ``bb' = bb + cc`` exactly and
+    ``ab' = ab sqrt(bb' / bb)`` (exact when the pieces of a group in a face share one ``c / b``,
+    as neighbouring pieces of a yarn on a smooth surface do); projecting instead would shorten
+    ``b`` and the braid angle with it (``tan alpha' = tan alpha cos(tilt)``).
+    """
+    n = np.cross(e1, e2)
     ma = np.einsum("fgij,fj->fgi", moment, e1)
     mb = np.einsum("fgij,fj->fgi", moment, e2)
-    return np.stack([np.einsum("fgi,fi->fg", ma, e1), np.einsum("fgi,fi->fg", ma, e2),
-                     np.einsum("fgi,fi->fg", mb, e2)], axis=-1)
+    aa = np.einsum("fgi,fi->fg", ma, e1)
+    ab = np.einsum("fgi,fi->fg", ma, e2)
+    bb = np.einsum("fgi,fi->fg", mb, e2)
+    cc = np.einsum("fgij,fi,fj->fg", moment, n, n)
+    bb_unfolded = bb + cc
+    scale = np.sqrt(np.divide(bb_unfolded, bb, out=np.ones_like(bb), where=bb > 0))
+    return np.stack([aa, ab * scale, bb_unfolded], axis=-1)
 
 
 def principal_direction_2d(aa, ab, bb):
@@ -382,8 +415,9 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     length, moment, first, unmapped = clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
     width = float(result.config.yarn.width)
     thickness = float(result.config.yarn.thickness)
-    tangent = surface_tangent(result, centroids, normals)
-    e1, e2 = local_frames(normals, tangent)
+    smooth = centroid_normals(V, F, normals)
+    tangent = surface_tangent(result, centroids, smooth)
+    e1, e2 = local_frames(smooth, tangent)
     rho = default_pool_radius(h, width) if pool_radius_m is None else float(pool_radius_m)
     planar = planar_moments(moment, e1, e2)
     if rho > 0:
@@ -398,6 +432,12 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     else:
         A, L, M = areas, length, planar
     data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width)
+    for name in GROUPS:  # directions shown in the facet's plane (the angle is the smooth frame's)
+        d = data[f"{name}_direction"]
+        d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
+        norm = np.linalg.norm(d, axis=1)
+        data[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
+                                              where=norm[:, None] > 0)
     jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
     k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
     hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
