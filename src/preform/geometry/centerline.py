@@ -222,12 +222,37 @@ def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
     return path
 
 
+def _slab_index(mesh):
+    """Face centroids (nf, 3) and each face's largest centroid-to-corner distance (nf,) m, cached
+    on the trimesh object: a plane farther than that from a centroid cannot cut the face."""
+    cached = mesh.metadata.get("_preform_slab")
+    if cached is None:
+        tri = mesh.vertices.view(np.ndarray)[mesh.faces.view(np.ndarray)]
+        centroids = tri.mean(axis=1)
+        reach = np.sqrt(((tri - centroids[:, None]) ** 2).sum(axis=2).max(axis=1))
+        cached = mesh.metadata["_preform_slab"] = (centroids, reach)
+    return cached
+
+
 def _section_loops(mesh, origin, normal):
-    """Closed section loops (list of (k, 3) arrays, first point repeated last) of a mesh with a plane."""
+    """Closed section loops (list of (k, 3) arrays, first point repeated last) of a mesh with a plane.
+
+    Only the faces whose centroid lies within their own centroid-to-corner distance of the
+    plane are cut (trimesh's ``local_faces``): on a 1 M-face mandrel a section then costs a few
+    ms instead of 77 ms for the whole mesh.
+    """
     from trimesh.intersections import mesh_plane
 
+    centroids, reach = _slab_index(mesh)
+    normal = np.asarray(normal, dtype=float)
+    level = float(np.asarray(origin, dtype=float) @ normal)
+    local = np.nonzero(np.abs(centroids @ normal - level) <= reach * (1.0 + 1e-9))[0]
+    if len(local) == 0:
+        return []
+    dots = mesh.vertices.view(np.ndarray) @ normal - level
     try:
-        segments = mesh_plane(mesh, plane_normal=normal, plane_origin=origin)
+        segments = mesh_plane(mesh, plane_normal=normal, plane_origin=origin, local_faces=local,
+                              cached_dots=dots)
     except Exception:
         return []
     return chain_segments(np.asarray(segments))

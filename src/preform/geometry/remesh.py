@@ -82,7 +82,14 @@ def subdivide_long_edges(vertices, faces, h):
     """
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
-    edges, pieces, face_edges = _edge_points(V, F, h)
+    tri = V[F]
+    long_face = (np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)
+    if not long_face.any():
+        return V, F, np.arange(len(F), dtype=np.int64)          # nothing to cut
+    # only faces with a long edge change; a long edge's two faces are both among them, and their
+    # short edges get no points, so the untouched faces stay conforming
+    cut_ids = np.nonzero(long_face)[0]
+    edges, pieces, face_edges = _edge_points(V, F[cut_ids], h)
     # interior points of edge e, from edges[e, 0] to edges[e, 1]: ids start[e] ... start[e] + pieces[e] - 2
     n_new = pieces - 1
     start = len(V) + np.concatenate([[0], np.cumsum(n_new)[:-1]])
@@ -92,9 +99,8 @@ def subdivide_long_edges(vertices, faces, h):
     new_points = (1.0 - t) * V[edges[e_rep, 0]] + t * V[edges[e_rep, 1]]
     V_out = np.vstack([V, new_points])
 
-    cut = (pieces[face_edges] > 1).any(axis=1)
-    out_faces = [F[~cut]]
-    out_source = [np.nonzero(~cut)[0]]
+    out_faces = [F[~long_face]]
+    out_source = [np.nonzero(~long_face)[0]]
 
     def chain(u, v, e):
         """Vertex ids from u to v along edge e, both ends included."""
@@ -105,13 +111,13 @@ def subdivide_long_edges(vertices, faces, h):
 
     corner_len = np.linalg.norm(V[np.roll(F, -1, axis=1)] - V[F], axis=2)
     tris, src = [], []
-    for f in np.nonzero(cut)[0]:
+    for i, f in enumerate(cut_ids):
         c = F[f]
         s = int(np.argmin(corner_len[f]))          # shortest edge: corners s -> s+1
         apex, ca, cb = c[(s + 2) % 3], c[s], c[(s + 1) % 3]
-        A = chain(apex, ca, face_edges[f, (s + 2) % 3])   # edge s+2 runs from corner s+2 to s
-        B = chain(apex, cb, face_edges[f, (s + 1) % 3])   # edge s+1 runs from corner s+1 to s+2
-        base = chain(ca, cb, face_edges[f, s])
+        A = chain(apex, ca, face_edges[i, (s + 2) % 3])   # edge s+2 runs from corner s+2 to s
+        B = chain(apex, cb, face_edges[i, (s + 1) % 3])   # edge s+1 runs from corner s+1 to s+2
+        base = chain(ca, cb, face_edges[i, s])
         m, n = len(A) - 1, len(B) - 1
         local = [(apex, A[1], B[1])]
         i = j = 1
