@@ -146,7 +146,7 @@ def test_project_against_brute_force(bent_path):
     rng = np.random.default_rng(4)
     on = cl.frames_at(rng.uniform(0.0, cl.length, 300))[0]
     points = on + rng.normal(scale=0.03, size=on.shape)        # well within the bend radius 0.35 m
-    s, d = cl.project(points, chunk=64)                       # several chunks
+    s, d = cl.project(points)
     # brute force: every segment sampled at spacing <= h; the nearest sample is at most h/2 farther
     # than the true closest point, and (for points this close to a smooth bend) at an arc length
     # within a few h of it

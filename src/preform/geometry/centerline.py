@@ -67,24 +67,19 @@ class Centerline:
         p, T, N, B = self.frames_at([s])
         return p[0], T[0], N[0], B[0]
 
-    def project(self, points, chunk: int = 4096):
-        """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m."""
-        points = np.asarray(points, dtype=float).reshape(-1, 3)
-        a = self.points[:-1]
-        ab = self.points[1:] - a
-        L2 = np.einsum("ij,ij->i", ab, ab)
+    def project(self, points):
+        """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m.
+
+        Every segment is tried for every point (``_kernels.mesh.project_to_polyline``, exact;
+        0.5 M mandrel vertices against 200 segments in well under a second).
+        """
+        from .._kernels.mesh import project_to_polyline
+
+        points = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
         out_s = np.empty(len(points))
         out_d = np.empty(len(points))
-        for lo in range(0, len(points), chunk):
-            p = points[lo:lo + chunk]
-            u = np.einsum("mij,ij->mi", p[:, None, :] - a[None], ab) / np.where(L2 > 0, L2, 1.0)
-            u = np.clip(u, 0.0, 1.0)
-            q = a[None] + u[..., None] * ab[None]
-            d = np.linalg.norm(q - p[:, None, :], axis=2)
-            j = np.argmin(d, axis=1)
-            r = np.arange(len(p))
-            out_s[lo:lo + chunk] = self.s[j] + u[r, j] * (self.s[j + 1] - self.s[j])
-            out_d[lo:lo + chunk] = d[r, j]
+        project_to_polyline(points, np.ascontiguousarray(self.points, dtype=float),
+                            np.ascontiguousarray(self.s, dtype=float), out_s, out_d)
         return out_s, out_d
 
 
