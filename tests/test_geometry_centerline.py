@@ -348,3 +348,12 @@ def test_auto_centerline_does_not_depend_on_the_triangulation():
     for cl in lines[1:]:
         assert cl.length == pytest.approx(1.6, rel=1e-9)
         assert np.abs(cl.frames_at(s)[0] - ref).max() < 1e-6
+
+
+def test_frame_at_is_frames_at_for_one_value(bent_path):
+    # the scalar fast path against the vectorised one, inside, at the points and beyond both ends
+    cl = centerline_from_points(bent_path)
+    rng = np.random.default_rng(5)
+    for s in np.concatenate([rng.uniform(-0.2, cl.length + 0.2, 500), cl.s]):
+        for one, many in zip(cl.frame_at(s), cl.frames_at([s])):
+            assert np.allclose(one, many[0], rtol=0, atol=1e-14)

@@ -8,6 +8,7 @@ the world axis least aligned with the tip tangent.
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from dataclasses import dataclass, replace
@@ -63,9 +64,26 @@ class Centerline:
         return p, T, N, B
 
     def frame_at(self, s: float):
-        """(point, T, N, B), each (3,), at one arc length."""
-        p, T, N, B = self.frames_at([s])
-        return p[0], T[0], N[0], B[0]
+        """(point, T, N, B), each (3,), at one arc length: frames_at for one value, without its
+        array set-up (the pose is taken twice per time step)."""
+        S = self.s
+        s = float(s)
+        i = min(max(int(np.searchsorted(S, s, side="right")) - 1, 0), len(S) - 2)
+        u = (s - S[i]) / (S[i + 1] - S[i])
+        w = min(max(u, 0.0), 1.0)
+        T = (1 - w) * self.tangents[i] + w * self.tangents[i + 1]
+        T = T / math.sqrt(T @ T)
+        N = (1 - w) * self.normals[i] + w * self.normals[i + 1]
+        N = N - (N @ T) * T
+        N = N / math.sqrt(N @ N)
+        B = np.array([T[1] * N[2] - T[2] * N[1], T[2] * N[0] - T[0] * N[2], T[0] * N[1] - T[1] * N[0]])
+        if s < S[0]:
+            p = self.points[0] + (s - S[0]) * self.tangents[0]
+        elif s > S[-1]:
+            p = self.points[-1] + (s - S[-1]) * self.tangents[-1]
+        else:
+            p = self.points[i] + u * (self.points[i + 1] - self.points[i])
+        return p, T, N, B
 
     def project(self, points):
         """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m.
