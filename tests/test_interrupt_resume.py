@@ -35,7 +35,7 @@ initial_position = 0.05
 braid_length = 0.5
 
 [model]
-time_step = 0.01
+time_step = 0.005
 
 [output]
 dir = "{out}"
@@ -58,12 +58,13 @@ def _preform(*args, **kw):
 def test_interrupted_run_is_marked_and_resumes_to_the_same_history(tmp_path):
     cfg = _case(tmp_path, "stopped")
     proc = _preform("run", cfg)
-    # wait until the simulation is stepping (the progress bar is on stderr), then Ctrl-C
+    # wait until the simulation is stepping (the progress bar is on stderr), then Ctrl-C; the
+    # simulation takes about 4 s at this time step (13600 steps), so 0.5 s in it is still stepping
     seen = b""
     deadline = time.time() + 300
     while b"braiding" not in seen and time.time() < deadline:
         seen += os.read(proc.stderr.fileno(), 256)
-    time.sleep(2.0)
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=300)
     assert proc.returncode == 130, err.decode()[-2000:]
