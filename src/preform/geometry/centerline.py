@@ -262,7 +262,13 @@ def _section_loops(mesh, origin, normal):
     local = np.nonzero(np.abs(centroids @ normal - level) <= reach * (1.0 + 1e-9))[0]
     if len(local) == 0:
         return []
-    dots = mesh.vertices.view(np.ndarray) @ normal - level
+    # mesh_plane reads the dots of the local faces' vertices only: fill just those
+    dots = mesh.metadata.get("_preform_dots")
+    V = mesh.vertices.view(np.ndarray)
+    if dots is None or len(dots) != len(V):
+        dots = mesh.metadata["_preform_dots"] = np.zeros(len(V))
+    used = mesh.faces.view(np.ndarray)[local].reshape(-1)
+    dots[used] = V[used] @ normal - level
     try:
         segments = mesh_plane(mesh, plane_normal=normal, plane_origin=origin, local_faces=local,
                               cached_dots=dots)
