@@ -83,10 +83,10 @@ def refine_to_edge_length(vertices, faces, max_edge):
 
     Longest-edge bisection (Rivara): each pass bisects the longest edge of every face that has an
     edge above ``max_edge``, plus, for conformity, the longest edge of every face sharing a split
-    edge (repeated until closed). Bisection keeps a face's shape: a needle of length L and width
-    w becomes needles of L / 2 and w / 2, so long CAD slivers are over-refined (a cylinder of
-    1 m x 5 mm slivers refined to 12 mm edges: 52 times the faces of an even mesh of that edge,
-    median aspect ratio 51), though every edge ends up below ``max_edge``.
+    edge (repeated until closed). Bisection keeps a face's shape (a needle of length L and width
+    w becomes needles of L / 2 and w / 2), so it suits faces that are already about as wide as
+    long: :func:`fields_on_input` uses it after cutting long edges into pieces
+    (:func:`preform.geometry.remesh.subdivide_long_edges`); the field mesh itself is remeshed.
 
     vertices : (nv, 3) float64, m;  faces : (nf, 3) int64;  max_edge : float, m (> 0)
     returns : (vertices (nv', 3) float64, faces (nf', 3) int64, source_faces (nf',) int64), the

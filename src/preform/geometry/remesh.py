@@ -33,26 +33,18 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RemeshSettings:
-    """Settings of :func:`isotropic_remesh`."""
+    """Settings of :func:`isotropic_remesh` (the measurements behind them: docs/decisions.md)."""
 
-    #: remeshing iterations: 10 reach a maximum aspect ratio of about 2 on the sliver cylinder and
-    #: on case A once the long edges are pre-cut (20 take twice the time for no better maximum)
+    #: remeshing iterations: enough for a maximum aspect ratio of about 2 once long edges are pre-cut
     iterations: int = 10
-    #: pre-cut input edges into pieces of at most this many target lengths (see the module
-    #: docstring): 2 took 1.5 s on the sliver cylinder and 0.7 s on case A, 1 took 2.1 s and 3.9 s
-    #: (the remesher then starts from 3x the faces of case A), 4 took 3.9 s on the slivers
+    #: pre-cut input edges to at most this many target lengths: the remesher then starts at its scale
     precut_lengths: float = 2.0
-    #: over-fine input (more faces than this many times the ideal count ``area / (sqrt(3)/4 h^2)``)
-    #: is first decimated to that many (quadric error, pyfqmr): the remesher's first collapse pass
-    #: over 1 M faces alone took 29 s; decimating that cylinder (r 40 mm) to 8x took 3.2 s with
-    #: 0.06 mm radius error, and the remesh of the result 3.4 s (0.26 mm off the radius, against
-    #: the 0.45 mm chord sag of 12 mm edges themselves)
+    #: decimate input with more faces than this many times ``area / (sqrt(3)/4 h^2)`` to that many:
+    #: the decimated surface stays within the field mesh's own chord sag, the remesh gets cheap
     decimate_above: float = 8.0
-    #: pyfqmr's aggressiveness (its default is 7): 5 kept the error above; 3 gave 0.06 mm after
-    #: the remesh but left twice the faces for it (7.5 s)
+    #: pyfqmr's aggressiveness (its default 7): 5 keeps the decimation error below the chord sag
     decimate_aggressiveness: int = 5
-    #: dihedral angle (deg) above which an input edge is a feature line kept by the remesher: a
-    #: cap rim is 90 deg; the facets of a smooth part meshed at >= 16 sections turn by <= 22.5 deg
+    #: dihedral angle (deg) of feature lines: a cap rim is 90 deg, smooth facets at >= 16 sections <= 22.5
     feature_angle_deg: float = 45.0
 
 
