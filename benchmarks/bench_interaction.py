@@ -1,6 +1,6 @@
 """Interaction model timing (issue 4, item 7) and frontal residual per iteration.
 
-``python benchmarks/bench_interaction.py [--full] [--png residual.png]``
+``python benchmarks/bench_interaction.py [--full] [--png residual.png] [--linear-solver splu]``
 
 * default: a synthetic zone (fell points held on a 75 mm circle at z = 0.6 m, case-A machine
   speeds, spool radius 1.382 m) for 48, 96 and 144 carriers: prints the time per crossing per
@@ -15,7 +15,7 @@
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
-  study of ``simulate.default_time_step``.
+  study of ``stepping.default_time_step``.
 """
 
 from __future__ import annotations
@@ -40,22 +40,24 @@ class _Identity:
 
 
 def _count_newton_steps():
-    """Wrap the solver's Newton step with a counter; the counter (list of one int)."""
+    """Count the Newton steps of runs through ``preform.simulate``, which builds its zone itself:
+    the solver's Newton step is wrapped with a counter (a benchmark's instrument, not a model
+    setting); the counter (list of one int)."""
     from preform.interaction import frontal
 
     count = [0]
-    step = getattr(frontal._newton_step, "wrapped", frontal._newton_step)
+    step = getattr(frontal._newton_step_inplace, "wrapped", frontal._newton_step_inplace)
 
     def counted(*a, **k):
         count[0] += 1
         return step(*a, **k)
 
     counted.wrapped = step
-    frontal._newton_step = counted
+    frontal._newton_step_inplace = counted
     return count
 
 
-def synthetic(carriers, steps, mu=0.25):
+def synthetic(carriers, steps, mu=0.25, linear_solver="auto"):
     """Run a zone with fixed fell points; (wall s, crossing-iterations, residual histories,
     crossings at the end, mean Newton steps per timed step, Newton traces). The residual
     histories are the frontal (friction-bound) iterations of five steps solved to convergence;
@@ -64,6 +66,7 @@ def synthetic(carriers, steps, mu=0.25):
     from preform.config import MachineConfig
     from preform.interaction import frontal
     from preform.interaction.model import InteractionZone
+    from preform.interaction.settings import DEFAULT
     from preform.machine import Machine
 
     mc = MachineConfig(carriers=carriers, spool_radius=1.382, angular_speed=np.radians(13.232),
@@ -71,31 +74,36 @@ def synthetic(carriers, steps, mu=0.25):
     machine = Machine.from_config(mc)
     cfg = NS(yarn=NS(width=4e-3, thickness=2.5e-4, tension=4.7, friction=mu, ring_friction=0.0),
              machine=mc)
-    zone = InteractionZone(cfg, machine, None, distance=lambda p: np.hypot(p[:, 0], p[:, 1]) - 0.075)
+    iterations = [DEFAULT.frontal.max_iterations]   # frontal iterations of the next step
+
+    def solve(*a, **k):
+        k.setdefault("max_iter", iterations[0])
+        return frontal.solve_zone_inplace(*a, **k)
+
+    settings = dataclasses.replace(DEFAULT, newton=dataclasses.replace(
+        DEFAULT.newton, linear_solver=linear_solver))
+    zone = InteractionZone(cfg, machine, None, distance=lambda p: np.hypot(p[:, 0], p[:, 1]) - 0.075,
+                           settings=settings, solve_zone=solve)
     phi = machine.azimuths(0.0)
     F = np.stack([0.075 * np.cos(phi), 0.075 * np.sin(phi), np.full_like(phi, 0.6)], 1)
     zone.start(0.0, F, _Identity())
     dt = 0.01 / machine.omega
     t, work, wall, hist, newton, timed = 0.0, 0, 0.0, [], 0, 0
     traces = []
-    count = _count_newton_steps()
-    defaults = frontal.solve_zone.__kwdefaults__
     for i in range(steps):
         # five steps spread over the run iterate the friction bounds to convergence (as a
         # snapshot does) for the residual plot; they are left out of the timing
         full = i in {int(steps * f) for f in (0.2, 0.4, 0.6, 0.8, 0.99)}
-        if full:
-            defaults["max_iter"] = frontal.SNAPSHOT_ITERATIONS
+        iterations[0] = (DEFAULT.frontal.snapshot_iterations if full
+                         else DEFAULT.frontal.max_iterations)
         t0 = time.perf_counter()
-        before = count[0]
         zs = zone.step(t, dt, F, _Identity())
         if full:
-            defaults["max_iter"] = frontal.MAX_ITERATIONS
             hist.append(zone.last_report.history)
         else:
             wall += time.perf_counter() - t0
-            work += zs.contacts * (count[0] - before)
-            newton += count[0] - before
+            work += zs.contacts * zone.last_report.newton
+            newton += zone.last_report.newton
             timed += 1
             if steps // 2 <= i < steps // 2 + 8:
                 rep = zone.last_report
@@ -109,7 +117,8 @@ def full(carriers, mu, length, step_factor=None):
     kinematic model's default step (None: the interaction model's own default)."""
     import preform as pf
     from preform.machine import Machine
-    from preform.simulate import default_time_step, load_geometry
+    from preform.simulation import load_geometry
+    from preform.stepping import default_time_step
 
     cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
@@ -149,6 +158,9 @@ def main(argv=None):
                     help="--full: time step as a multiple of the kinematic model's default step "
                          "(default: the interaction model's own)")
     ap.add_argument("--png", default=str(ROOT / "benchmarks" / "frontal_residual.png"))
+    ap.add_argument("--linear-solver", default="auto", choices=("auto", "cholmod", "splu"),
+                    help="factorisation of the Newton systems (interaction/linalg.py)")
+    ap.add_argument("--no-plot", action="store_true", help="timings only")
     args = ap.parse_args(argv)
     if args.full:
         for n in args.carriers:
@@ -157,25 +169,29 @@ def main(argv=None):
     synthetic(16, 5)   # JIT warm-up
     hists, traces = {}, {}
     for n in (48, 96, 144):
-        wall, work, hist, m, per_step, trace = synthetic(n, args.steps)
+        wall, work, hist, m, per_step, trace = synthetic(n, args.steps,
+                                                         linear_solver=args.linear_solver)
         hists[n], traces[n] = hist, trace
         print(f"{n} carriers: {args.steps} steps, {m} crossings at the end, wall {wall:.2f} s, "
               f"{1e9 * wall / max(work, 1):.1f} ns per crossing per Newton step, "
-              f"{per_step:.1f} Newton steps per step")
+              f"{per_step:.1f} Newton steps per step ({args.linear_solver})")
+    if args.no_plot:
+        return
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from preform.interaction import frontal
+    from preform.interaction.settings import DEFAULT
+    roundoff = DEFAULT.newton.roundoff
     fig, (ax_r, ax_e, ax_f) = plt.subplots(1, 3, figsize=(15, 4.2))
     rises = e_rises = 0
     for res, E in traces[144]:
         k = np.arange(len(res))
         ax_r.semilogy(k, res, marker=".")
         # E's distance to its value at the solution (the last iterate), floored at its round-off
-        ax_e.semilogy(k, np.maximum(E - E[-1], frontal.ROUNDOFF * abs(E[-1])), marker=".")
+        ax_e.semilogy(k, np.maximum(E - E[-1], roundoff * abs(E[-1])), marker=".")
         rises += int(np.any(np.diff(res) > 0))
-        # Armijo on E allows a rise of its round-off (frontal.ROUNDOFF |E|)
-        e_rises += int(np.any(np.diff(E) > frontal.ROUNDOFF * np.abs(E[1:])))
+        # Armijo on E allows a rise of its round-off (settings.newton.roundoff |E|)
+        e_rises += int(np.any(np.diff(E) > roundoff * np.abs(E[1:])))
     ax_r.set(xlabel="Newton iteration of a time step", ylabel="relative force imbalance",
              title="balance residual per Newton iteration")
     ax_e.set(xlabel="Newton iteration of a time step", ylabel="E - E(solution) (J)",

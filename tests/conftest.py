@@ -75,3 +75,29 @@ def synthetic_result(n_steps=6, snapshot_points=((2, 2, 3, 4), (2, 3, 2, 2))) ->
 @pytest.fixture
 def small_result() -> Result:
     return synthetic_result()
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """``mount(size, read_only=False) -> Path``: a small tmpfs (root only; skips elsewhere).
+
+    Full and read-only filesystems are real here, not monkeypatched writes."""
+    import subprocess
+
+    mounted = []
+
+    def mount(size="256k", read_only=False):
+        if os.geteuid() != 0:
+            pytest.skip("mounting a tmpfs needs root")
+        point = tmp_path / f"fs{len(mounted)}"
+        point.mkdir()
+        opts = f"size={size}" + (",ro" if read_only else "")
+        if subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(point)],
+                          capture_output=True).returncode != 0:
+            pytest.skip("this machine refuses to mount a tmpfs")
+        mounted.append(point)
+        return point
+
+    yield mount
+    for point in mounted:
+        subprocess.run(["umount", "-l", str(point)], capture_output=True)

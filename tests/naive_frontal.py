@@ -3,19 +3,18 @@
 Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
 arrays in creation order as the kernels do), segments are vectors, the energy is written term by
 term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from DESIGN.md
-§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``).
+§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``). The model's constants are
+arguments (``preform.interaction.settings``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from preform._kernels.frontal import COMPRESSION   # a constant of the model, not code
-
 
 def yarn_point(st, c, side, h):
-    s = st.over[c] if side == 0 else -st.over[c]
-    return st.pos[c] + s * h * st.normal[c]
+    o = st.over[c] if side == 0 else -st.over[c]
+    return st.pos[c] + o * h * st.normal[c]
 
 
 def chains(st):
@@ -28,45 +27,52 @@ def polyline(st, k, side, chain, fell, top, h):
     return np.array([fell[k]] + [yarn_point(st, c, side, h) for c in chain] + [top[k]])
 
 
-def energy(st, fell, top, f_top, g, s_old, EA, eps_f, kappa0, h, eps2, eps2_top, l_jam=0.0,
-           k_jam=0.0):
-    """The step energy (no wall) by yarns: stretched segments, jamming of segments between two
-    crossings shorter than l_jam, spool payout (top segment length smoothed by eps2 + eps2_top),
-    friction."""
+def energy(st, fell, top, f_top, bound, centre, EA, compression, eps_f, kappa0, h, eps2, eps2_top,
+           l_jam=0.0, k_jam=0.0, plane=None, k_wall=0.0, pos=None, material=None):
+    """The step energy by yarns: stretched segments, jamming of segments between two crossings
+    shorter than l_jam, spool payout (top segment length smoothed by eps2 + eps2_top), friction,
+    and the wall (``plane`` (m, 6): point and outward normal per crossing; none if None). pos,
+    material: the iterate (default the state's)."""
+    pos = st.pos[: st.m] if pos is None else pos
+    material = st.material[: st.m] if material is None else material
     E = 0.0
     for k, (side, chain) in enumerate(chains(st)):
         if not chain:
             continue
-        pts = polyline(st, k, side, chain, fell, top, h)
-        s = [st.s_fell[k]] + [st.s[c, side] for c in chain]
+        o = np.array([st.over[c] if side == 0 else -st.over[c] for c in chain])
+        pts = np.vstack([fell[k], pos[chain] + o[:, None] * h * st.normal[chain], top[k]])
+        u = [st.material_fell[k]] + [material[c, side] for c in chain]
         for i in range(len(chain)):
             d = pts[i + 1] - pts[i]
             l = np.sqrt(d @ d + eps2)
-            q = s[i + 1] - s[i]
+            q = u[i + 1] - u[i]
             if q <= 0:
                 return np.inf
-            E += 0.5 * EA * (l - q) ** 2 / q * (1.0 if l >= q else COMPRESSION)
+            E += 0.5 * EA * (l - q) ** 2 / q * (1.0 if l >= q else compression)
             if i >= 1 and l < l_jam:      # pts[0] is the fell point
                 E += 0.5 * k_jam * (l_jam - l) ** 2
         d = pts[-1] - pts[-2]
         f = f_top[k]
-        E += (f + f * f / (2 * EA)) * s[-1] + f * np.sqrt(d @ d + eps2 + eps2_top)
-    x = st.s[: st.m] - s_old
-    E += np.sum(g * (np.sqrt(x * x + eps_f ** 2) - eps_f) + 0.5 * kappa0 * x * x)
+        E += (f + f * f / (2 * EA)) * u[-1] + f * np.sqrt(d @ d + eps2 + eps2_top)
+    x = material - centre
+    E += np.sum(bound * (np.sqrt(x * x + eps_f ** 2) - eps_f) + 0.5 * kappa0 * x * x)
+    if plane is not None:
+        dist = np.einsum("ij,ij->i", pos - plane[:, :3], plane[:, 3:])
+        E += 0.5 * k_wall * np.sum(np.minimum(dist, 0.0) ** 2)
     return E
 
 
-def tensions(st, fell, EA, h, eps2):
+def tensions(st, fell, EA, compression, h, eps2):
     """Tension below every crossing (m, 2), walking every yarn from its fell point up."""
     out = np.zeros((st.m, 2))
     for k, (side, chain) in enumerate(chains(st)):
-        prev, s_prev = fell[k], st.s_fell[k]
+        prev, u_prev = fell[k], st.material_fell[k]
         for c in chain:
             p = yarn_point(st, c, side, h)
             l = np.sqrt(np.sum((p - prev) ** 2) + eps2)
-            q = st.s[c, side] - s_prev
-            out[c, side] = EA * (l - q) / q * (1.0 if l >= q else COMPRESSION)
-            prev, s_prev = p, st.s[c, side]
+            q = st.material[c, side] - u_prev
+            out[c, side] = EA * (l - q) / q * (1.0 if l >= q else compression)
+            prev, u_prev = p, st.material[c, side]
     return out
 
 

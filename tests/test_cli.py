@@ -176,7 +176,7 @@ def test_example_mandrel_files_exist_or_are_being_built():
 
 @pytest.fixture
 def stubbed_run(small_result, tmp_path, monkeypatch):
-    """A valid case file, with preform.simulate / checks / fields replaced by stubs that return
+    """A valid case file, with preform.simulation / checks / fields replaced by stubs that return
     the synthetic Result: tests the command's plumbing, not the physics."""
     import dataclasses
     import types
@@ -184,7 +184,8 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     (tmp_path / "mandrel.stl").write_text("solid placeholder\nendsolid placeholder\n")
     config = tmp_path / "case.toml"
     config.write_text(CASE.format(machine_extra=""))
-    state = {"status": "done", "preflight": []}
+    state = {"status": "done", "preflight": [],
+             "mandrel": types.SimpleNamespace(repairs=("filled 1 small hole",))}
 
     def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False):
         state["progress"] = progress
@@ -195,8 +196,8 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
         state["preflight"].append((mandrel, centerline))
         return ["guide ring is tight"]
 
-    monkeypatch.setitem(sys.modules, "preform.simulate", types.SimpleNamespace(
-        simulate=simulate, load_geometry=lambda cfg: ("mandrel", "centerline")))
+    monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
+        simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
     monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
     monkeypatch.setitem(sys.modules, "preform.fields", types.SimpleNamespace(map_to_surface=lambda r: None))
     return config, state
@@ -210,7 +211,8 @@ def test_run_writes_results_and_prints_summary(stubbed_run, tmp_path, capsys):
     lines = captured.out.strip().splitlines()
     assert len(lines) == 3 and lines[0].startswith(f"results: {out}")
     assert "warning: guide ring is tight" in captured.err
-    assert state["preflight"] == [("mandrel", "centerline")] and state["progress"] is False
+    assert "mandrel: filled 1 small hole" in captured.err
+    assert state["preflight"] == [(state["mandrel"], "centerline")] and state["progress"] is False
     summary = json.loads((out / "summary.json").read_text())
     assert summary["inputs"]["machine"]["carriers"] == 16
     assert (out / "history.csv").is_file() and (out / "convergence.pvd").is_file()

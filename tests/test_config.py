@@ -82,7 +82,7 @@ def test_minimal_config_defaults(tmp_path):
     assert cfg.mandrel.roll_reference is None
     assert cfg.machine.pattern == "regular" and cfg.machine.guide_ring is None
     assert (cfg.yarn.tension, cfg.yarn.friction, cfg.yarn.ring_friction) == (4.7, 0.0, 0.0)
-    assert cfg.process.eccentricity == (0.0, 0.0) and cfg.process.pose_lead == 0.0
+    assert cfg.process.eccentricity == (0.0, 0.0) and cfg.process.pose_lead is None   # "auto"
     assert cfg.model.kind == "kinematic" and cfg.model.time_step is None
     assert (cfg.model.start, cfg.model.seed) == ("tip", 0)
     assert cfg.output.dir == (tmp_path / "results" / "case").resolve()
@@ -400,3 +400,60 @@ def test_section_that_is_not_a_table(tmp_path):
     path.write_text("yarn = 3\n" + path.read_text())
     with pytest.raises(ConfigError, match=r"\[yarn\] must be a table"):
         load_config(path)
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = make_case(tmp_path)
+    plain = load_config(path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())   # what Notepad writes
+    assert load_config(path).machine == plain.machine
+
+
+def test_a_folder_given_as_config_is_said_so(tmp_path):
+    with pytest.raises(ConfigError, match="is a folder: give the path of a .toml"):
+        load_config(tmp_path)
+
+
+def test_a_config_not_in_utf8_names_the_byte(tmp_path):
+    path = make_case(tmp_path)
+    path.write_bytes(path.read_bytes() + b"# caf\xe9\n")
+    with pytest.raises(ConfigError, match="not UTF-8 text.*save the config as UTF-8"):
+        load_config(path)
+
+
+def test_pose_lead_auto_is_the_default_and_can_be_said(tmp_path):
+    assert load_config(make_case(tmp_path, process={"pose_lead": "auto"})).process.pose_lead is None
+    with pytest.raises(ConfigError, match=r'pose_lead.*or "auto"'):
+        load_config(make_case(tmp_path, name="bad", process={"pose_lead": "far"}))
+
+
+def test_mandrel_body_key(tmp_path):
+    assert load_config(make_case(tmp_path, mandrel={"body": "largest"})).mandrel.body == "largest"
+    assert load_config(make_case(tmp_path, name="one", mandrel={"body": 1})).mandrel.body == 1
+    with pytest.raises(ConfigError, match=r'\[mandrel\] body.*expected "largest" or the index'):
+        load_config(make_case(tmp_path, name="bad", mandrel={"body": -1}))
+
+
+def test_yarn_min_width_defaults_to_half_the_width(tmp_path):
+    cfg = load_config(make_case(tmp_path))
+    assert cfg.yarn.min_width is None and cfg.yarn.least_width == 0.5 * cfg.yarn.width
+    cfg = load_config(make_case(tmp_path, name="w", yarn={"min_width": 1e-3}))
+    assert cfg.yarn.least_width == 1e-3
+    with pytest.raises(ConfigError, match=r"min_width.*expected at most \[yarn\] width"):
+        load_config(make_case(tmp_path, name="wide", yarn={"min_width": 1.0}))
+
+
+def test_rtm_material_and_section(tmp_path):
+    cfg = load_config(make_case(tmp_path, yarn={"linear_density_tex": 800.0, "fibre_density": 1780.0,
+                                                "fibre_radius": 3.5e-6},
+                                rtm={"cavity_thickness": 1.2e-3, "packing": "quadratic"}))
+    assert cfg.yarn.has_material and cfg.yarn.fibre_density == 1780.0
+    assert cfg.rtm.cavity_thickness == 1.2e-3 and cfg.rtm.permeability == "gebart"
+    assert not load_config(make_case(tmp_path, name="plain")).yarn.has_material
+    with pytest.raises(ConfigError, match="go together: give fibre_density, fibre_radius too"):
+        load_config(make_case(tmp_path, name="half", yarn={"linear_density_tex": 800.0}))
+    with pytest.raises(ConfigError, match=r"fibre_density = 1.78.*g/cm\^3\? multiply by 1000"):
+        load_config(make_case(tmp_path, name="unit", yarn={"linear_density_tex": 800.0,
+                                                           "fibre_density": 1.78, "fibre_radius": 3.5e-6}))
+    with pytest.raises(ConfigError, match="needs k_ref"):
+        load_config(make_case(tmp_path, name="kc", rtm={"permeability": "kozeny_carman"}))

@@ -24,7 +24,7 @@ from preform import simulate
 from preform.fields import map_to_surface
 from preform.geometry import shapes
 from simcase import make_config, write_centerline, write_stl
-from test_interaction_zone import checked_snapshot_files
+from snapshot_checks import checked_snapshot_files
 
 LENGTH = 0.75
 SQUARE = (0.2, 0.33)      # z range (m) of steady braid on the square part

@@ -60,10 +60,11 @@ def test_summary_content(small_result, tmp_path):
     assert summary["braided_length_m"] == h["braided_length_m"][-1]
     final = summary["braid_angle_deg"]["final"]
     assert final == {"warp": h["braid_angle_warp_deg"][-1], "weft": h["braid_angle_weft_deg"][-1]}
-    # steady: mean over the last 25 % of braided length 0..0.025 m -> steps with L >= 0.01875: 4, 5
-    steady = summary["braid_angle_deg"]["steady"]
-    assert steady["warp"] == pytest.approx(np.mean(h["braid_angle_warp_deg"][4:]), abs=1e-12)
-    assert steady["weft"] == pytest.approx(np.mean(h["braid_angle_weft_deg"][4:]), abs=1e-12)
+    # six steps are too few to call anything steady: no steady values
+    assert summary["braid_angle_deg"]["steady"] is None
+    assert summary["convergence_length_m"]["steady"] is None
+    assert summary["steady_state"]["reached"] is False
+    assert summary["quality"]["verdict"] in ("ok", "suspect")
     conv = summary["convergence_length_m"]["final"]
     assert conv["mean"] == h["convergence_length_mean_m"][-1]
     assert conv["min"] == h["convergence_length_min_m"][-1]

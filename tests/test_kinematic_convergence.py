@@ -10,9 +10,8 @@ import pytest
 
 from preform import analytic
 from preform.geometry import shapes
-from preform.machine import Machine
 from preform.result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
-from preform.simulate import _Stepper, load_geometry, simulate
+from preform.simulation import load_geometry, make_stepper, simulate
 from simcase import make_config, write_centerline, write_stl
 
 OMEGA = 0.2309401
@@ -28,7 +27,7 @@ def _cone(tmp, slope, n_around=128, name="cone"):
 def _run_for(cfg, seconds):
     """Step a config for a fixed process time; returns the stepper (fell points, history)."""
     mandrel, centerline = load_geometry(cfg)
-    st = _Stepper(cfg, Machine.from_config(cfg.machine), mandrel, centerline)
+    st = make_stepper(cfg, mandrel, centerline)
     for _ in range(int(round(seconds / st.dt))):
         st.advance(V)
     return st
@@ -71,7 +70,7 @@ def test_mesh_refinement_converges(tmp_path):
     for n in (64, 128, 256, 512):
         stl, cl = _cone(tmp_path, 0.02, n_around=n, name=f"cone{n}")
         st = _run_for(make_config(stl, cl, spool_radius=0.12, initial_position=0.05, time_step=0.1), 24.0)
-        H[n] = st.H_hist[-1].mean()
+        H[n] = st.recording.H.array[-1].mean()
     err = [abs(H[n] - H[512]) for n in (64, 128, 256)]
     assert err[0] > err[1] > err[2]
     assert err[0] / err[2] > 8        # facet error ~ 1/n^2: 16 ideally between 64 and 256

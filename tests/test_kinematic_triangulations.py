@@ -16,7 +16,7 @@ import trimesh
 from preform import analytic
 from preform.fields import face_geometry, map_to_surface
 from preform.geometry import shapes
-from preform.simulate import simulate
+from preform.simulation import simulate
 from simcase import make_config, write_stl
 
 R, LENGTH = 0.04, 0.6

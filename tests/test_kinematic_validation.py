@@ -15,7 +15,7 @@ import pytest
 from preform import analytic
 from preform.geometry import shapes
 from preform.result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
-from preform.simulate import simulate
+from preform.simulation import simulate
 from simcase import make_config, write_centerline, write_stl
 
 OMEGA = 0.2309401    # rad/s: Ko angle 60 deg at r = 75 mm and v = 10 mm/s

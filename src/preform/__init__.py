@@ -1,29 +1,46 @@
-"""preform: biaxial overbraiding on CAD mandrels (DESIGN.md)."""
+"""preform: biaxial overbraiding on CAD mandrels (DESIGN.md).
+
+``import preform`` is light: reading and checking a config needs only the standard library and
+NumPy. The names that need numba, SciPy, trimesh or pyvista (``simulate``, ``map_to_surface``,
+``write_results``, ``SurfaceFields``, ``Mandrel``, ...) load their module on first use (a module
+``__getattr__``, PEP 562) and are the functions and types themselves, with their own signatures.
+"""
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from ._version import __version__
+from .config import Config, load_config
+from .errors import ConfigError, MandrelError, PreformError, SimulationError
+from .result import Result, Snapshot, YarnPaths
+from .tolerances import Tolerances, tol
 
-from .config import load_config  # noqa: E402
-from .errors import ConfigError, MandrelError, PreformError, SimulationError  # noqa: E402
-
-# Imported eagerly: a lazy wrapper named like the submodule would be replaced by the module object
-# the first time ``preform.simulate`` is imported.
-from .simulate import simulate  # noqa: E402
-
-
-def map_to_surface(result, **kwargs):
-    """Per-face fields on the mandrel mesh; see :func:`preform.fields.map_to_surface`."""
-    from .fields import map_to_surface as _map
-
-    return _map(result, **kwargs)
+#: the public names imported on first use (``__getattr__``)
+_LAZY = ("simulate", "map_to_surface", "SurfaceFields", "write_results", "load_mandrel", "Mandrel",
+         "Centerline", "CheckpointError")
 
 
-def write_results(result, fields, out_dir):
-    """Write every result file; see :func:`preform.io.write_results`."""
-    from .io import write_results as _write
+def __getattr__(name):
+    """The lazy names of ``_LAZY``: import their module, keep the object here, return it."""
+    if name == "simulate":
+        from .simulation import simulate as value
+    elif name in ("map_to_surface", "SurfaceFields"):
+        from . import fields
+        value = getattr(fields, name)
+    elif name == "write_results":
+        from .io import write_results as value
+    elif name in ("load_mandrel", "Mandrel", "Centerline"):
+        from . import geometry
+        value = getattr(geometry, name)
+    elif name == "CheckpointError":
+        from .checkpoint import CheckpointError as value
+    else:
+        raise AttributeError(f"module 'preform' has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
-    return _write(result, fields, out_dir)
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
 
 
 __all__ = [
@@ -32,8 +49,19 @@ __all__ = [
     "simulate",
     "map_to_surface",
     "write_results",
+    "load_mandrel",
+    "Config",
+    "Result",
+    "YarnPaths",
+    "Snapshot",
+    "SurfaceFields",
+    "Mandrel",
+    "Centerline",
+    "Tolerances",
+    "tol",
     "PreformError",
     "ConfigError",
     "MandrelError",
     "SimulationError",
+    "CheckpointError",
 ]

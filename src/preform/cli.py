@@ -8,39 +8,26 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from pathlib import Path
 
-from . import __version__
+from ._version import __version__
 from .errors import MandrelError, PreformError
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
-def _optional(module: str, name: str):
-    """``module.name`` if that module exists yet, else None (the package grows in parallel)."""
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as err:
-        if err.name is not None and module.startswith(err.name):
-            return None
-        raise
-    return getattr(mod, name, None)
-
-
 def _checked_geometry(config):
     """Load the mandrel and centerline of ``config`` and run the pre-flight checks
-    (``preform.checks.preflight``, when present): impossible set-ups raise PreformError, doubtful
-    ones are printed as warnings. Returns (Mandrel, Centerline)."""
-    from .simulate import load_geometry
+    (``preform.checks.preflight``): impossible set-ups raise PreformError, doubtful ones are
+    printed as warnings. Returns (Mandrel, Centerline)."""
+    from .checks import preflight
+    from .simulation import load_geometry
 
     mandrel, centerline = load_geometry(config)
-    for repair in getattr(mandrel, "repairs", ()):
+    for repair in mandrel.repairs:
         print(f"mandrel: {repair}", file=sys.stderr)
-    preflight = _optional("preform.checks", "preflight")
-    if preflight is not None:
-        _print_warnings(preflight(config, mandrel, centerline))
+    _print_warnings(preflight(config, mandrel, centerline))
     return mandrel, centerline
 
 
@@ -88,28 +75,26 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
 
 
 #: the state of a running simulation, saved periodically and on Ctrl-C, removed when it is done
-CHECKPOINT = "checkpoint.pkl"
+CHECKPOINT = "checkpoint.npz"
 
 
 def cmd_run(args) -> int:
     from .config import load_config
 
     config = load_config(args.config)  # bad input fails here, before the heavy imports
-    if getattr(args, "model", None):
+    if args.model:
         import dataclasses
 
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
     mandrel, centerline = _checked_geometry(config)  # impossible set-ups fail here, before simulating
+    from .fields import map_to_surface
     from .io import write_results
-    from .simulate import simulate  # not ``from . import simulate``: that name becomes the module
+    from .simulation import simulate
 
     out_dir = _out_dir(config, args.out)
     result = simulate(config, progress=not args.no_progress, mandrel=mandrel, centerline=centerline,
                       checkpoint=out_dir / CHECKPOINT, resume=args.resume)
-    fields = None
-    map_to_surface = _optional("preform.fields", "map_to_surface")
-    if map_to_surface is not None and len(result.yarns.points):
-        fields = map_to_surface(result)
+    fields = map_to_surface(result) if len(result.yarns.points) else None
     try:
         written = write_results(result, fields, out_dir)
     except OSError as err:
@@ -155,12 +140,8 @@ def cmd_mandrel_info(args) -> int:
     stl = _existing_file(args.file, "mandrel STL")
     auto = args.centerline == "auto"
     centerline = "auto" if auto else _existing_file(args.centerline, "centerline CSV")
-    mandrel_info = _optional("preform.geometry.info", "mandrel_info")
-    if mandrel_info is None:
-        print("error: preform.geometry.info is not available in this build", file=sys.stderr)
-        return EXIT_FAILED
     from .geometry import write_centerline_csv
-    from .geometry.info import format_mandrel_info
+    from .geometry.info import format_mandrel_info, mandrel_info
 
     info = mandrel_info(stl, unit=args.unit, centerline=centerline)
     print(format_mandrel_info(info))
@@ -168,6 +149,55 @@ def cmd_mandrel_info(args) -> int:
     if csv is not None:
         write_centerline_csv(info.centerline, csv, unit=args.unit)
         print(f"centerline written to {csv}")
+    return EXIT_DONE
+
+
+# ---------------------------------------------------------------- preform sweep
+
+def cmd_sweep(args) -> int:
+    from .sweep import SWEEP_CSV, load_sweep, sweep
+
+    spec = load_sweep(args.sweep)   # bad input fails here, before a cluster starts
+    rows = sweep(args.sweep, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                 progress=not args.no_progress)
+    failed = [r for r in rows if r.get("status") != "done"]
+    print(f"sweep: {len(rows) - len(failed)} of {len(rows)} points done; table: {spec.out_dir / SWEEP_CSV}")
+    for r in failed:
+        print(f"error: point {r['point']} ({r['results']}): {r.get('status')}: {r.get('message', '')}",
+              file=sys.stderr)
+    return EXIT_FAILED if failed else EXIT_DONE
+
+
+# ---------------------------------------------------------------- preform design
+
+def cmd_design(args) -> int:
+    import dataclasses
+
+    from .config import load_config
+    from .design import design_speed, plot_design, read_target_table, write_design_config
+
+    config = load_config(args.config)
+    if args.model:
+        config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
+    target = args.target_angle if args.target_table is None else read_target_table(args.target_table)
+    mandrel, centerline = _checked_geometry(config)
+    design = design_speed(config, target, mandrel=mandrel, centerline=centerline,
+                          progress=lambda k, e: print(f"design: forward run {k}: largest error "
+                                                      f"{e:.2f} deg beyond the start-up transient",
+                                                      file=sys.stderr, flush=True))
+    print("braided_length_m,take_up_speed_m_s,target_deg,achieved_deg")
+    for row in zip(design.length, design.speed, design.target_deg, design.achieved_deg):
+        print(",".join(f"{x:.6g}" for x in row))
+    print(f"design: achieved within {design.max_error_deg():.2f} deg of the target beyond "
+          f"{2 * design.h_inf:.2f} m of braid (the start-up transient before it is set by the initial "
+          "position, not by the speed)", file=sys.stderr)
+    if args.out:
+        out = Path(args.out).expanduser().resolve()
+        write_design_config(config, design, out)
+        title = f"Designed take-up speed: {Path(config.source).stem if config.source else 'case'} · " \
+                f"{config.model.kind} model"
+        png = plot_design(design, out.with_name(f"{out.stem}_design.png"), title)
+        print(f"design: runnable config {out}; plot {png}", file=sys.stderr)
     return EXIT_DONE
 
 
@@ -192,6 +222,28 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="validate a case and its mandrel without simulating")
     check.add_argument("config", metavar="CONFIG", help="case file (TOML)")
     check.set_defaults(func=cmd_check)
+
+    sw = sub.add_parser("sweep", help="run a parameter sweep on Dask (a LocalCluster or --scheduler)")
+    sw.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: base config, [grid] and/or [[points]]")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="an existing Dask scheduler, tcp://host:port (default: a LocalCluster here)")
+    sw.add_argument("--workers", type=int, metavar="N",
+                    help="worker processes of the LocalCluster (default: one per core)")
+    sw.add_argument("--resume", action="store_true", help="skip the points already finished")
+    sw.add_argument("--no-progress", action="store_true", help="no progress lines")
+    sw.set_defaults(func=cmd_sweep)
+
+    des = sub.add_parser("design", help="take-up speed table for a target braid angle")
+    des.add_argument("config", metavar="CONFIG", help="case file (TOML)")
+    target = des.add_mutually_exclusive_group(required=True)
+    target.add_argument("--target-angle", type=float, metavar="DEG", help="constant target braid angle")
+    target.add_argument("--target-table", metavar="CSV",
+                        help="target braid angle against centerline arc length: rows s_m,angle_deg")
+    des.add_argument("--model", choices=("kinematic", "interaction"),
+                     help="the forward model, in place of the config's [model] kind")
+    des.add_argument("--out", metavar="FILE.toml",
+                     help="write the config with the designed take_up_speed table (and a plot beside it)")
+    des.set_defaults(func=cmd_design)
 
     mandrel = sub.add_parser("mandrel", help="mandrel tools")
     msub = mandrel.add_subparsers(dest="mandrel_command", metavar="COMMAND", required=True)

@@ -28,6 +28,9 @@ class MandrelConfig:
     centerline: str | Path = "auto"  # "auto" or absolute path of a CSV (x,y,z in the STL's unit, tip first)
     #: optional direction (STL frame) that the pose maps to machine +x at the tip; None: automatic
     roll_reference: tuple[float, float, float] | None = None
+    #: which body of a multi-body STL is the mandrel: None (the STL must be one body), "largest"
+    #: (by bounding-box diagonal), or an index into the bodies as the refusal lists them
+    body: str | int | None = None
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,25 @@ class YarnConfig:
     tension: float = 4.7            # N, spool tension
     friction: float = 0.0           # yarn-yarn mu_y
     ring_friction: float = 0.0      # yarn-ring mu_r
+    #: least width (m) a yarn narrows to where its neighbours leave it less room (paper §2.4.2);
+    #: below it the yarns jam. None: half the width, the order a flat tow of spread filaments
+    #: narrows to before they bunch into a round bundle
+    min_width: float | None = None
+
+    #: tow material data for the RTM hand-off (all three or none): linear density (g/km = tex),
+    #: fibre density (kg/m^3), fibre radius (m)
+    linear_density_tex: float | None = None
+    fibre_density: float | None = None
+    fibre_radius: float | None = None
+
+    @property
+    def has_material(self) -> bool:
+        return self.linear_density_tex is not None
+
+    @property
+    def least_width(self) -> float:
+        """``min_width``, or its default of half the width (m)."""
+        return 0.5 * self.width if self.min_width is None else self.min_width
 
 
 @dataclass(frozen=True)
@@ -67,8 +89,9 @@ class ProcessConfig:
     braid_length: float             # m of centerline to braid
     eccentricity: tuple[float, float] = (0.0, 0.0)   # m, machine x, y
     #: axial distance (m) ahead of the supply plane where the pose puts the centerline on the axis
-    #: (DESIGN.md §2; see geometry/pose.py). 0: at the supply plane.
-    pose_lead: float = 0.0
+    #: (DESIGN.md §2; see geometry/pose.py). None: "auto", chosen from the machine and the mandrel
+    #: when the run is composed (``preform.reference.resolve_pose_lead``).
+    pose_lead: float | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +110,21 @@ class OutputConfig:
 
 
 @dataclass(frozen=True)
+class RtmConfig:
+    """The RTM hand-off (preform.rtm): how fibre content and permeability are read."""
+
+    #: m, the mould cavity the preform is compressed to; None: the preform's own thickness
+    cavity_thickness: float | None = None
+    permeability: str = "gebart"    # "gebart" | "kozeny_carman" | "table"
+    packing: str = "hexagonal"      # Gebart's fibre packing: "hexagonal" | "quadratic"
+    #: kozeny_carman: measured (K along, K across the fibres) in m^2 at fibre fraction vf_ref
+    k_ref: tuple[float, float] | None = None
+    vf_ref: float | None = None
+    #: table: CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 on a full grid
+    table: Path | None = None
+
+
+@dataclass(frozen=True)
 class Config:
     mandrel: MandrelConfig
     machine: MachineConfig
@@ -95,6 +133,7 @@ class Config:
     model: ModelConfig = field(default_factory=ModelConfig)
     output: OutputConfig | None = None
     source: Path | None = None      # the TOML file this came from
+    rtm: RtmConfig = field(default_factory=RtmConfig)
 
 
 # --------------------------------------------------------------------------------------------
@@ -103,12 +142,14 @@ class Config:
 
 #: known keys per section, in the order of DESIGN.md §1
 KEYS = {
-    "mandrel": ("stl", "stl_unit", "centerline", "roll_reference"),
+    "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
-    "yarn": ("width", "thickness", "tension", "friction", "ring_friction"),
+    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
+             "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed"),
     "output": ("dir", "field_edge_length", "snapshots"),
+    "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
 REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
@@ -137,15 +178,23 @@ def load_config(path) -> Config:
     and are stored absolute. ``[output] dir`` defaults to ``results/<config stem>`` there.
     """
     path = Path(path).expanduser().resolve()
+    if path.is_dir():
+        raise ConfigError(f"config file {path} is a folder: give the path of a .toml case file "
+                          "(e.g. examples/case_a.toml)")
     if not path.is_file():
         raise ConfigError(f"config file {path} not found")
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
+        raw = path.read_bytes()
+        # a UTF-8 byte-order mark (Notepad writes one) is not TOML; accept it
+        text = raw.decode("utf-8-sig")
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: cannot be read: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {err.start}: {raw[err.start:err.start + 1]!r}); "
+                          "save the config as UTF-8") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot be read: {err.strerror or err}") from None
     return config_from_dict(data, base_dir=path.parent, name=path.stem, source=path)
 
 
@@ -165,6 +214,7 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         model=_model(_Section("model", data)),
         output=_output(_Section("output", data), base_dir, name),
         source=None if source is None else Path(source),
+        rtm=_rtm(_Section("rtm", data), base_dir),
     )
 
 
@@ -342,7 +392,21 @@ def _mandrel(sec: _Section, base_dir: Path) -> MandrelConfig:
     roll = sec.vector("roll_reference", 3, "a direction in the STL frame", default=None)
     if roll is not None and not any(roll):
         raise sec.error("roll_reference", list(roll), "expected a non-zero direction [x, y, z]")
-    return MandrelConfig(stl=stl, stl_unit=unit, centerline=centerline, roll_reference=roll)
+    return MandrelConfig(stl=stl, stl_unit=unit, centerline=centerline, roll_reference=roll,
+                         body=_body(sec))
+
+
+def _body(sec: _Section) -> str | int | None:
+    """``[mandrel] body``: "largest" or a non-negative index; absent: None."""
+    if "body" not in sec.table:
+        return None
+    value = sec.table["body"]
+    if value == "largest":
+        return "largest"
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+        return value
+    raise sec.error("body", value, 'expected "largest" or the index (0, 1, ...) of a body in the '
+                    "list the mandrel check prints")
 
 
 def _machine(sec: _Section) -> MachineConfig:
@@ -390,7 +454,61 @@ def _yarn(sec: _Section) -> YarnConfig:
     _implausible(sec, "thickness", thickness, MAX_YARN_THICKNESS, "m", "mm? divide by 1000")
     tension = sec.number("tension", "N", default=YarnConfig.tension, positive=True)
     frictions = {key: _friction(sec, key) for key in ("friction", "ring_friction")}
-    return YarnConfig(width=width, thickness=thickness, tension=tension, **frictions)
+    min_width = sec.number("min_width", "m", default=None, positive=True)
+    if min_width is not None and min_width > width:
+        raise sec.error("min_width", min_width, f"expected at most [yarn] width = {_fmt(width)} (m): "
+                        "the least width a yarn narrows to")
+    material = _material(sec)
+    return YarnConfig(width=width, thickness=thickness, tension=tension, min_width=min_width,
+                      **frictions, **material)
+
+
+#: material keys of [yarn] (given together) and their plausible ranges with a unit hint
+MATERIAL = {
+    "linear_density_tex": ("g/km (tex)", 1.0, 1e5, "a 12K carbon tow is 800 tex"),
+    "fibre_density": ("kg/m^3", 500.0, 5000.0, "carbon 1760-1800, glass 2550-2600 kg/m^3; g/cm^3? multiply by 1000"),
+    "fibre_radius": ("m", 5e-7, 1e-4, "carbon 3.5e-6 m; um? multiply by 1e-6"),
+}
+
+
+def _material(sec: _Section) -> dict:
+    given = [k for k in MATERIAL if k in sec.table]
+    if given and len(given) < len(MATERIAL):
+        missing = [k for k in MATERIAL if k not in sec.table]
+        raise sec.error(given[0], sec.table[given[0]],
+                        f"the RTM material data go together: give {', '.join(missing)} too")
+    out = {}
+    for key, (unit, lo, hi, hint) in MATERIAL.items():
+        if key not in sec.table:
+            continue
+        value = sec.number(key, unit, positive=True)
+        if not lo <= value <= hi:
+            raise sec.error(key, value, f"expected {lo:g} to {hi:g} {unit} ({hint})")
+        out[key] = value
+    return out
+
+
+RTM_MODELS = ("gebart", "kozeny_carman", "table")
+PACKINGS = ("hexagonal", "quadratic")
+
+
+def _rtm(sec: _Section, base_dir: Path) -> RtmConfig:
+    model = sec.choice("permeability", RTM_MODELS, default="gebart")
+    k_ref = sec.vector("k_ref", 2, "m^2, along and across the fibres", default=None)
+    vf_ref = sec.number("vf_ref", "fibre volume fraction", default=None, positive=True)
+    if model == "kozeny_carman" and (k_ref is None or vf_ref is None):
+        raise sec.error("permeability", model, "needs k_ref = [K_along, K_across] (m^2) and vf_ref")
+    if k_ref is not None and min(k_ref) <= 0:
+        raise sec.error("k_ref", list(k_ref), "expected two positive permeabilities (m^2)")
+    if vf_ref is not None and vf_ref >= 1:
+        raise sec.error("vf_ref", vf_ref, "expected a fibre volume fraction below 1")
+    table = sec.path("table", base_dir, "the path of a CSV") if "table" in sec.table else None
+    if model == "table" and table is None:
+        raise sec.error("permeability", model, 'needs table = "K1_K2.csv" (braid_angle_deg, '
+                        "fibre_volume_fraction, k1_m2, k2_m2)")
+    return RtmConfig(cavity_thickness=sec.number("cavity_thickness", "m", default=None, positive=True),
+                     permeability=model, packing=sec.choice("packing", PACKINGS, default="hexagonal"),
+                     k_ref=k_ref, vf_ref=vf_ref, table=table)
 
 
 def _friction(sec: _Section, key: str) -> float:
@@ -410,8 +528,15 @@ def _process(sec: _Section) -> ProcessConfig:
                                     minimum=0.0),
         braid_length=sec.number("braid_length", "m of centerline", positive=True),
         eccentricity=sec.vector("eccentricity", 2, "m, machine x and y", default=(0.0, 0.0)),
-        pose_lead=sec.number("pose_lead", "m", default=0.0, minimum=0.0),
+        pose_lead=_pose_lead(sec),
     )
+
+
+def _pose_lead(sec: _Section) -> float | None:
+    """``"auto"`` (the default) -> None; else a non-negative number (m)."""
+    if sec.table.get("pose_lead", "auto") == "auto":
+        return None
+    return sec.number("pose_lead", 'm, or "auto"', minimum=0.0)
 
 
 def _take_up_speed(sec: _Section) -> tuple[tuple[float, float], ...]:
@@ -480,18 +605,26 @@ def dump_config(config: Config) -> dict:
     return {
         "source": _str_or_none(config.source),
         "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
-                    "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference)},
+                    "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
+                    "body": mc.body},
         "machine": {"carriers": ma.carriers, "spool_radius": ma.spool_radius,
                     "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
                     "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset}},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
-                 "friction": y.friction, "ring_friction": y.ring_friction},
+                 "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width,
+                 "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
+                 "fibre_radius": y.fibre_radius},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
-                    "braid_length": p.braid_length, "pose_lead": p.pose_lead},
+                    "braid_length": p.braid_length,
+                    "pose_lead": "auto" if p.pose_lead is None else p.pose_lead},
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},
+        "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,
+                "packing": config.rtm.packing,
+                "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
+                "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
 
 

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._kernels import kinematic as K
-from .result import FLAG_BRIDGE, FLAG_CATCH
+from .result import FLAG_BRIDGE, FLAG_CATCH, Snapshot
+from .zone import ZoneStep
 
 #: how many catch/bridge jumps one yarn may take in one step
 MAX_JUMPS = 16
@@ -141,3 +142,42 @@ class Depositor:
             pending[:] = False
             pending[jumpers] = True
         return StepLaid(F_out, face_out, moved, end_flag, extra)
+
+
+class KinematicZone:
+    """The kinematic model's zone (``preform.zone.Zone``): free yarns straight from fell point to
+    supply point (spool, or guide-ring point), DESIGN.md §3.2. It has no state of its own."""
+
+    def __init__(self, config, machine, mandrel=None):
+        self.config = config
+        self.machine = machine
+
+    def start(self, t, F_machine, pose):
+        """Called once with the tie points (machine frame) and the mandrel pose at time t."""
+
+    def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
+        """The step from t0 to t0 + dt; F_machine: fell points at its end; pose_end: the mandrel's."""
+        m = self.machine
+        return ZoneStep(G_mid=m.supply_points(t0 + 0.5 * dt), G_end=m.supply_points(t0 + dt))
+
+    def snapshot(self, t, F_machine) -> Snapshot:
+        """Fell point, supply point (and spool point behind a guide ring) of every yarn."""
+        ends = [F_machine, self.machine.supply_points(t)]
+        if self.config.machine.guide_ring is not None:
+            ends.append(self.machine.spool_points(t))
+        ny = len(F_machine)
+        per = len(ends)
+        points = np.stack(ends, axis=1).reshape(-1, 3)
+        return Snapshot(time_s=t, points=points, offsets=np.arange(ny + 1, dtype=np.int64) * per,
+                        tension_N=np.full(ny * (per - 1), float(self.config.yarn.tension)),
+                        contact_id=np.full(len(points), -1, dtype=np.int64),
+                        slip=np.zeros(len(points), dtype=np.int8), group=self.machine.group.copy())
+
+    def export_state(self) -> dict:
+        """No state: the zone is the machine at every time."""
+        return {}
+
+    def import_state(self, arrays) -> None:
+        """No state to restore; a checkpoint of this zone holds no arrays of it."""
+        if arrays:
+            raise ValueError(f"the kinematic zone has no state, the checkpoint gives {sorted(arrays)}")

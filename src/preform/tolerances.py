@@ -1,4 +1,10 @@
-"""Numerical tolerances and solver defaults, in one place (used by code and tests)."""
+"""Numerical tolerances and settings of the geometry and the time stepper, in one place.
+
+One frozen :class:`Tolerances` object, ``tol``, is the default everywhere; the stepper takes its
+settings as a parameter (``preform.simulate(config, tolerances=...)``), so tests and studies run
+with other settings by passing another object (``dataclasses.replace(tol, ...)``), never by
+editing a module. The interaction solver's own constants live in ``preform.interaction``.
+"""
 
 from __future__ import annotations
 
@@ -21,9 +27,34 @@ class Tolerances:
     max_carrier_rotation: float = 0.01
     #: interaction model: maximum time step as a fraction of the pass period (the time between two
     #: passes along one yarn, ``Machine.pass_period``), and maximum fell-point advance per step as
-    #: a fraction of the yarn width (``simulate.default_time_step``)
+    #: a fraction of the yarn width (``stepping.default_time_step``)
     interaction_pass_fraction: float = 1.0 / 3.0
     interaction_fell_advance: float = 2.0
+    #: yarns are tied this many yarn widths from the tip along the centerline: clear of the tip's
+    #: edge, where the smooth normals of the cap and the side blend
+    tie_offset_widths: float = 2.0
+    #: the catch test casts the free yarn from its own centerline, half a yarn thickness off the
+    #: surface (in thicknesses) ...
+    catch_clearance_thickness: float = 0.5
+    #: ... and at least this fraction of the mandrel's diagonal off it, clear of ray round-off
+    catch_clearance_diagonal: float = 1e-5
+    #: longest straight piece (in yarn widths) of a fell point's walk over the surface: the walk
+    #: follows the smooth normals, a piece this short keeps it on a curved surface
+    walk_piece_widths: float = 0.5
+    #: longest walk of a fell point in one step: this many times what the machine moves a point
+    #: in a step (carrier speed at the mandrel's size plus take-up) ...
+    walk_reach_factor: float = 20.0
+    #: ... and at least this many yarn widths: a walk that needs more has lost the surface
+    walk_reach_widths: float = 10.0
+    #: steps between updates of the braided length (the stopping test and the progress bar): the
+    #: projection of all fell points costs about a step
+    braided_length_every: int = 10
+    #: sample spacing (m) of the centerline for the arc length of points (``analysis.
+    #: CenterlineProjector``), refined to the exact projection on the nearest segments
+    projector_spacing: float = 5e-4
+    #: slip tendency (DESIGN.md §3.2): |kappa_g| exceeds mu |kappa_n| by more than this (1/m), so
+    #: that round-off on a geodesic (kappa_g = 0 exactly) never flags
+    slip_curvature: float = 1e-9
 
 
 tol = Tolerances()

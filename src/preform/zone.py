@@ -1,15 +1,18 @@
-"""The convergence zone: what each fell point's free yarn pulls towards, step by step.
+"""The convergence zone's interface: what each fell point's free yarn pulls towards, step by step.
 
-The stepper (``simulate.py``) asks its zone, each time step, for the point every yarn's lowest free
-segment runs to (``G_mid`` at the middle of the step, ``G_end`` at its end, machine frame) and for
-the crossings that reached the mandrel (``deposits``). The kinematic zone is the machine itself:
-the free yarn runs straight to the supply point (DESIGN.md §3.2). The interaction model
-(``preform.interaction``) has the same interface: its yarns run to their lowest crossing.
+The stepper (``preform.stepping``) asks its zone, each time step, for the point every yarn's lowest
+free segment runs to (``G_mid`` at the middle of the step, ``G_end`` at its end, machine frame) and
+for the crossings that reached the mandrel (``deposits``). Two models implement :class:`Zone`: the
+kinematic one (``preform.kinematic.KinematicZone``: the free yarn runs straight to the supply point,
+DESIGN.md §3.2) and the interaction one (``preform.interaction.model.InteractionZone``: its yarns
+run to their lowest crossing, DESIGN.md §3.3). The run picks one by ``[model] kind``
+(``preform.simulation.ZONES``). This module is a leaf: it imports nothing of ours but ``result``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -22,6 +25,7 @@ class ZoneStep:
 
     deposits : list of (yarn index, point (3,) machine frame): crossings now on the mandrel,
         which become that yarn's fell point.
+    contacts, iterations, residual : the zone's solve (0 for the kinematic model), for history.csv
     """
 
     G_mid: np.ndarray
@@ -33,42 +37,30 @@ class ZoneStep:
 
     @classmethod
     def kinematic(cls, supply):
+        """The free yarns run straight to ``supply`` (ny, 3) over the whole step."""
         return cls(G_mid=supply, G_end=supply)
 
 
-class KinematicZone:
-    """Free yarns straight from fell point to supply point (spool, or guide-ring point)."""
+@runtime_checkable
+class Zone(Protocol):
+    """A convergence zone: built as ``Zone(config, machine, mandrel)``, then driven by the stepper.
 
-    def __init__(self, config, machine, mandrel=None):
-        self.config = config
-        self.machine = machine
+    Points are (ny, 3) float64, m, machine frame; ``pose`` / ``pose_end`` are the mandrel's
+    ``preform.geometry.Pose`` at that time. ``export_state`` / ``import_state`` carry whatever the
+    zone keeps from one step to the next as plain arrays (checkpoints, ``preform.checkpoint``).
+    """
 
-    def start(self, t, F_machine, pose):
-        """Called once with the tie points (machine frame) and the mandrel pose at time t."""
+    def start(self, t: float, F_machine: np.ndarray, pose) -> None:
+        """Called once with the tie points and the mandrel pose at time t."""
 
-    def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
+    def step(self, t0: float, dt: float, F_machine: np.ndarray, pose_end) -> ZoneStep:
         """The step from t0 to t0 + dt; F_machine: fell points at its end; pose_end: the mandrel's."""
-        m = self.machine
-        return ZoneStep(G_mid=m.supply_points(t0 + 0.5 * dt), G_end=m.supply_points(t0 + dt))
 
-    def snapshot(self, t, F_machine) -> Snapshot:
-        """Fell point, supply point (and spool point behind a guide ring) of every yarn."""
-        ends = [F_machine, self.machine.supply_points(t)]
-        if self.config.machine.guide_ring is not None:
-            ends.append(self.machine.spool_points(t))
-        ny = len(F_machine)
-        per = len(ends)
-        points = np.stack(ends, axis=1).reshape(-1, 3)
-        return Snapshot(time_s=t, points=points, offsets=np.arange(ny + 1, dtype=np.int64) * per,
-                        tension_N=np.full(ny * (per - 1), float(self.config.yarn.tension)),
-                        contact_id=np.full(len(points), -1, dtype=np.int64),
-                        slip=np.zeros(len(points), dtype=np.int8), group=self.machine.group.copy())
+    def snapshot(self, t: float, F_machine: np.ndarray) -> Snapshot:
+        """The zone at time t (its yarns as polylines, fell point first) for convergence.pvd."""
 
+    def export_state(self) -> dict[str, np.ndarray]:
+        """The zone's state as named plain arrays (numeric dtypes only)."""
 
-def make_zone(config, machine, mandrel):
-    """The zone of ``[model] kind``; ``mandrel`` (mandrel frame) for contact and deposition tests."""
-    if config.model.kind == "interaction":
-        from .interaction.model import InteractionZone
-
-        return InteractionZone(config, machine, mandrel)
-    return KinematicZone(config, machine)
+    def import_state(self, arrays: dict[str, np.ndarray]) -> None:
+        """Replace the state by one ``export_state`` gave (validated: ValueError if unusable)."""

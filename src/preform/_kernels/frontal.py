@@ -2,40 +2,44 @@
 
 Arrays and scalars only; the layout of the crossing arrays is documented in
 ``preform/interaction/zone_state.py`` (creation order, ``low``/``up`` links, ``over``, ``normal``,
-material coordinates ``s``); the reading of the paper implemented here is in
-``preform/interaction/frontal.py``. The slow NumPy twins live in ``tests/naive_frontal.py``.
+material coordinates ``material``); the reading of the paper implemented here is in
+``preform/interaction/frontal.py``; the numerical constants arrive as arguments from
+``preform/interaction/settings.py``. The slow NumPy twins live in ``tests/naive_frontal.py``.
 
 Geometry. The centerline point of yarn ``side`` (0 warp, 1 weft) at crossing ``c`` is
-``P = C + s h N`` with ``s = over[c]`` for the warp and ``-over[c]`` for the weft, ``h`` half the
+``P = C + o h N`` with ``o = over[c]`` for the warp and ``-over[c]`` for the weft, ``h`` half the
 yarn thickness and ``N = normal[c]`` the contact normal held fixed during a solve (paper eq. 16, one
 normal per crossing). Segments: below every crossing on both yarns (to the lower crossing's yarn
 point or the fell point), and the top segment of every yarn (its highest crossing to its top point:
 ring point or spool point).
 
 Unknowns: 5 per crossing, ``x[5 c + 0..2] = C`` (m, machine frame) and ``x[5 c + 3 + side] =
-s[c, side]``, the material coordinate (m of yarn) of yarn ``side`` at the crossing. The function
-``assemble`` returns (value, gradient, Hessian as COO triplets) of
+material[c, side]`` (written ``u`` below), the material coordinate (m of yarn) of yarn ``side``
+at the crossing. The function ``assemble`` returns (value, gradient, Hessian as COO triplets) of
 
-    E = sum_below W(l, q) + sum_yarns (F(f_top) s_highest + f_top l_top)
-        + sum_(c, side) friction(s - s_old)
+    E = sum_below W(l, q) + sum_yarns (F(f_top) u_highest + f_top l_top)
+        + sum_(c, side) friction(u - centre)
         + sum_c k_wall min(0, dist_c)^2 / 2
         + sum_(segments between crossings) k_jam max(0, l_jam - l)^2 / 2
 
-* ``W(l, q) = k (l - q)^2 / (2 q)``: a segment of material length ``q = s_upper - s_lower``
-  (or ``- s_fell``) stretched to length ``l``, tension ``f = dW/dl = k (l - q) / q`` with ``k = EA``
-  (a stiff tow) or ``COMPRESSION EA`` when slack; convex in ``(l, q)``, its Hessian ``k / q v v^T``,
-  ``v = (1, -l/q)``;
-* ``F(f_top) s_highest + f_top l_top``: the spool pays yarn out at the tension ``f_top``
-  (``F = material_force``, the force ``-dW/dq`` of a segment at that tension);
-* friction at the crossing (``_friction``): ``g |s - s_old|`` with ``|x|`` smoothed to
-  ``sqrt(x^2 + eps^2) - eps``, ``g`` the friction bound held fixed in a solve. ``dE/ds = 0``
-  reads ``F(f_below) - F(f_above) = g x / sqrt(x^2 + eps^2)``: a yarn that slides through the
+* ``W(l, q) = k (l - q)^2 / (2 q)``: a segment of material length ``q = u_upper - u_lower``
+  (or ``- material_fell``) stretched to length ``l``, tension ``f = dW/dl = k (l - q) / q`` with
+  ``k = EA`` (a stiff tow) or ``compression EA`` when slack; convex in ``(l, q)``, its Hessian
+  ``k / q v v^T``, ``v = (1, -l/q)``;
+* ``F(f_top) u_highest + f_top l_top``: the spool pays yarn out at the tension ``f_top``
+  (``F = material_force``, the force ``-dW/dq`` of a segment at that tension), with ``l_top``
+  smoothed by ``eps2_top``;
+* friction at the crossing (``_friction``): ``bound |u - centre|`` with ``|x|`` smoothed to
+  ``sqrt(x^2 + eps^2) - eps``, ``bound`` the friction bound held fixed in a solve. ``dE/du = 0``
+  reads ``F(f_below) - F(f_above) = bound x / sqrt(x^2 + eps^2)``: a yarn that slides through the
   crossing (``|x| >> eps``) sits on the bound, one that does not stays inside it (stick);
-* the wall keeps crossings in front of the mandrel's tangent planes.
+* the wall keeps crossings in front of the mandrel's tangent planes (``plane``: a point and the
+  outward unit normal per crossing, ``dist_c`` the signed distance to it);
+* jamming pushes two crossings of a yarn apart when closer than ``l_jam`` along it.
 
 All terms are convex in the unknowns except the geometric part of a segment in compression
 (``l < q``, a state Newton may pass through; at a solution every yarn is in tension): its
-geometric stiffness in the Hessian is floored at ``GEOMETRIC_FLOOR`` (the gradient stays exact),
+geometric stiffness in the Hessian is floored at ``geometric_floor`` (the gradient stays exact),
 so the Newton matrix is positive definite and every Newton direction descends.
 """
 
@@ -46,16 +50,14 @@ import math
 import numpy as np
 from numba import njit
 
-from . import contact as CK
-
 
 @njit(cache=True)
 def yarn_point(pos, normal, over, c, side, h, out):
     """Centerline point (m) of yarn ``side`` at crossing ``c`` into out (3,)."""
-    s = over[c] * h if side == 0 else -over[c] * h
-    out[0] = pos[c, 0] + s * normal[c, 0]
-    out[1] = pos[c, 1] + s * normal[c, 1]
-    out[2] = pos[c, 2] + s * normal[c, 2]
+    d = over[c] * h if side == 0 else -over[c] * h
+    out[0] = pos[c, 0] + d * normal[c, 0]
+    out[1] = pos[c, 1] + d * normal[c, 1]
+    out[2] = pos[c, 2] + d * normal[c, 2]
 
 
 @njit(cache=True)
@@ -102,40 +104,19 @@ def deflection_dot(p, a, b):
 
 
 @njit(cache=True)
-def cone(f_ext, d, mu):
-    """(lowest, highest) internal tension (N) the friction cone allows for external tension f_ext
-    and u_int . u_ext = d (DESIGN.md §3.3, discrete Capstan); highest = inf when self-locking."""
-    lo = CK.slip_tension(f_ext, d, mu, -1)
-    hi = CK.slip_tension(f_ext, d, mu, 1)
-    if lo < 0.0:
-        lo = 0.0
-    if hi < 0.0:
-        hi = np.inf
-    return lo, hi
-
-
-
-
-#: m^2, extra smoothing of the top segment's length, sqrt(l^2 + TOP_SMOOTHING2): a crossing
-#: whose balance lies at its yarn's ring or spool point (two yarns that have just crossed, with
-#: different ring tensions, meet at the ring) sits within 30 um of it instead of on a kink of E that
-#: Newton cannot resolve. It changes the top force by the relative amount TOP_SMOOTHING2 / (2 l^2):
-#: < 5e-4 for a crossing more than 1 mm below the point
-TOP_SMOOTHING2 = 3e-5 ** 2
-#: a segment shorter than its material (slack) pushes back with this fraction of EA: a yarn does not
-#: push, but a small stiffness keeps the material coordinates of a slack stretch defined and the
-#: energy's second derivative bounded below (C1, piecewise quadratic in the stretch)
-COMPRESSION = 1e-2
-#: N, smallest tension the Hessian's geometric stiffness of a segment uses (see the docstring)
-GEOMETRIC_FLOOR = 1e-3
+def half_angles(d):
+    """cos(delta/2), sin(delta/2) of a yarn's deflection delta from d = u_int . u_ext = -cos(delta)."""
+    c = math.sqrt(max(0.5 * (1.0 - d), 0.0))
+    s = math.sqrt(max(0.5 * (1.0 + d), 0.0))
+    return c, s
 
 
 @njit(cache=True)
-def _lower(k, c, side, lo, pos, normal, over, fell, s, s_fell, h, out):
+def _lower(k, c, side, lo, pos, normal, over, fell, material, material_fell, h, out):
     """Yarn point below crossing c on yarn k (lower crossing lo, or the fell point) into out;
     returns the lower material coordinate."""
     _end_point(pos, normal, over, lo, side, k, fell, h, out)
-    return s[lo, side] if lo >= 0 else s_fell[k]
+    return material[lo, side] if lo >= 0 else material_fell[k]
 
 
 @njit(cache=True)
@@ -147,17 +128,17 @@ def _sub(pa, pb, eps2):
 
 
 @njit(cache=True)
-def segment_tension(l, q, EA):
+def segment_tension(l, q, EA, compression):
     """Tension (N) of a segment of length l (m) and material length q (m); negative, with the
-    small stiffness ``COMPRESSION EA``, when it is shorter than its material (a yarn that cannot
+    small stiffness ``compression EA``, when it is shorter than its material (a yarn that cannot
     push: slack, kept just stiff enough for Newton; see ``assemble``)."""
-    return axial(l, q, EA) * (l - q) / q
+    return axial(l, q, EA, compression) * (l - q) / q
 
 
 @njit(cache=True)
-def axial(l, q, EA):
-    """Axial stiffness (N) of a segment: EA stretched, COMPRESSION EA compressed."""
-    return EA if l >= q else COMPRESSION * EA
+def axial(l, q, EA, compression):
+    """Axial stiffness (N) of a segment: EA stretched, compression x EA compressed."""
+    return EA if l >= q else compression * EA
 
 
 @njit(cache=True)
@@ -177,9 +158,9 @@ def _put(rows, cols, vals, nnz, r, c, v):
 
 
 @njit(cache=True)
-def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old,
-             f_top, g, EA, eps_f, kappa0, h, eps2, plane, k_wall, l_jam, k_jam, grad, rows, cols,
-             vals):
+def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, material,
+             material_fell, centre, f_top, bound, EA, compression, geometric_floor, eps_f, kappa0,
+             h, eps2, eps2_top, plane, k_wall, l_jam, k_jam, grad, rows, cols, vals):
     """E (N m), gradient grad (m, 5) and Hessian triplets of the step's energy (module
     docstring). Returns (E, nnz); E = inf when a segment's material length is not positive (the
     line search then backs off). rows, cols, vals need ``triplet_capacity(m, n_yarns)``."""
@@ -198,15 +179,15 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             k = yarn[c, side]
             lo = low[c, side]
             yarn_point(pos, normal, over, c, side, h, pa)
-            sb = _lower(k, c, side, lo, pos, normal, over, fell, s, s_fell, h, pb)
-            q = s[c, side] - sb
+            sb = _lower(k, c, side, lo, pos, normal, over, fell, material, material_fell, h, pb)
+            q = material[c, side] - sb
             if q <= 0.0:
                 return np.inf, 0
             dx, dy, dz, l = _sub(pa, pb, eps2)
             dx /= l
             dy /= l
             dz /= l
-            f = segment_tension(l, q, EA)
+            f = segment_tension(l, q, EA, compression)
             # jamming: two crossings of a yarn push apart when closer than l_jam along it (the
             # crossing yarns lie side by side) with the force fj = k_jam (l_jam - l); its
             # Hessian k_jam d d^T joins the axial block below. Geometric stiffness of the net
@@ -214,7 +195,7 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             # stays exact)
             gap = l_jam - l
             kj = k_jam if (gap > 0.0 and lo >= 0) else 0.0
-            nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f - kj * gap, GEOMETRIC_FLOOR) / l,
+            nnz = _geometric(rows, cols, vals, nnz, c, lo, max(f - kj * gap, geometric_floor) / l,
                              dx, dy, dz)
             if lo >= 0:
                 E += 0.5 * kj * gap * gap
@@ -225,7 +206,7 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
                 grad[lo, 1] += kj * gap * dy
                 grad[lo, 2] += kj * gap * dz
             e = l - q
-            ka = axial(l, q, EA)
+            ka = axial(l, q, EA, compression)
             E += 0.5 * ka * e * e / q
             wq = -f - f * f / (2.0 * ka)               # dW/dq
             grad[c, 0] += f * dx
@@ -270,9 +251,9 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, pa)
-        dx, dy, dz, l = _sub(pa, top[k], eps2 + TOP_SMOOTHING2)
+        dx, dy, dz, l = _sub(pa, top[k], eps2 + eps2_top)
         fm = material_force(f_top[k], EA)
-        E += fm * s[c, side] + f_top[k] * l
+        E += fm * material[c, side] + f_top[k] * l
         grad[c, 0] += f_top[k] * dx / l
         grad[c, 1] += f_top[k] * dy / l
         grad[c, 2] += f_top[k] * dz / l
@@ -280,8 +261,8 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
         nnz = _geometric(rows, cols, vals, nnz, c, -1, f_top[k] / l, dx / l, dy / l, dz / l)
     for c in range(m):
         for side in range(2):
-            x = s[c, side] - s_old[c, side]
-            e, d1, d2 = _friction(x, g[c, side], eps_f, kappa0)
+            x = material[c, side] - centre[c, side]
+            e, d1, d2 = _friction(x, bound[c, side], eps_f, kappa0)
             E += e
             grad[c, 3 + side] += d1
             i = 5 * c + 3 + side
@@ -300,14 +281,14 @@ def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_
 
 
 @njit(cache=True)
-def _friction(x, g, eps_f, kappa0):
+def _friction(x, bound, eps_f, kappa0):
     """Friction term of one yarn at one crossing and its first and second derivative in the slide
-    x = s - s_old (m): g (sqrt(x^2 + eps_f^2) - eps_f), the work of the friction force g against
-    the sliding, |x| smoothed over eps_f; plus kappa0 x^2 / 2, which keeps the material coordinate
-    of a yarn without friction and without tension defined."""
+    x = material - centre (m): bound (sqrt(x^2 + eps_f^2) - eps_f), the work of the friction force
+    against the sliding, |x| smoothed over eps_f; plus kappa0 x^2 / 2, which keeps the material
+    coordinate of a yarn without friction and without tension defined."""
     r = math.sqrt(x * x + eps_f * eps_f)
-    return (g * (r - eps_f) + 0.5 * kappa0 * x * x, g * x / r + kappa0 * x,
-            g * eps_f * eps_f / (r * r * r) + kappa0)
+    return (bound * (r - eps_f) + 0.5 * kappa0 * x * x, bound * x / r + kappa0 * x,
+            bound * eps_f * eps_f / (r * r * r) + kappa0)
 
 
 @njit(cache=True)
@@ -402,8 +383,9 @@ def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
 
 
 @njit(cache=True)
-def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fell, s_old, f_top,
-           g, EA, eps_f, kappa0, h, eps2, plane, k_wall, l_jam, k_jam):
+def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, material, material_fell,
+           centre, f_top, bound, EA, compression, geometric_floor, eps_f, kappa0, h, eps2,
+           eps2_top, plane, k_wall, l_jam, k_jam):
     """E as in ``assemble``, without derivatives (inf when a material length is not positive)."""
     n = n_yarns // 2
     pa = np.empty(3)
@@ -413,15 +395,16 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fe
         for side in range(2):
             k = yarn[c, side]
             yarn_point(pos, normal, over, c, side, h, pa)
-            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, s, s_fell, h, pb)
-            q = s[c, side] - sb
+            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, material,
+                        material_fell, h, pb)
+            q = material[c, side] - sb
             if q <= 0.0:
                 return np.inf
             l = _sub(pa, pb, eps2)[3]
-            E += 0.5 * axial(l, q, EA) * (l - q) ** 2 / q
+            E += 0.5 * axial(l, q, EA, compression) * (l - q) ** 2 / q
             if low[c, side] >= 0 and l < l_jam:
                 E += 0.5 * k_jam * (l_jam - l) ** 2
-            E += _friction(s[c, side] - s_old[c, side], g[c, side], eps_f, kappa0)[0]
+            E += _friction(material[c, side] - centre[c, side], bound[c, side], eps_f, kappa0)[0]
         sd = _wall_distance(pos, plane, c)
         if sd < 0.0:
             E += 0.5 * k_wall * sd * sd
@@ -431,12 +414,14 @@ def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, s, s_fe
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, pa)
-        E += material_force(f_top[k], EA) * s[c, side] + f_top[k] * _sub(pa, top[k], eps2 + TOP_SMOOTHING2)[3]
+        E += (material_force(f_top[k], EA) * material[c, side]
+              + f_top[k] * _sub(pa, top[k], eps2 + eps2_top)[3])
     return E
 
 
 @njit(cache=True)
-def tensions(m, yarn, pos, normal, over, low, fell, s, s_fell, EA, h, eps2, out):
+def tensions(m, yarn, pos, normal, over, low, fell, material, material_fell, EA, compression, h,
+             eps2, out):
     """Tension (N) of the segment below every crossing on both yarns into out (m, 2)."""
     pa = np.empty(3)
     pb = np.empty(3)
@@ -444,15 +429,17 @@ def tensions(m, yarn, pos, normal, over, low, fell, s, s_fell, EA, h, eps2, out)
         for side in range(2):
             k = yarn[c, side]
             yarn_point(pos, normal, over, c, side, h, pa)
-            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, s, s_fell, h, pb)
-            out[c, side] = segment_tension(_sub(pa, pb, eps2)[3], s[c, side] - sb, EA)
+            sb = _lower(k, c, side, low[c, side], pos, normal, over, fell, material,
+                        material_fell, h, pb)
+            out[c, side] = segment_tension(_sub(pa, pb, eps2)[3], material[c, side] - sb, EA,
+                                           compression)
 
 
 @njit(cache=True)
-def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, g,
+def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, bound,
                     psi):
-    """Per crossing and yarn the friction bound g = mu (f_int + f_ext) tan(delta/2) (N) of the
-    current geometry and tensions into g (m, 2) (DESIGN.md §3.3), and Psi / (f_int + f_ext),
+    """Per crossing and yarn the friction bound mu (f_int + f_ext) tan(delta/2) (N) of the
+    current geometry and tensions into bound (m, 2) (DESIGN.md §3.3), and Psi / (f_int + f_ext),
     Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2)."""
     p = np.empty(3)
     a = np.empty(3)
@@ -466,9 +453,9 @@ def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_t
             yarn_point(pos, normal, over, c, side, h, p)
             _end_point(pos, normal, over, low[c, side], side, k, fell, h, a)
             _end_point(pos, normal, over, u, side, k, top, h, b)
-            ch, sh = CK.half_angles(deflection_dot(p, a, b))
+            ch, sh = half_angles(deflection_dot(p, a, b))
             tot = max(fi + fe, 1e-300)
-            g[c, side] = mu * (fi + fe) * sh / max(ch, 1e-300)
+            bound[c, side] = mu * (fi + fe) * sh / max(ch, 1e-300)
             psi[c, side] = (abs(fi - fe) * ch - mu * (fi + fe) * sh) / tot
 
 
@@ -494,9 +481,11 @@ def imbalance(m, yarn, up, grad, tension, f_top):
 
 
 @njit(cache=True)
-def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, s, tension, EA, h, eps2, s_fell):
-    """Material coordinate of every yarn's fell point such that the segment from it to the
-    yarn's lowest crossing keeps its tension: s_fell = s_lowest - l / (1 + f / EA). Yarn laid on
+def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, material, tension, EA, compression, h,
+             eps2, material_fell):
+    """Material coordinate of every yarn's fell point into material_fell (2n,), such that the
+    segment from it to the yarn's lowest crossing keeps its tension: material_fell =
+    material_lowest - l / (1 + f / EA) (0 for a yarn without crossings). Yarn laid on
     the mandrel leaves the free segment along the yarn (the fell point advances along it), so
     the tension does not jump when the fell point moves."""
     n = n_yarns // 2
@@ -504,13 +493,13 @@ def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, s, tension, EA, h, 
     for k in range(n_yarns):
         c = lowest[k]
         if c < 0:
-            s_fell[k] = 0.0
+            material_fell[k] = 0.0
             continue
         side = 0 if k < n else 1
         yarn_point(pos, normal, over, c, side, h, p)
         l = _sub(p, fell[k], eps2)[3]
         f = tension[c, side]
-        s_fell[k] = s[c, side] - l / (1.0 + f / (EA if f >= 0.0 else COMPRESSION * EA))
+        material_fell[k] = material[c, side] - l / (1.0 + f / (EA if f >= 0.0 else compression * EA))
 
 @njit(cache=True)
 def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spool, mu_r,

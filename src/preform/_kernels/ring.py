@@ -19,7 +19,9 @@ Transverse (eqs. 10-12): contact force ``F_r = f_int u_int + f_ext u_ext`` (the 
 the ring), ``F^t = F_r . t_r``, ``|F^n| = |F_r - F^t t_r|`` (``n_r`` in the plane of ``F_r`` and
 ``t_r``), ``Psi_r = |F^t| - mu_r |F^n|``. Stick keeps ``theta``; slip moves ``R`` along ``sign(F^t)
 t_r`` (``slide = sign(F^t)``, +1: theta grows) to the first ``theta`` with ``Psi_r = 0``, found by a
-marching bracket and Illinois regula falsi.
+marching bracket and Illinois regula falsi. The tolerances and iteration limits are arguments
+(``preform.interaction.settings.RingSettings``); the status codes and the layout of ``out`` are the
+named module constants below.
 """
 
 from __future__ import annotations
@@ -45,12 +47,6 @@ RING_OUT_U_EXT = 12     # 12..14 unit R -> B
 RING_OUT_F_R = 15       # 15..17 contact force F_r = f_int u_int + f_ext u_ext, N
 RING_OUT_ITERATIONS = 18
 RING_OUT_SIZE = 19
-
-PSI_REL_TOL = 1e-12   # Psi_r <= this * (f_int + f_ext) counts as sticking
-MARCH_STEP = 0.01     # rad, bracket march of the slip solve
-MARCH_MAX = 315       # ~ half a turn
-ROOT_MAX_ITER = 200
-ROOT_REL_TOL = 1e-15  # on Psi / (f_int + f_ext)
 
 
 @njit(cache=True)
@@ -102,16 +98,19 @@ def _fail(out, status):
 
 
 @njit(cache=True)
-def slip_theta(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign):
-    """First theta from theta0 in direction ``slide`` with Psi_r = 0: (ok, theta, evaluations)."""
+def slip_theta(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign,
+               march_step, march_max, root_max_iter, root_rel_tol):
+    """First theta from theta0 in direction ``slide`` with Psi_r = 0: (ok, theta, evaluations).
+    The root is bracketed by at most ``march_max`` steps of ``march_step`` (rad) and refined by
+    at most ``root_max_iter`` Illinois iterations to ``|Psi_r| <= root_rel_tol (f_int + f_ext)``."""
     lo = theta0
     ok, h_lo = _signed_psi(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign)
     hi = theta0
     h_hi = 0.0
     evals = 1
     found = False
-    for k in range(1, MARCH_MAX + 1):
-        x = theta0 + slide * k * MARCH_STEP
+    for k in range(1, march_max + 1):
+        x = theta0 + slide * k * march_step
         ok, h = _signed_psi(x, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign)
         evals += 1
         if not ok:
@@ -132,7 +131,7 @@ def slip_theta(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, caps
     hb = h_hi
     x = hi
     side = 0
-    for _ in range(ROOT_MAX_ITER):
+    for _ in range(root_max_iter):
         if hb == 0.0:
             x = lo + (hi - lo) * ub
             break
@@ -142,7 +141,7 @@ def slip_theta(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, caps
         x = lo + (hi - lo) * u
         ok, h = _signed_psi(x, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign)
         evals += 1
-        if abs(h) <= ROOT_REL_TOL or ub - ua <= 1e-15:
+        if abs(h) <= root_rel_tol or ub - ua <= 1e-15:
             break
         if h > 0.0:
             ua, ha = u, h
@@ -158,12 +157,15 @@ def slip_theta(theta0, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, caps
 
 
 @njit(cache=True)
-def solve_ring(ax, ay, az, bx, by, bz, f_ext, r, z_ring, theta_prev, mu, capstan_sign, out):
+def solve_ring(ax, ay, az, bx, by, bz, f_ext, r, z_ring, theta_prev, mu, capstan_sign,
+               psi_rel_tol, march_step, march_max, root_max_iter, root_rel_tol, out):
     """Solve the yarn-ring contact (paper Fig. A.17). Writes ``out[:RING_OUT_SIZE]``, returns a status.
 
     A = (ax, ay, az), B = (bx, by, bz): fixed and supply points, m, machine frame. f_ext: spool
     tension at B, N. r, z_ring: ring radius and plane, m. theta_prev: previous ring angle, rad.
     mu: yarn-ring friction. capstan_sign: -1 paper eq. 9 (lower tension on the A side), +1 reversed.
+    psi_rel_tol: Psi_r <= psi_rel_tol (f_int + f_ext) sticks; march_step .. root_rel_tol: the slip
+    root solve (``slip_theta``; ``interaction.settings.RingSettings``).
     """
     if not (f_ext > 0.0 and r > 0.0):
         return _fail(out, RING_DEGENERATE)
@@ -171,13 +173,14 @@ def solve_ring(ax, ay, az, bx, by, bz, f_ext, r, z_ring, theta_prev, mu, capstan
     ok, ft, fn, f_int, eta = ring_state(theta, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu, capstan_sign)
     if not ok:
         return _fail(out, RING_DEGENERATE)
-    slip = abs(ft) - mu * fn > PSI_REL_TOL * (f_int + f_ext)
+    slip = abs(ft) - mu * fn > psi_rel_tol * (f_int + f_ext)
     slide = 0.0
     evals = 0
     if slip:
         slide = 1.0 if ft > 0.0 else -1.0
         ok, theta, evals = slip_theta(theta, slide, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu,
-                                      capstan_sign)
+                                      capstan_sign, march_step, march_max, root_max_iter,
+                                      root_rel_tol)
         if not ok:
             return _fail(out, RING_NO_ROOT)
         ok, ft, fn, f_int, eta = ring_state(theta, ax, ay, az, bx, by, bz, f_ext, r, z_ring, mu,
@@ -217,11 +220,13 @@ def solve_ring(ax, ay, az, bx, by, bz, f_ext, r, z_ring, theta_prev, mu, capstan
 
 
 @njit(cache=True)
-def solve_rings(A, B, f_ext, r, z_ring, theta_prev, mu, capstan_sign, out, status):
+def solve_rings(A, B, f_ext, r, z_ring, theta_prev, mu, capstan_sign, psi_rel_tol, march_step,
+                march_max, root_max_iter, root_rel_tol, out, status):
     """Batch driver over rows of A, B (n, 3) and f_ext, theta_prev (n,); out (n, RING_OUT_SIZE)."""
     for i in range(A.shape[0]):
-        status[i] = solve_ring(A[i, 0], A[i, 1], A[i, 2], B[i, 0], B[i, 1], B[i, 2], f_ext[i], r, z_ring,
-                               theta_prev[i], mu, capstan_sign, out[i])
+        status[i] = solve_ring(A[i, 0], A[i, 1], A[i, 2], B[i, 0], B[i, 1], B[i, 2], f_ext[i], r,
+                               z_ring, theta_prev[i], mu, capstan_sign, psi_rel_tol, march_step,
+                               march_max, root_max_iter, root_rel_tol, out[i])
 
 
 def empty_out(n):

@@ -1,10 +1,10 @@
 """The yarn-interaction convergence zone (paper §2; DESIGN.md §3.3) behind ``[model] kind =
-"interaction"``: the same interface as :class:`preform.zone.KinematicZone`.
+"interaction"``: a :class:`preform.zone.Zone`, like the kinematic model's.
 
 Each step (``step``):
 
 1. the material coordinate of every fell point is anchored to the new fell points
-   (``frontal.anchor_fell``: the yarn laid on the mandrel leaves the lowest segment's tension);
+   (``frontal.fell_material``: the yarn laid on the mandrel leaves the lowest segment's tension);
 2. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
    both yarns, at the midpoint of the closest points of the two top segments (from the yarn's
    highest crossing, or fell point, to its ring or spool point at the step's end); over/under from
@@ -15,7 +15,7 @@ Each step (``step``):
    the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
    points of the step's end, each yarn sticking (its material at the crossing stays) or slipping
    on its friction bound;
-4. a crossing that lies closer to the mandrel than ``DEPOSIT_HEIGHT`` yarn thicknesses (the
+4. a crossing that lies closer to the mandrel than ``deposit_height`` yarn thicknesses (the
    solver keeps the crossings outside the mandrel's tangent planes, ``frontal.Boundary.plane``)
    is deposited: it becomes the
    fell point of both its yarns (``ZoneStep.deposits``) and leaves the zone; crossings below it on
@@ -29,10 +29,11 @@ with Amontons friction (``slide_rings``, the single ring-contact solver, after e
 the ring point lags the yarn by a step), and the tension below it follows Capstan from the spool
 tension as the paper's eq. 9 writes it, ``f_spool = f exp(mu_r eta)`` (``_kernels/frontal.
 top_tensions``; the ring solver's default ``capstan_sign = -1``): the mandrel side carries the
-lower tension. (The reverse, the higher tension on the mandrel side of a yarn drawn from the spool,
-was tried: with ring friction 0.6 the ring's normal force then grows with the Capstan factor
-faster than the carriers' pull across the ring, the ring points never slip and the braid stops,
-which braiding machines with such rings do not show.)
+lower tension (the reverse sign stops the braid, ``docs/decisions-interaction.md``).
+
+The numerical settings (deposit height, creation, staging, the snapshot's ring alternation and
+everything the solver uses) are an :class:`~preform.interaction.settings.InteractionSettings`,
+passed to the constructor.
 
 Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
 """
@@ -44,31 +45,16 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._kernels import frontal as K
+from .._kernels import frontal as frontal_kernels
+from .._kernels import ring as ring_kernels
 from ..errors import SimulationError
+from .. import plain
 from ..result import Snapshot
 from ..zone import ZoneStep
 from . import frontal
-from .._kernels import ring as RK
-from .ring import ring_point
+from .ring import ring_arguments, ring_point
+from .settings import DEFAULT, InteractionSettings
 from .zone_state import ZoneState
-
-#: a lowest crossing closer to the mandrel than this many yarn thicknesses is deposited
-DEPOSIT_HEIGHT = 1.0
-#: a new crossing starts no lower than this fraction of its yarns' top segments: behind a guide
-#: ring whose points lag the carriers, two yarns whose carriers have passed may not cross yet
-#: below the ring, and their closest points are the crossings below (the solver then takes the
-#: new crossing up to the ring, where the yarns do cross)
-CREATION_LOWEST = 0.5
-#: snapshot: alternations of the zone solve and the ring points' stick/slip, at most, and the
-#: ring-point motion (m) below which they stop
-RING_ITERATIONS = 20
-RING_TOLERANCE = 1e-9
-#: frontal iterations per pass of that alternation (the last solve iterates to convergence)
-RING_PASS_ITERATIONS = 3
-#: where a step's solve fails, the step is solved again with its boundary moved in these stages
-#: (fractions of the move; ``InteractionZone._staged``)
-BOUNDARY_STAGES = (0.25, 0.5, 0.75, 1.0)
 
 
 class MandrelDistance:
@@ -98,30 +84,47 @@ class MandrelDistance:
 
 
 class InteractionZone:
-    """Crossings with stick/slip friction between the fell points and the supply side."""
+    """Crossings with stick/slip friction between the fell points and the supply side.
 
-    def __init__(self, config, machine, mandrel=None, distance=None):
+    config: the run's :class:`~preform.config.Config` (its ``yarn`` section is read); machine:
+    :class:`~preform.machine.Machine`; mandrel: the mandrel (mandrel frame) whose distance decides
+    deposition and whose tangent planes are the wall, or None; distance: instead of the mandrel, a
+    :class:`MandrelDistance` or a plain callable ``points (k, 3) -> signed distance (k,)`` (no
+    wall: it has no planes); settings: the numerical settings (default ``settings.DEFAULT``);
+    solve_zone: the zone solver, ``frontal.solve_zone_inplace`` or a stand-in with its signature
+    (failure-injection tests).
+    """
+
+    def __init__(self, config, machine, mandrel=None, *, distance=None,
+                 settings: InteractionSettings | None = None, solve_zone=None):
         self.config = config
         self.machine = machine
+        self.settings = DEFAULT if settings is None else settings
+        self.solve_zone = frontal.solve_zone_inplace if solve_zone is None else solve_zone
         self.distance = distance if distance is not None else (
             MandrelDistance(mandrel) if mandrel is not None else None)
+        # the tangent planes of the wall: only a mandrel has them
+        self.planes = self.distance.planes if isinstance(self.distance, MandrelDistance) else None
         y = config.yarn
         self.h = 0.5 * float(y.thickness)
         self.width = float(y.width)
         self.mu = float(y.friction)
-        self.mu_r = float(getattr(y, "ring_friction", 0.0) or 0.0)
+        self.mu_r = float(y.ring_friction)
         self.f_spool = float(y.tension)
         self.state = ZoneState(machine.n_yarns)
-        self.f_top = np.full(machine.n_yarns, self.f_spool)
+        self.f_top = np.full(machine.n_yarns, self.f_spool)   # N, top tension of every yarn
         self.step_index = 0
-        self.G_prev = None
-        self.lowest_uid_prev = None
-        self.last_report = None
-        self.fell = None
-        self.fell_ref = None
-        self.staged = 0            # steps solved in stages (``_staged``)
+        self.G_prev = None            # (2n, 3) free-yarn ends of the last step
+        self.lowest_uid_prev = None   # (2n,) uid of every yarn's lowest crossing at the last step
+        self.last_report = None       # frontal.SolveReport of the last step
+        self.fell = None              # (2n, 3) fell points of the last step
+        self.fell_ref = None          # (2n, 3) where the next step's boundary moves from
+        self.staged = 0               # steps solved in stages (``_staged``)
         self.t = 0.0
-        self.pose_end = None
+        self.pose_end = None          # the mandrel's pose at the end of the last step
+        self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
+        self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
+        self.ring_anchor = None       # (2n,) rad, ring angles at the start of the last step
 
     # -- interface --------------------------------------------------------------------------
     def start(self, t, F_machine, pose):
@@ -155,22 +158,25 @@ class InteractionZone:
         self.step_index += 1
         bc = self.boundary(t1, F_machine)
         st = self.state
-        frontal.anchor_fell(st, bc)
+        st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
-        K.radial_normals(st.m, st.pos, st.normal)
+        frontal_kernels.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
-        s_old = frontal.friction_centres(st)
-        start = st.pos[: st.m].copy(), st.s[: st.m].copy()   # what a failed solve leaves moved
+        centre = frontal.friction_centres(st)
+        # what a failed solve leaves moved
+        start = st.pos[: st.m].copy(), st.material[: st.m].copy()
         try:
             wall = self._with_wall(bc)
-            self.last_report = frontal.solve_zone(st, wall, self.f_top, where=where, s_old=s_old)
+            self.last_report = self.solve_zone(st, wall, settings=self.settings, where=where,
+                                               centre=centre)
             bc = wall
         except SimulationError:
-            if getattr(self, "fell_ref", None) is None or not BOUNDARY_STAGES:
+            if self.fell_ref is None or not self.settings.zone.boundary_stages:
                 raise
-            st.pos[: st.m], st.s[: st.m] = start
-            bc = self._staged(t0, t1, bc, where, s_old)
+            st.pos[: st.m], st.material[: st.m] = start
+            bc = self._staged(t0, t1, bc, where, centre)
+        self.f_top = self.last_report.f_top
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
@@ -192,14 +198,16 @@ class InteractionZone:
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
 
-    def _staged(self, t0, t1, bc, where, s_old):
-        """The step solved again with its boundary moved in BOUNDARY_STAGES (fell points from
-        where the last step left them, supply or ring points from their last places, each solve
-        warm-started from the last; the same friction centres ``s_old``): where the boundary's
-        move in one go takes Newton out of its reach. Returns the final boundary (with the wall)."""
+    def _staged(self, t0, t1, bc, where, centre):
+        """The step solved again with its boundary moved in the ``boundary_stages`` (fell points
+        from where the last step left them, supply or ring points from their last places, each
+        solve warm-started from the last; the same friction centres ``centre``): where the
+        boundary's move in one go takes Newton out of its reach. Sets ``last_report``; returns the
+        final boundary (with the wall)."""
         st = self.state
         m = self.machine
-        where = f"{where}, also with the boundary moved in {len(BOUNDARY_STAGES)} stages"
+        stages = self.settings.zone.boundary_stages
+        where = f"{where}, also with the boundary moved in {len(stages)} stages"
         report, bcl = None, bc
 
         def at(lam):
@@ -209,17 +217,16 @@ class InteractionZone:
             return self.boundary(t0 + lam * (t1 - t0), fell, theta)
 
         # the fell points' material moves with them: from where the last step's fell points
-        # hold the lowest segments' tensions to the step's own anchoring (``anchor_fell``), so
+        # hold the lowest segments' tensions to the step's own anchoring (``fell_material``), so
         # the last stage is the step's problem itself
-        s_fell_end = st.s_fell.copy()
-        frontal.anchor_fell(st, at(0.0))
-        s_fell_start = st.s_fell.copy()
-        for lam in BOUNDARY_STAGES:
+        fell_end = st.material_fell.copy()
+        fell_start = frontal.fell_material(st, at(0.0), self.settings)
+        for lam in stages:
             bcl = at(lam) if lam < 1.0 else bc
-            st.s_fell[:] = s_fell_start + lam * (s_fell_end - s_fell_start)
+            st.material_fell[:] = fell_start + lam * (fell_end - fell_start)
             bcl = self._with_wall(bcl)
-            report = frontal.solve_zone(st, bcl, self.f_top, where=where, s_old=s_old)
-        self.staged = getattr(self, "staged", 0) + 1
+            report = self.solve_zone(st, bcl, settings=self.settings, where=where, centre=centre)
+        self.staged += 1
         self.last_report = report
         return bcl
 
@@ -228,64 +235,126 @@ class InteractionZone:
 
         The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
         are in balance with the exported fell points."""
-        st = _copy_state(self.state)
-        # each yarn's friction centre at each crossing (``frontal.solve_zone``)
+        st = self.state.copy()
+        # each yarn's friction centre at each crossing (``frontal.solve_zone_inplace``)
         anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
         fell = np.array(F_machine, dtype=float)
-        f_top = self.f_top.copy()
-        theta = getattr(self, "ring_theta", None)
+        theta = self.ring_theta
+        zs = self.settings.zone
         where = f"in the snapshot at t = {t:.6g} s"
-        for i in range(RING_ITERATIONS):
+        for i in range(zs.ring_iterations):
             # the same stick anchors (yarn material, ring angles) in every pass: a fixed point
             # of the step's state, not further steps
             bc = self._with_wall(self.boundary(t, fell, theta), st)
-            frontal.anchor_fell(st, bc)
-            s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
-            frontal.solve_zone(st, bc, f_top, max_iter=RING_PASS_ITERATIONS, where=where,
-                               s_old=s_old)
+            st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
+            centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
+            self.solve_zone(st, bc, settings=self.settings, max_iter=zs.ring_pass_iterations,
+                            where=where, centre=centre)
             # a crossing the re-solve laid on the mandrel is deposited there, as a step would
             deposits = self._deposit(self.pose_end, st)
             for k, p in deposits:
                 fell[k] = p
             moved = 0.0
             if self.machine.has_ring:
-                new = self.slide_rings(st, bc, getattr(self, "ring_anchor", theta))
+                new = self.slide_rings(st, bc, self.ring_anchor)
                 moved = float(np.abs(new - theta).max()) * self.machine.ring_radius
                 theta = new
-            if moved < RING_TOLERANCE and not deposits:
+            if moved < zs.ring_tolerance and not deposits:
                 break
         # the friction bounds to convergence at the final ring points and fell points
         bc = self._with_wall(self.boundary(t, fell, theta), st)
-        frontal.anchor_fell(st, bc)
-        s_old = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
-        frontal.solve_zone(st, bc, f_top, max_iter=frontal.SNAPSHOT_ITERATIONS, where=where,
-                           s_old=s_old, friction_tol=frontal.SNAPSHOT_TOLERANCE)
-        return _snapshot(st, bc, f_top, t, self.machine)
+        st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
+        centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
+        fr = self.settings.frontal
+        report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
+                                 where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
+        return _snapshot(st, bc, report.f_top, t, self.machine)
 
     def slide_rings(self, st, bc, theta):
         """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
         ring with Amontons friction (paper §2.3, ``_kernels.ring.solve_ring``), the yarn running
         from its highest crossing (or fell point) over the ring to its spool point. Explicit: the
         zone's solve that follows uses them, so the ring point lags its yarn by a step (snapshots
-        iterate to RING_TOLERANCE)."""
+        iterate to ``ring_tolerance``)."""
         n = st.n_yarns
         A = np.array([self._top_point(k, bc.fell, st) for k in range(n)])
-        out = RK.empty_out(n)
+        out = ring_kernels.empty_out(n)
         status = np.empty(n, dtype=np.int64)
-        RK.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
-                       self.machine.ring_radius, self.machine.supply_z, np.asarray(theta, float),
-                       self.mu_r, -1.0, out, status)
-        ok = status == RK.RING_OK
-        return np.where(ok, out[:, RK.RING_OUT_THETA], theta)
+        ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
+                                 self.machine.ring_radius, self.machine.supply_z,
+                                 np.asarray(theta, float), self.mu_r, -1.0,
+                                 *ring_arguments(self.settings.ring), out, status)
+        ok = status == ring_kernels.RING_OK
+        return np.where(ok, out[:, ring_kernels.RING_OUT_THETA], theta)
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def export_state(self) -> dict:
+        """What the zone carries from step to step, as plain arrays (``preform.checkpoint``): the
+        crossings (``ZoneState.to_arrays``, names ``state.*``), top tensions, fell points, the
+        last step's lowest points, waiting passes, ring angles and pose. (``last_report`` is
+        not state: each step sets it before reading it.)"""
+        out = plain.prefixed("state.", self.state.to_arrays())
+        pending = self.pending
+        out.update(
+            f_top=self.f_top, fell=self.fell, fell_ref=self.fell_ref, G_prev=self.G_prev,
+            lowest_uid_prev=self.lowest_uid_prev, t=np.float64(self.t),
+            step_index=np.int64(self.step_index), staged=np.int64(self.staged),
+            pending_time=np.array([p[0] for p in pending], dtype=np.float64),
+            pending_yarns=np.array([p[1:3] for p in pending], dtype=np.int64).reshape(-1, 2),
+            pending_over=np.array([p[3] for p in pending], dtype=bool))
+        if self.pose_end is not None:
+            out.update(pose_R=self.pose_end.R, pose_t=self.pose_end.t)
+        if self.ring_theta is not None:
+            out.update(ring_theta=self.ring_theta, ring_anchor=self.ring_anchor)
+        return {k: np.array(v) for k, v in out.items()}
+
+    def import_state(self, arrays) -> None:
+        """Replace the state by one ``export_state`` gave, checked first (ValueError)."""
+        from ..geometry.pose import Pose
+
+        ny, n = self.machine.n_yarns, self.machine.n_per_group
+        f64 = np.float64
+
+        def points(name):
+            return plain.finite(name, plain.take(arrays, name, (ny, 3), f64))
+
+        state = ZoneState.from_arrays(plain.unprefixed("state.", arrays), ny)
+        f_top = plain.finite("f_top", plain.take(arrays, "f_top", (ny,), f64))
+        fell, fell_ref, G_prev = points("fell"), points("fell_ref"), points("G_prev")
+        uid_prev = plain.in_range("lowest_uid_prev",
+                                  plain.take(arrays, "lowest_uid_prev", (ny,), np.int64), -1, 2**62)
+        t = plain.finite("t", plain.take(arrays, "t", (), f64)).item()
+        step_index = plain.scalar(arrays, "step_index", np.int64)
+        staged = plain.scalar(arrays, "staged", np.int64)
+        times = plain.finite("pending_time", plain.take(arrays, "pending_time", (None,), f64))
+        yarns = plain.take(arrays, "pending_yarns", (len(times), 2), np.int64)
+        plain.in_range("pending_yarns (warp)", yarns[:, 0], 0, n)
+        plain.in_range("pending_yarns (weft)", yarns[:, 1], n, 2 * n)
+        over = plain.take(arrays, "pending_over", (len(times),), bool)
+        pose = None
+        if "pose_R" in arrays:
+            pose = Pose(R=plain.finite("pose_R", plain.take(arrays, "pose_R", (3, 3), f64)),
+                        t=plain.finite("pose_t", plain.take(arrays, "pose_t", (3,), f64)))
+        if self.machine.has_ring != ("ring_theta" in arrays):
+            raise ValueError("the ring angles do not match the machine's guide ring")
+        theta = anchor = None
+        if self.machine.has_ring:
+            theta = plain.finite("ring_theta", plain.take(arrays, "ring_theta", (ny,), f64))
+            anchor = plain.finite("ring_anchor", plain.take(arrays, "ring_anchor", (ny,), f64))
+        self.ring_theta, self.ring_anchor = theta, anchor
+        self.state, self.f_top, self.fell, self.fell_ref, self.G_prev = state, f_top, fell, fell_ref, G_prev
+        self.lowest_uid_prev, self.t, self.step_index, self.staged = uid_prev, t, step_index, staged
+        self.pending = [(float(tp), int(kx), int(ko), bool(o))
+                        for tp, (kx, ko), o in zip(times, yarns, over)]
+        self.pose_end = pose
 
     # -- pieces -----------------------------------------------------------------------------
     def _with_wall(self, bc, state=None):
         """bc with the mandrel's tangent planes near the crossings (no wall without a mandrel)."""
         st = self.state if state is None else state
-        planes = getattr(self.distance, "planes", None)
-        if planes is None or st.m == 0 or self.pose_end is None:
+        if self.planes is None or st.m == 0 or self.pose_end is None:
             return bc
-        return dataclasses.replace(bc, plane=planes(st.pos[: st.m], self.pose_end))
+        return dataclasses.replace(bc, plane=self.planes(st.pos[: st.m], self.pose_end))
 
     def lowest_points(self, top) -> np.ndarray:
         """(2n, 3): each yarn's centerline point at its lowest crossing, or its top point."""
@@ -332,14 +401,15 @@ class InteractionZone:
         for tp, kx, ko, over in self._ready_passes(t0, t1):
             px, po = self._top_point(kx, bc.fell), self._top_point(ko, bc.fell)
             gx, go = bc.top[kx], bc.top[ko]
-            C, N = creation_point(px, gx, po, go, lowest=CREATION_LOWEST)
+            C, N = creation_point(px, gx, po, go, lowest=self.settings.zone.creation_lowest)
             st = self.state
             r = float(np.hypot(C[0], C[1]))
-            if r > 0.0:     # the normal the solve uses (``radial_normals``), so s matches it
+            if r > 0.0:     # the normal the solve uses (``radial_normals``): material matches it
                 N = np.array([C[0] / r, C[1] / r, 0.0])
             c = st.add(kx, ko, C, N, bool(over), float(tp))
             for side, (k, below) in enumerate(((kx, px), (ko, po))):
-                st.s[c, side] = frontal.new_material(st, c, side, below, self.f_top[k], bc)
+                st.material[c, side] = frontal.new_material(st, c, side, below, self.f_top[k], bc,
+                                                            self.settings)
                 st.tension[c, side] = self.f_top[k]
 
     def _deposit(self, pose, state=None):
@@ -348,7 +418,7 @@ class InteractionZone:
             return []
         cand = np.arange(st.m)
         d = self.distance(pose.to_mandrel(st.pos[cand]))
-        hit = cand[d < DEPOSIT_HEIGHT * 2.0 * self.h]
+        hit = cand[d < self.settings.zone.deposit_height * 2.0 * self.h]
         if len(hit) == 0:
             return []
         dead = []
@@ -385,35 +455,29 @@ def creation_point(px, gx, po, go, lowest=0.0):
     a, e, b = d1 @ d1, d2 @ d2, d1 @ d2
     c, f = d1 @ r, d2 @ r
     tiny = 1e-30
+    # closest points px + tx d1 and po + to d2, tx and to in [0, 1]
     if a <= tiny and e <= tiny:
-        s = u = 0.0
+        tx = to = 0.0
     elif a <= tiny:
-        s, u = 0.0, float(np.clip(f / e, 0.0, 1.0))
+        tx, to = 0.0, float(np.clip(f / e, 0.0, 1.0))
     elif e <= tiny:
-        s, u = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+        tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
     else:
         den = a * e - b * b
-        s = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > tiny else 1.0
-        u = (b * s + f) / e
-        if u < 0.0:
-            s, u = float(np.clip(-c / a, 0.0, 1.0)), 0.0
-        elif u > 1.0:
-            s, u = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
-    s, u = max(s, lowest), max(u, lowest)
-    C = 0.5 * (px + s * d1 + po + u * d2)
+        tx = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > tiny else 1.0
+        to = (b * tx + f) / e
+        if to < 0.0:
+            tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+        elif to > 1.0:
+            tx, to = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
+    tx, to = max(tx, lowest), max(to, lowest)
+    C = 0.5 * (px + tx * d1 + po + to * d2)
     N = np.cross(d1, d2)
     nn = np.linalg.norm(N)
     N = N / nn if nn > 0 else np.array([C[0], C[1], 0.0]) / max(np.hypot(C[0], C[1]), 1e-300)
     if N[0] * C[0] + N[1] * C[1] < 0:
         N = -N
     return C, N
-
-
-def _copy_state(st):
-    new = ZoneState.__new__(ZoneState)
-    for key, value in vars(st).items():
-        setattr(new, key, value.copy() if isinstance(value, np.ndarray) else value)
-    return new
 
 
 def _snapshot(st, bc, f_top, t, machine) -> Snapshot:

@@ -22,13 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._kernels import ring as K
+from .._kernels import ring as ring_kernels
 from .contact import ContactInputError, as_friction, as_vector
+from .settings import RingSettings
 
 STATUS_MESSAGES = {
-    K.RING_OK: "ok",
-    K.RING_DEGENERATE: "A or B lies on the ring point, or the tension or radius is not positive",
-    K.RING_NO_ROOT: "no ring point within half a turn holds the yarn inside the friction cone",
+    ring_kernels.RING_OK: "ok",
+    ring_kernels.RING_DEGENERATE: "A or B lies on the ring point, or the tension or radius is not "
+                                  "positive",
+    ring_kernels.RING_NO_ROOT: "no ring point within half a turn holds the yarn inside the friction "
+                               "cone",
 }
 
 
@@ -59,7 +62,7 @@ class RingSolution:
 
     @property
     def ok(self) -> bool:
-        return self.status == K.RING_OK
+        return self.status == ring_kernels.RING_OK
 
     @property
     def message(self) -> str:
@@ -73,16 +76,18 @@ class RingSolution:
     @classmethod
     def from_row(cls, row, status, f_ext) -> "RingSolution":
         """Unpack one kernel output row (``_kernels.ring.RING_OUT_*`` layout)."""
+        rk = ring_kernels
         row = np.array(row, dtype=np.float64)
         vec = {}
-        for name, k in (("R", K.RING_OUT_R), ("u_int", K.RING_OUT_U_INT), ("u_ext", K.RING_OUT_U_EXT),
-                        ("F_r", K.RING_OUT_F_R)):
+        for name, k in (("R", rk.RING_OUT_R), ("u_int", rk.RING_OUT_U_INT),
+                        ("u_ext", rk.RING_OUT_U_EXT), ("F_r", rk.RING_OUT_F_R)):
             vec[name] = row[k:k + 3]
             vec[name].flags.writeable = False
-        return cls(theta_r=float(row[K.RING_OUT_THETA]), f_int=float(row[K.RING_OUT_F_INT]),
-                   f_ext=float(f_ext), eta=float(row[K.RING_OUT_ETA]), psi_r=float(row[K.RING_OUT_PSI]),
-                   slip=int(row[K.RING_OUT_SLIP]), slide=int(row[K.RING_OUT_SLIDE]), status=int(status),
-                   iterations=int(row[K.RING_OUT_ITERATIONS]), **vec)
+        return cls(theta_r=float(row[rk.RING_OUT_THETA]), f_int=float(row[rk.RING_OUT_F_INT]),
+                   f_ext=float(f_ext), eta=float(row[rk.RING_OUT_ETA]),
+                   psi_r=float(row[rk.RING_OUT_PSI]), slip=int(row[rk.RING_OUT_SLIP]),
+                   slide=int(row[rk.RING_OUT_SLIDE]), status=int(status),
+                   iterations=int(row[rk.RING_OUT_ITERATIONS]), **vec)
 
 
 def _positive(name, value) -> float:
@@ -92,13 +97,15 @@ def _positive(name, value) -> float:
     return v
 
 
-def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1) -> RingSolution:
+def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1,
+               settings: RingSettings | None = None) -> RingSolution:
     """Solve the yarn-ring contact (paper Fig. A.17: stick predictor, transverse slip corrector).
 
     A, B : (3,) float64, m, machine frame: fixed point and supply point. f_ext : N, spool tension.
     r_ring : m, ring radius; z_ring : m, ring plane. theta_prev : rad, the ring angle carried from the
     previous step. mu_r : yarn-ring friction >= 0. capstan_sign : -1 (paper eq. 9) or +1 (module
-    docstring). Returns a :class:`RingSolution`; check ``.ok``.
+    docstring). settings: the root solve's tolerances (default ``RingSettings()``). Returns a
+    :class:`RingSolution`; check ``.ok``.
     """
     a, b = as_vector("A", A), as_vector("B", B)
     f = _positive("f_ext", f_ext)
@@ -109,10 +116,18 @@ def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1
         raise ContactInputError(f"z_ring = {z_ring!r}, theta_prev = {theta_prev!r}: expected finite numbers")
     if capstan_sign not in (-1, 1):
         raise ContactInputError(f"capstan_sign = {capstan_sign!r}: expected -1 or +1")
-    out = np.zeros(K.RING_OUT_SIZE)
-    status = K.solve_ring(a[0], a[1], a[2], b[0], b[1], b[2], f, r, z, th, as_friction("mu_r", mu_r),
-                          float(capstan_sign), out)
+    out = np.zeros(ring_kernels.RING_OUT_SIZE)
+    s = RingSettings() if settings is None else settings
+    status = ring_kernels.solve_ring(a[0], a[1], a[2], b[0], b[1], b[2], f, r, z, th,
+                                     as_friction("mu_r", mu_r), float(capstan_sign),
+                                     *ring_arguments(s), out)
     return RingSolution.from_row(out, status, f)
+
+
+def ring_arguments(s: RingSettings) -> tuple:
+    """The ring kernels' settings arguments (psi_rel_tol .. root_rel_tol), in their order."""
+    return (float(s.psi_rel_tol), float(s.march_step), int(s.march_max), int(s.root_max_iter),
+            float(s.root_rel_tol))
 
 
 def ring_point(theta_r, r_ring, z_ring) -> np.ndarray:

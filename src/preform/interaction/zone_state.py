@@ -16,16 +16,17 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``over (cap,) float64``: +1 if the warp is the outer (over) yarn at this crossing, else -1. The
   yarn centerline points are ``C + over * h * N`` (warp) and ``C - over * h * N`` (weft),
   ``h = thickness / 2`` (paper eq. 16, with one normal per crossing);
-- ``s (cap, 2) float64, m``: material coordinate of each yarn at the crossing (m of yarn from a
-  point of the yarn's deposited part; ``interaction/frontal.py``): what a sticking yarn keeps;
-- ``g (cap, 2) float64, N``: friction bound of each yarn at the crossing from the last solve (NaN
-  before the first), the start of the next;
+- ``material (cap, 2) float64, m``: material coordinate of each yarn at the crossing (m of yarn
+  from a point of the yarn's deposited part; ``interaction/frontal.py``): what a sticking yarn
+  keeps;
+- ``bound (cap, 2) float64, N``: friction bound of each yarn at the crossing from the last solve
+  (NaN before the first), the start of the next;
 - ``slip (cap, 2) int8``: friction state per yarn in the last step: 0 stick, +1 slipping with the
   tension below the crossing larger (the yarn slides towards the mandrel through the crossing), -1
   the other way (the crossing runs down the yarn faster than the yarn is drawn);
 - ``offset (cap, 2) float64, m``: the elastic part of the friction slip that carries the friction
-  force of each yarn over to the next step (``interaction/frontal.py``, FRICTION_MEMORY): the
-  next step's friction term is centred at ``s - offset``;
+  force of each yarn over to the next step (``interaction/frontal.py``, ``friction_memory``): the
+  next step's friction term is centred at ``material - offset``;
 - ``low (cap, 2) int64`` / ``up (cap, 2) int64``: array index of the next crossing towards the
   mandrel / towards the supply on the warp (column 0) and weft (column 1) yarn; -1 for the fell
   point below / the supply side above;
@@ -33,12 +34,14 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
 Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
--1 when it has none; ``s_fell[k]``: material coordinate of its fell point (m).
+-1 when it has none; ``material_fell[k]``: material coordinate of its fell point (m).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .. import plain
 
 #: initial capacity (crossings); the arrays double when full
 INITIAL_CAPACITY = 256
@@ -49,8 +52,8 @@ _FIELDS = {
     "pos": ((3,), np.float64, 0.0),
     "normal": ((3,), np.float64, 0.0),
     "over": ((), np.float64, 1.0),
-    "s": ((2,), np.float64, 0.0),
-    "g": ((2,), np.float64, np.nan),
+    "material": ((2,), np.float64, 0.0),
+    "bound": ((2,), np.float64, np.nan),
     "slip": ((2,), np.int8, 0),
     "offset": ((2,), np.float64, 0.0),
     "low": ((2,), np.int64, -1),
@@ -72,20 +75,99 @@ class ZoneState:
             setattr(self, name, np.full((capacity,) + shape, fill, dtype=dtype))
         self.lowest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
-        self.s_fell = np.zeros(self.n_yarns)
-
-    def __setstate__(self, state):
-        """Unpickle (checkpoints): a field that a checkpoint of an older version lacks starts
-        at its fill value, as for a new crossing."""
-        self.__dict__.update(state)
-        cap = len(self.uid)
-        for name, (shape, dtype, fill) in _FIELDS.items():
-            if name not in state:
-                setattr(self, name, np.full((cap,) + shape, fill, dtype=dtype))
+        self.material_fell = np.zeros(self.n_yarns)
 
     @property
     def capacity(self) -> int:
         return len(self.uid)
+
+    def _yarn_arrays(self) -> list[str]:
+        """Names of the per-yarn arrays (``lowest``, ``highest``, the fell points' material
+        coordinates): every array attribute that is not a crossing field of ``_FIELDS``."""
+        return [k for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in _FIELDS]
+
+    def copy(self) -> "ZoneState":
+        """An independent copy (same capacity; every array copied)."""
+        new = ZoneState(self.n_yarns, capacity=self.capacity)
+        new.m, new.next_uid = self.m, self.next_uid
+        for name in (*_FIELDS, *self._yarn_arrays()):
+            setattr(new, name, getattr(self, name).copy())
+        return new
+
+    def to_arrays(self) -> dict:
+        """The state as plain arrays (checkpoints): every field of ``_FIELDS`` for the ``m``
+        crossings, the per-yarn arrays, and ``next_uid`` (0-d int64). Rows past ``m`` are not
+        state (``add`` sets every field of a new crossing), nor is the capacity."""
+        out = {name: getattr(self, name)[: self.m].copy() for name in _FIELDS}
+        out.update({name: getattr(self, name).copy() for name in self._yarn_arrays()})
+        out["next_uid"] = np.int64(self.next_uid)
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    @classmethod
+    def from_arrays(cls, arrays, n_yarns: int) -> "ZoneState":
+        """The state ``to_arrays`` gave, checked before any kernel sees it: shapes and dtypes of
+        ``_FIELDS`` and of the per-yarn arrays of a new state, finite floats (NaN only in a field
+        whose fill is NaN: not yet solved), yarn indices on their side (warp ``0 .. n-1``, weft
+        ``n .. 2n-1``), links within the crossings and consistent with the chains (module
+        docstring). ValueError names what is wrong."""
+        n_yarns = int(n_yarns)
+        m = len(plain.take(arrays, "uid", (None,), np.int64))
+        capacity = INITIAL_CAPACITY
+        while capacity < m:
+            capacity *= 2
+        st = cls(n_yarns, capacity=capacity)
+        for name, (shape, dtype, fill) in _FIELDS.items():
+            a = plain.take(arrays, name, (m,) + shape, dtype)
+            if a.dtype.kind == "f":
+                plain.finite(name, a, allow_nan=bool(np.isnan(fill)))
+            getattr(st, name)[:m] = a
+        st.m = m
+        st.next_uid = plain.scalar(arrays, "next_uid", np.int64)
+        for name in st._yarn_arrays():
+            like = getattr(st, name)
+            a = plain.take(arrays, name, like.shape, like.dtype)
+            if a.dtype.kind == "f":
+                plain.finite(name, a)
+            setattr(st, name, a)
+        for name in ("lowest", "highest"):
+            plain.in_range(name, getattr(st, name), -1, m)
+        st._validate()
+        return st
+
+    def _validate(self) -> None:
+        """ValueError unless indices and links are those of a state ``add`` and ``remove`` make."""
+        m, n = self.m, self.n_yarns // 2
+        yarn = self.yarn[:m]
+        plain.in_range("yarn (warp)", yarn[:, 0], 0, n)
+        plain.in_range("yarn (weft)", yarn[:, 1], n, 2 * n)
+        uid = self.uid[:m]
+        plain.in_range("uid", uid, 0, max(self.next_uid, 0))
+        if len(np.unique(uid)) != m:
+            raise ValueError("array 'uid' repeats a crossing id")
+        if not np.all(np.abs(self.over[:m]) == 1.0):
+            raise ValueError("array 'over' holds values other than +1 and -1")
+        if not np.all(np.isin(self.slip[:m], (-1, 0, 1))):
+            raise ValueError("array 'slip' holds values other than -1, 0 and +1")
+        c = np.arange(m)
+        for side in range(2):
+            for name, links, older in (("low", self.low, True), ("up", self.up, False)):
+                v = plain.in_range(name, links[:m, side], -1, m)
+                linked = v >= 0
+                # creation order: a crossing's neighbour towards the mandrel is older, its
+                # neighbour towards the supply newer, both on the same yarn, linked back to it
+                back = (self.up if older else self.low)[v[linked], side]
+                if (np.any((v[linked] < c[linked]) != older) or np.any(back != c[linked])
+                        or np.any(yarn[v[linked], side] != yarn[linked, side])):
+                    raise ValueError(f"array {name!r} does not link crossings along their yarns")
+                ends = self.lowest if older else self.highest
+                if np.any(ends[yarn[~linked, side]] != c[~linked]):
+                    raise ValueError(f"the {'lowest' if older else 'highest'} crossings do not "
+                                     f"match the links {name!r}")
+        for name, ends, links in (("lowest", self.lowest, self.low), ("highest", self.highest, self.up)):
+            k = np.nonzero(ends >= 0)[0]
+            side = (k >= n).astype(np.int64)
+            if np.any(yarn[ends[k], side] != k) or np.any(links[ends[k], side] != -1):
+                raise ValueError(f"array {name!r} names crossings that are not the ends of its yarns")
 
     def _grow(self, need: int):
         cap = self.capacity
@@ -111,8 +193,8 @@ class ZoneState:
         self.over[c] = 1.0 if over else -1.0
         self.slip[c] = 0
         self.offset[c] = 0.0
-        self.s[c] = 0.0
-        self.g[c] = np.nan
+        self.material[c] = 0.0
+        self.bound[c] = np.nan
         self.tension[c] = 0.0
         self.uid[c] = self.next_uid
         self.next_uid += 1
@@ -142,8 +224,8 @@ class ZoneState:
 
     def centerline_point(self, c: int, side: int, half_thickness: float) -> np.ndarray:
         """Yarn centerline point of side ``side`` at crossing ``c`` (module docstring), (3,)."""
-        s = self.over[c] if side == 0 else -self.over[c]
-        return self.pos[c] + s * half_thickness * self.normal[c]
+        o = self.over[c] if side == 0 else -self.over[c]
+        return self.pos[c] + o * half_thickness * self.normal[c]
 
     def remove(self, dead) -> None:
         """Remove crossings (array indices ``dead``, each the lowest on both its yarns once the

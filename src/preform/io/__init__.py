@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_folder
 from .plots import plot_history, plot_yarns_3d
 from .tables import write_history, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp
@@ -46,8 +46,8 @@ def write_results(result, fields, out_dir) -> list[Path]:
     out_dir : str or Path, created if missing
     returns : the paths written, summary.json last
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = safe_folder(out_dir)
+    safe_folder(out_dir, PLOTS)   # a symlink planted as plots/ is replaced, never followed
     summary = out_dir / SUMMARY
     summary.unlink(missing_ok=True)  # a summary from an earlier run would mark this one complete
     written = [write_history(result, out_dir / HISTORY),
@@ -55,6 +55,12 @@ def write_results(result, fields, out_dir) -> list[Path]:
                *write_convergence(result.snapshots, out_dir)]
     if fields is not None:
         written += _write_surface(fields, out_dir)
+        if result.centerline is not None:
+            from .maps import MAP, write_surface_map
+            from .plots import run_title
+
+            written.append(write_surface_map(fields, result.centerline, out_dir / PLOTS / MAP,
+                                             run_title(result, "Surface fields, unrolled")))
     if result.steps:
         written += plot_history(result, out_dir / PLOTS)
     written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
@@ -74,4 +80,5 @@ __all__ = [
     "atomic_path",
     "atomic_write_text",
     "atomic_write_bytes",
+    "safe_folder",
 ]

@@ -6,6 +6,7 @@ they work headless whatever ``MPLBACKEND`` says and leave no global figure state
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -32,44 +33,128 @@ def _column(result, name):
     return np.asarray(result.history[name], dtype=np.float64)
 
 
-def braid_angle_figure(result) -> Figure:
-    """Warp and weft braid angle (deg) against braided length (m)."""
-    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+def run_title(result, what: str) -> str:
+    """``what`` with the case, the model and the run's status (an unfinished run says so)."""
+    config = result.config
+    case = Path(config.source).stem if config is not None and config.source else "run"
+    model = config.model.kind if config is not None else "?"
+    status = result.status if result.status == "done" else f"{result.status.upper()}: partial results"
+    return f"{what}\n{case} · {model} model · {status}"
+
+
+#: the start-up rows left out of the axis range: while the yarns wind from their tie points to
+#: tangency the fell points stay put and the laid angle climbs from 0 (a spike that squashes
+#: the interesting range); the range starts where the braided length has grown by this fraction
+START_FRACTION = 1e-3
+
+
+def start_rows(length) -> int:
+    """Rows of the wind-up at the start of a history (see START_FRACTION), at least one."""
+    length = np.asarray(length, dtype=float)
+    if len(length) < 2:
+        return 0
+    grown = np.nonzero(length > length[0] + START_FRACTION * (length.max() - length[0]))[0]
+    return int(grown[0]) + 1 if len(grown) else 1
+
+
+def _range(ax, skip, *columns):
+    values = np.concatenate([np.asarray(c, dtype=float)[skip:] for c in columns])
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        return
+    lo, hi = float(values.min()), float(values.max())
+    pad = max(0.08 * (hi - lo), 1e-3 * max(abs(hi), 1.0), 1e-6)
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def _steady_mark(ax, steady):
+    """A dotted line where steady state starts, or a note that the run did not reach it."""
+    if not steady:
+        return
+    if steady.get("reached"):
+        ax.axvline(steady["braided_length_m"], color="0.3", linestyle=":", linewidth=1.0,
+                   label=f"steady from {steady['braided_length_m']:.2f} m")
+    else:
+        ax.text(0.02, 0.03, "steady state not reached", transform=ax.transAxes, color="0.3",
+                fontsize=9, ha="left", va="bottom")
+
+
+def braid_angle_figure(result, refs=None, steady=None) -> Figure:
+    """Warp and weft braid angle (deg) against braided length (m), with Ko's angle (``refs``, a
+    :class:`preform.reference.References`) and the start of steady state (``steady``)."""
+    fig = Figure(figsize=(7.2, 4.4), layout="constrained")
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
-    ax.plot(length, _column(result, "braid_angle_warp_deg"), color=GROUP_COLOURS[0], label="warp")
-    ax.plot(length, _column(result, "braid_angle_weft_deg"), color=GROUP_COLOURS[1], label="weft",
-            linestyle="--")
+    warp, weft = _column(result, "braid_angle_warp_deg"), _column(result, "braid_angle_weft_deg")
+    ax.plot(length, warp, color=GROUP_COLOURS[0], label="warp")
+    ax.plot(length, weft, color=GROUP_COLOURS[1], label="weft", linestyle="--")
+    columns = [warp, weft]
+    if refs is not None and len(length):
+        ko = np.interp(length, refs.s, refs.ko_deg)
+        ax.plot(length, ko, color="0.45", linewidth=1.0, label="Ko (quasi-static)")
+        columns.append(ko)
+    _steady_mark(ax, steady)
+    _range(ax, start_rows(length), *columns)
     ax.set_xlabel("braided length L (m)")
     ax.set_ylabel("braid angle α (deg)")
-    ax.set_title("Braid angle at the fell points")
+    ax.set_title(run_title(result, "Braid angle at the fell points"))
     ax.grid(True, alpha=0.3)
     ax.legend()
     return fig
 
 
-def convergence_length_figure(result) -> Figure:
-    """Mean convergence length (m) with its min-max band over yarns, against braided length (m)."""
-    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+def convergence_length_figure(result, refs=None, steady=None) -> Figure:
+    """Mean convergence length (m) with its min-max band over yarns, against braided length (m),
+    with the kinematic steady value H_inf (``refs``) and the start of steady state."""
+    fig = Figure(figsize=(7.2, 4.4), layout="constrained")
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
-    ax.fill_between(length, _column(result, "convergence_length_min_m"),
-                    _column(result, "convergence_length_max_m"), color="tab:green", alpha=0.25,
-                    label="min – max over yarns")
+    lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")
+    ax.fill_between(length, lo, hi, color="tab:green", alpha=0.25, label="min – max over yarns")
     ax.plot(length, _column(result, "convergence_length_mean_m"), color="tab:green", label="mean")
+    columns = [lo, hi]
+    if refs is not None and len(length):
+        h_inf = np.interp(length, refs.s, refs.h_inf)
+        ax.plot(length, h_inf, color="0.45", linewidth=1.0, label="H∞ (kinematic, quasi-static)")
+        columns.append(h_inf)
+    _steady_mark(ax, steady)
+    _range(ax, start_rows(length), *columns)
     ax.set_xlabel("braided length L (m)")
     ax.set_ylabel("convergence length H (m)")
-    ax.set_title("Convergence zone length")
+    ax.set_title(run_title(result, "Convergence zone length"))
     ax.grid(True, alpha=0.3)
     ax.legend()
     return fig
 
 
-def plot_history(result, plots_dir) -> list[Path]:
-    """Write ``braid_angle.png`` and ``convergence_length.png`` in ``plots_dir``; return the paths."""
+def history_references(result, n=60):
+    """Ko and H_inf along the braided part (preform.reference), or None without geometry."""
+    if result.mandrel is None or result.centerline is None or not result.steps:
+        return None
+    from ..geometry.centerline import section_perimeters
+    from ..reference import references
+
+    end = min(float(np.max(_column(result, "braided_length_m"))) * 1.05, result.centerline.length)
+    s = np.linspace(0.0, max(end, 1e-6), n)
+    perimeter = section_perimeters(result.mandrel, result.centerline, s)
+    ok = perimeter > 0
+    if np.count_nonzero(ok) < 2:
+        return None
+    return references(result.config, s[ok], perimeter[ok])
+
+
+def plot_history(result, plots_dir, refs=None) -> list[Path]:
+    """Write ``braid_angle.png`` and ``convergence_length.png`` in ``plots_dir``; return the paths.
+
+    refs : preform.reference.References, or None to compute them from the result's geometry.
+    """
+    from ..steady import steady_state
+
     plots_dir = Path(plots_dir)
-    return [_save(braid_angle_figure(result), plots_dir / "braid_angle.png"),
-            _save(convergence_length_figure(result), plots_dir / "convergence_length.png")]
+    refs = refs if refs is not None else history_references(result)
+    steady = steady_state(result.history) if result.steps else None
+    return [_save(braid_angle_figure(result, refs, steady), plots_dir / "braid_angle.png"),
+            _save(convergence_length_figure(result, refs, steady), plots_dir / "convergence_length.png")]
 
 
 def yarns_figure(result) -> Figure:
@@ -109,5 +194,23 @@ def yarns_figure(result) -> Figure:
 
 
 def plot_yarns_3d(result, path) -> Path:
-    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``)."""
-    return _save(yarns_figure(result), path)
+    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``).
+
+    The mandrel with its yarns rendered from two sides (``io.render3d``); where off-screen
+    rendering fails (no OpenGL) or there is no mandrel, a matplotlib picture of the yarns alone
+    with a warning saying why.
+    """
+    title = run_title(result, "Braided mandrel").replace("\n", " – ")
+    if result.mandrel is not None:
+        from .render3d import render_braided_mandrel
+
+        try:
+            with atomic_path(path) as tmp:
+                render_braided_mandrel(result, tmp, title)
+            return Path(path)
+        except Exception as error:  # noqa: BLE001 - any VTK/GL failure: fall back to matplotlib
+            warnings.warn(f"{path}: off-screen rendering failed ({type(error).__name__}: {error}); "
+                          "drew the yarns without the mandrel", RuntimeWarning, stacklevel=2)
+    fig = yarns_figure(result)
+    fig.axes[0].set_title(title)
+    return _save(fig, path)

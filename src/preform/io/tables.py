@@ -21,10 +21,6 @@ from .atomic import atomic_write_text
 #: history columns that count things; written as integers
 INTEGER_COLUMNS = ("contacts", "iterations")
 
-#: the "steady" braid angle is the mean over the last part of the run: this fraction of the
-#: final braided length (a run that reached steady state is flat there)
-STEADY_WINDOW = 0.25
-
 
 # ---------------------------------------------------------------- history.csv
 
@@ -118,23 +114,19 @@ def _final(result, name):
     return float(column[-1]) if len(column) else None
 
 
-def _steady(result, name):
-    """Mean of ``name`` over the last STEADY_WINDOW of the braided length (None if no steps)."""
-    column = np.asarray(result.history.get(name, ()), dtype=np.float64)
-    length = np.asarray(result.history.get("braided_length_m", ()), dtype=np.float64)
-    if not len(column) or len(length) != len(column):
-        return None
-    in_window = length >= length[-1] - STEADY_WINDOW * (length[-1] - length[0])
-    return float(np.mean(column[in_window]))
-
-
 def _steady_state(result):
     from ..steady import steady_state
 
-    try:
-        return steady_state(result.history)
-    except KeyError:
+    if not result.steps:
         return None
+    return steady_state(result.history)
+
+
+def _quality(result, fields_reasons=()):
+    from ..quality import assess, verdict
+
+    q = assess(result)
+    return verdict([*q["reasons"], *fields_reasons])
 
 
 def flag_counts(yarns) -> dict:
@@ -145,10 +137,12 @@ def flag_counts(yarns) -> dict:
 
 def summary_dict(result, extra=None) -> dict:
     """Everything summary.json holds, as JSON-able data (non-finite numbers become null)."""
-    from .. import __version__
+    from .._version import __version__
 
     config = result.config
-    model = getattr(getattr(config, "model", None), "kind", None)
+    model = config.model.kind if config is not None else None
+    extra = dict(extra or {})
+    steady = _steady_state(result) or {}
     summary = {
         "preform_version": __version__,
         "model": model,
@@ -160,17 +154,18 @@ def summary_dict(result, extra=None) -> dict:
         "braid_angle_deg": {
             "final": {"warp": _final(result, "braid_angle_warp_deg"),
                       "weft": _final(result, "braid_angle_weft_deg")},
-            "steady": {"warp": _steady(result, "braid_angle_warp_deg"),
-                       "weft": _steady(result, "braid_angle_weft_deg")},
-            "steady_window": f"mean over the last {STEADY_WINDOW:.0%} of the braided length",
+            # only where the run reached it (steady_state says how far from it the run ended)
+            "steady": steady["braid_angle_deg"] if steady.get("reached") else None,
         },
         "convergence_length_m": {
             "final": {"mean": _final(result, "convergence_length_mean_m"),
                       "min": _final(result, "convergence_length_min_m"),
                       "max": _final(result, "convergence_length_max_m")},
+            "steady": steady["convergence_length_m"] if steady.get("reached") else None,
         },
-        "steady_state": _steady_state(result),
-        "mandrel_repairs": list(getattr(result.mandrel, "repairs", ()) or ()),
+        "steady_state": steady or None,
+        "quality": _quality(result, (extra or {}).pop("quality_reasons", ())),
+        "mandrel_repairs": list(result.mandrel.repairs) if result.mandrel is not None else [],
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),

@@ -16,7 +16,7 @@ import numpy as np
 import pyvista as pv
 
 from ..errors import SimulationError
-from .atomic import atomic_path, atomic_write_text
+from .atomic import atomic_path, atomic_write_text, safe_folder
 
 CONVERGENCE_DIR = "convergence"
 CONVERGENCE_PVD = "convergence.pvd"
@@ -115,8 +115,7 @@ def write_convergence(snapshots, out_dir) -> list[Path]:
     written, the .pvd first.
     """
     out_dir = Path(out_dir)
-    folder = out_dir / CONVERGENCE_DIR
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = safe_folder(out_dir, CONVERGENCE_DIR)
     entries, written = [], []
     for i, snapshot in enumerate(snapshots):
         relative = f"{CONVERGENCE_DIR}/step_{i:04d}.vtp"

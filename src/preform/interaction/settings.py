@@ -1,0 +1,178 @@
+"""Numerical settings of the yarn-interaction model (DESIGN.md §3.3), in one place.
+
+Every tolerance, iteration limit, regularisation constant and staging fraction of the interaction
+model is a field below, with the reason for its value. ``InteractionZone(config, machine, mandrel,
+settings=...)`` passes them down to the frontal solver (``interaction/frontal.py``), the ring
+contact (``interaction/ring.py``) and the numba kernels, which receive them as scalar arguments.
+The defaults are the model's; a test or a study varies one by passing another object, e.g.
+``dataclasses.replace(s, frontal=dataclasses.replace(s.frontal, friction_memory=0.0))``.
+The measurements behind the values are in ``docs/decisions-interaction.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class EnergySettings:
+    """Constants of the step energy E (``_kernels/frontal.py`` writes it out)."""
+
+    #: strain of the tow at the spool tension, EA = f_spool / tow_strain: stiff enough to leave the
+    #: yarns inextensible to 0.1 %, soft enough that a crossing's transverse millimetre (second
+    #: order in the length) does not swamp the stretch; tied to f_spool so the model stays
+    #: homogeneous in the forces, as Amontons friction is
+    tow_strain: float = 1e-3
+    #: a segment shorter than its material pushes back with this fraction of EA: a yarn does not
+    #: push, but a small stiffness keeps a slack stretch's material coordinates defined and E's
+    #: second derivative bounded below
+    compression: float = 1e-2
+    #: N, smallest tension the Hessian's geometric stiffness of a segment uses: keeps the Newton
+    #: matrix positive definite where a segment is in compression (the gradient stays exact)
+    geometric_floor: float = 1e-3
+    #: N/m, stiffness pinning the material coordinate of a yarn without friction or tension; it
+    #: changes a tension jump by at most kappa0 x (slide in a step, < 0.1 m) = 1e-8 N
+    kappa0: float = 1e-7
+    #: m^2, smoothing of a segment's length, l = sqrt(|d|^2 + length_smoothing): keeps l and its
+    #: derivatives finite where two yarn points meet
+    length_smoothing: float = 1e-12
+    #: m, extra smoothing of the top segment's length, sqrt(l^2 + top_smoothing^2): a crossing
+    #: whose balance lies at its yarn's ring or spool point sits within 30 um of it instead of on a
+    #: kink of E; it changes the top force by top_smoothing^2 / (2 l^2), < 5e-4 for l > 1 mm
+    top_smoothing: float = 3e-5
+    #: N/m, stiffness of the mandrel wall that keeps crossings outside: 10 N push 1 um
+    wall_stiffness: float = 1e7
+    #: jamming force where two crossings of a yarn would coincide, in spool tensions: of the order
+    #: of the zone's forces, so crossings created close together move apart instead of stopping
+    #: Newton, and a yarn gone slack behind friction keeps its crossings apart
+    jam_force: float = 1.0
+
+    @property
+    def top_smoothing2(self) -> float:
+        """top_smoothing^2, m^2, as the kernels add it to the squared length."""
+        return self.top_smoothing ** 2
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """The inner solve: damped Newton on E with the friction bounds and top tensions fixed."""
+
+    #: largest relative residual (force imbalance over the sum of the four tensions; friction
+    #: equation over f_int + f_ext): 1e4 times below what exported snapshots must meet (1e-3)
+    balance_tolerance: float = 1e-7
+    #: Newton steps per inner solve before the solve falls back to continuation in the friction
+    newton_steps: int = 80
+    #: friction fractions of that continuation (``frontal._balance_or_continue``): from the
+    #: frictionless network, which converges robustly, up to the full bounds
+    continuation: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    #: Armijo constant of the line search on E (sufficient decrease)
+    armijo: float = 1e-4
+    #: halvings of the line search before the step is taken as small as it got
+    line_search_halvings: int = 50
+    #: relative round-off of E: Armijo allows E to rise by roundoff |E|
+    roundoff: float = 1e-13
+    #: a Newton step whose predicted decrease (-slope) is below roundoff_slope x roundoff |E| is
+    #: taken whole: E cannot judge it, the balance residual does
+    roundoff_slope: float = 10.0
+    #: iterative refinement steps of a Newton direction (H spans stiffnesses kappa0 to EA / q)
+    refinement_steps: int = 2
+    #: relative residual of a Newton direction above which it is refined
+    refinement_trigger: float = 1e-10
+    #: sparse factorisation of the Newton systems (``interaction/linalg.py``): "auto" (CHOLMOD
+    #: when cvxopt is installed, else SuperLU), "cholmod" or "splu"
+    linear_solver: str = "auto"
+
+
+@dataclass(frozen=True)
+class FrontalSettings:
+    """The outer (frontal) iteration of the friction bounds and top tensions, and the friction
+    regularisation."""
+
+    #: convergence of the outer iteration: change of the bounds and top tensions between
+    #: iterations, relative to the tensions; bounds Psi / (f_int + f_ext) of the result
+    friction_tolerance: float = 1e-6
+    #: outer iterations per time step: the bounds lag the geometry by up to a step (an explicit
+    #: update of a state variable; history.csv's residual says by how much), and a second
+    #: iteration costs as much as the first for a change of 0.02 % in the convergence length
+    max_iterations: int = 1
+    #: outer iterations of a snapshot's final solve (the exported crossings meet Psi to
+    #: snapshot_tolerance where the iteration converges within them, else to its last change)
+    snapshot_iterations: int = 100
+    #: convergence of a snapshot's final solve: a change below 1e-4 of f_int + f_ext leaves Psi a
+    #: factor 5 below the 1e-3 x tension the written crossings must meet
+    snapshot_tolerance: float = 1e-4
+    #: m of yarn, smoothing eps of |x| in the friction term sqrt(x^2 + eps^2) - eps: a sticking
+    #: yarn gives eps r / sqrt(1 - r^2) at the used fraction r of its bound; Newton's cost falls
+    #: steeply with it, sliding yarns move millimetres per step
+    friction_creep: float = 1e-4
+    #: fraction of the bound up to which a yarn's friction force carries over to the next step
+    #: (elastic-plastic Coulomb friction): a sticking yarn creeps only while its force grows
+    friction_memory: float = 0.95
+    #: a yarn whose material lies more than this many friction_creep from its friction centre is
+    #: reported as slipping (it uses more than 99.5 % of its bound)
+    slip_report_creeps: float = 10.0
+
+    @property
+    def slip_report(self) -> float:
+        """m of yarn: the slide above which a yarn is reported as slipping."""
+        return self.slip_report_creeps * self.friction_creep
+
+    @property
+    def memory_cap(self) -> float:
+        """Largest friction offset carried to the next step (m): where the smoothed friction force
+        bound x / sqrt(x^2 + eps^2) reaches friction_memory x bound."""
+        r = self.friction_memory
+        return self.friction_creep * r / math.sqrt(1.0 - r * r)
+
+
+@dataclass(frozen=True)
+class ZoneSettings:
+    """Creation, deposition, staging and the snapshot's ring alternation (``interaction/model.py``)."""
+
+    #: a crossing closer to the mandrel than this many yarn thicknesses is deposited: the solver
+    #: keeps crossings outside the mandrel's tangent planes, so the lowest rows rest there
+    deposit_height: float = 1.0
+    #: a new crossing starts no lower than this fraction of its yarns' top segments: behind a
+    #: guide ring two yarns whose carriers have passed may not cross yet below the ring
+    creation_lowest: float = 0.5
+    #: snapshot: alternations of the zone solve and the ring points' stick/slip, at most
+    ring_iterations: int = 20
+    #: m, ring-point motion below which that alternation stops
+    ring_tolerance: float = 1e-9
+    #: frontal iterations per pass of that alternation (its last solve iterates to convergence)
+    ring_pass_iterations: int = 3
+    #: where a step's solve fails, the step is solved again with its boundary moved in these
+    #: fractions of the move, each stage warm-started from the last (empty: no staging)
+    boundary_stages: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
+
+
+@dataclass(frozen=True)
+class RingSettings:
+    """Root solve of a yarn's slip across the guide ring (``_kernels/ring.py``)."""
+
+    #: Psi_r <= psi_rel_tol (f_int + f_ext) counts as sticking: round-off of the force sum
+    psi_rel_tol: float = 1e-12
+    #: rad, step of the bracket march along the ring
+    march_step: float = 0.01
+    #: bracket steps at most: about half a turn (315 x 0.01 rad)
+    march_max: int = 315
+    #: Illinois regula-falsi iterations at most (it converges superlinearly in ~10)
+    root_max_iter: int = 200
+    #: root tolerance on Psi_r / (f_int + f_ext): double-precision round-off
+    root_rel_tol: float = 1e-15
+
+
+@dataclass(frozen=True)
+class InteractionSettings:
+    """All numerical settings of the interaction model (module docstring)."""
+
+    energy: EnergySettings = field(default_factory=EnergySettings)
+    newton: NewtonSettings = field(default_factory=NewtonSettings)
+    frontal: FrontalSettings = field(default_factory=FrontalSettings)
+    zone: ZoneSettings = field(default_factory=ZoneSettings)
+    ring: RingSettings = field(default_factory=RingSettings)
+
+
+#: the model's settings
+DEFAULT = InteractionSettings()

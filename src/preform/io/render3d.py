@@ -1,0 +1,128 @@
+"""``braided_mandrel.png``: the mandrel with its deposited yarns, from two opposite sides.
+
+An off-screen pyvista render (EGL, no display needed): the mandrel surface in grey under the
+yarn centerlines (warp blue, weft red), seen across the braided part's long axis from two
+opposite oblique directions, each 45 deg between two faces of a four-sided section, so that all
+four sides of a square mandrel are in one picture; the view is framed on the braided part (the
+unbraided rest of a long mandrel would make it a thin stick). If rendering fails (no OpenGL) the
+caller falls back to a matplotlib picture.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+#: picture size, pixels (width, height): two wide views stacked
+WINDOW_SIZE = (1600, 1000)
+COLOURS = {0: "#1f77b4", 1: "#d62728"}   # warp, weft: matplotlib's tab:blue, tab:red
+MANDREL_COLOUR = "#c8c8c8"
+#: the yarns' points drawn per yarn at most (every k-th beyond that)
+MAX_POINTS_PER_YARN = 4000
+
+
+def view_axes(points):
+    """(centre (3,), long axis (3,), two unit vectors across it) of a point cloud, by PCA."""
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    return centre, vt[0], vt[1], vt[2]
+
+
+def _yarn_lines(yarns, group):
+    import pyvista as pv
+
+    blocks = []
+    for k in np.flatnonzero(np.asarray(yarns.group) == group):
+        yarn = yarns.yarn(k)
+        if len(yarn) < 2:
+            continue
+        stride = max(1, int(np.ceil(len(yarn) / MAX_POINTS_PER_YARN)))
+        blocks.append(np.vstack([yarn[::stride], yarn[-1:]]))
+    if not blocks:
+        return None
+    points = np.vstack(blocks)
+    sizes = [len(b) for b in blocks]
+    starts = np.cumsum([0, *sizes[:-1]])
+    lines = np.concatenate([np.concatenate([[n], np.arange(s, s + n)]) for s, n in zip(starts, sizes)])
+    return pv.PolyData(points, lines=lines)
+
+
+def _close_up(result, laid, centre, axis, across, third):
+    """(centre, tangent, up, front, section radius) of a close-up at the middle of the braid.
+
+    On the centerline at half the braided length, looking across its tangent from 27 deg off its
+    principal normal (two faces of a square section in view); the radius is that of the laid yarn
+    within 1 cm of that section.
+    """
+    braided = np.asarray(result.history["braided_length_m"], dtype=float) if result.steps else []
+    if result.centerline is None or not len(braided) or len(laid) < 3:
+        return centre, axis, (third - across) / np.sqrt(2.0), (across + third) / np.sqrt(2.0), \
+            float(np.max(np.linalg.norm(laid - centre, axis=1), initial=1e-3))
+    p, T, N, B = (np.asarray(a)[0] for a in result.centerline.frames_at(np.array([0.5 * braided[-1]])))
+    rel = laid - p
+    near = np.abs(rel @ T) < 0.01
+    radius = float(np.max(np.linalg.norm(rel[near], axis=1))) if np.any(near) else \
+        float(np.min(np.linalg.norm(rel, axis=1)))
+    # mostly along the principal normal: a bend then runs towards the viewer, not off the view
+    front = (N + 0.5 * B) / np.sqrt(1.25)
+    up = (B - 0.5 * N) / np.sqrt(1.25)
+    return p, T, up, front, max(radius, 1e-4)
+
+
+def _camera(plotter, centre, view, up, half_width, half_height, aspect):
+    """Parallel projection looking at ``centre`` along ``-view``, fitting the given half extents."""
+    plotter.camera_position = [tuple(centre + 10.0 * max(half_width, half_height) * view),
+                               tuple(centre), tuple(up)]
+    plotter.enable_parallel_projection()
+    plotter.camera.parallel_scale = 1.08 * max(half_height, half_width / aspect)
+    plotter.reset_camera_clipping_range()
+
+
+def render_braided_mandrel(result, path, title: str) -> None:
+    """Render ``result`` (mandrel + yarns, mandrel frame) into the PNG ``path``.
+
+    Top: the whole braided part from the front (where the braid lies on the mandrel); bottom:
+    close-ups of the middle of the braid from the front and from the back (the yarn pattern).
+    """
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    import pyvista as pv
+
+    yarns = result.yarns
+    laid = np.asarray(yarns.points, dtype=np.float64).reshape(-1, 3)
+    mandrel = result.mandrel
+    faces = np.asarray(mandrel.faces, dtype=np.int64)
+    cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
+    surface = pv.PolyData(np.asarray(mandrel.vertices, dtype=np.float64), cells)
+    focus = laid if len(laid) >= 3 else np.asarray(mandrel.vertices, dtype=np.float64)
+    centre, axis, across, third = view_axes(focus)
+    along = (focus - centre) @ axis
+    lo, hi = float(along.min()), float(along.max())
+    spread = float(np.max(np.abs((focus - centre) @ across)))
+    depth = float(np.max(np.abs((focus - centre) @ third)))
+    # whole part: mostly across its least spread (a bent part's bend plane faces the viewer)
+    whole_view = (0.8 * third + 0.6 * across)
+    whole_up = np.cross(whole_view, axis)
+    whole_centre = centre + 0.5 * (lo + hi) * axis
+    mid, tangent, up, front, radius = _close_up(result, laid, centre, axis, across, third)
+    w, h = WINDOW_SIZE
+    plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 2),
+                         groups=[(0, np.s_[:])], border=False)
+    lines = [_yarn_lines(yarns, group) for group in (0, 1)]
+    views = [((0, 0), whole_view, whole_up, whole_centre, 0.5 * (hi - lo) + 0.1 * spread,
+              max(spread, depth), 2.0 * w / h, f"{title}: braided part"),
+             ((1, 0), front, up, mid, 3.0 * radius, 1.5 * radius, w / h, "middle of the braid, front"),
+             ((1, 1), -front, up, mid, 3.0 * radius, 1.5 * radius, w / h, "middle of the braid, back")]
+    try:
+        for (row, col), view, view_up, look_at, half_w, half_h, aspect, label in views:
+            plotter.subplot(row, col)
+            plotter.set_background("white")
+            plotter.add_mesh(surface, color=MANDREL_COLOUR, smooth_shading=True, ambient=0.35, diffuse=0.7)
+            for group, poly in enumerate(lines):
+                if poly is not None:
+                    plotter.add_mesh(poly, color=COLOURS[group], line_width=1.5 if row else 1.0)
+            plotter.add_text(label, font_size=10 if row else 11, color="black", position="upper_left")
+            _camera(plotter, look_at, view, view_up, half_w, half_h, aspect)
+        plotter.screenshot(str(path))
+    finally:
+        plotter.close()

@@ -1,0 +1,127 @@
+"""A verdict on every run: the plausibility checks a process engineer makes (issue 16 item 1).
+
+A run can finish ``done`` and still be nonsense: a pose that leaves the braiding zone misaligned
+makes the yarns bridge and catch at every step, the convergence length collapse to almost
+nothing, and the braid angle jump from step to step. :func:`assess` reads the history and the
+deposited yarns (and the surface fields, when given) and returns ``{"verdict": "ok" | "suspect",
+"reasons": [...]}``; each reason names what was seen, the figure and the threshold.
+``summary.json`` carries it under ``quality``; the CLI prints it (``--strict`` makes ``suspect``
+an error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .result import FLAG_BRIDGE, FLAG_CATCH
+
+
+@dataclass(frozen=True)
+class QualitySettings:
+    """Thresholds of the plausibility checks."""
+
+    #: bridged or caught points above this share of the deposited yarn: on a convex mandrel
+    #: there are none; a concave stretch here and there gives well under 1 %
+    max_flag_share: float = 0.01
+    #: the first part of the run (fraction of the braided length) is its start-up transient
+    transient: float = 0.1
+    #: a yarn's convergence length below this fraction of the run's median: the fell point has
+    #: caught up with the supply side, which a straight yarn from a carrier cannot do
+    min_convergence_ratio: float = 0.5
+    #: braid-angle change between consecutive steps (deg) beyond which the laid angle jumps: a
+    #: converged step moves it by hundredths of a degree
+    max_angle_jump_deg: float = 5.0
+    #: faces covered beyond the braided length by more than this (m) past the furthest fell point
+    field_reach_margin: float = 0.02
+    #: uncovered faces inside the braided region above this share of its faces
+    max_hole_share: float = 0.005
+
+
+QUALITY = QualitySettings()
+
+
+def _share(flags, bit) -> float:
+    return float(np.count_nonzero(flags & bit)) / max(len(flags), 1)
+
+
+def history_reasons(history, settings: QualitySettings = QUALITY) -> list[str]:
+    """Reasons to doubt a run from its ``history`` columns (arrays of one row per step)."""
+    reasons = []
+    L = np.asarray(history["braided_length_m"], dtype=float)
+    if len(L) < 3:
+        return reasons
+    settled = L >= L[0] + settings.transient * (L[-1] - L[0])
+    settled[:2] = False   # the first rows are the tie and its first step
+    if not np.any(settled):
+        return reasons
+    H_mean = np.asarray(history["convergence_length_mean_m"], dtype=float)[settled]
+    H_min = np.asarray(history["convergence_length_min_m"], dtype=float)[settled]
+    median = float(np.median(H_mean))
+    if np.min(H_min) <= 0.0:
+        reasons.append(f"a fell point went behind the supply plane (convergence length "
+                       f"{np.min(H_min):.4g} m): the yarns cannot be laid there")
+    elif median > 0 and np.min(H_min) < settings.min_convergence_ratio * median:
+        reasons.append(f"convergence length down to {np.min(H_min):.4g} m, below "
+                       f"{settings.min_convergence_ratio:g} x the run's median {median:.4g} m")
+    for group in ("warp", "weft"):
+        angle = np.asarray(history[f"braid_angle_{group}_deg"], dtype=float)
+        jumps = np.abs(np.diff(angle))[settled[1:]]
+        if len(jumps) and np.max(jumps) > settings.max_angle_jump_deg:
+            n = int(np.count_nonzero(jumps > settings.max_angle_jump_deg))
+            reasons.append(f"{group} braid angle jumps by up to {np.max(jumps):.1f} deg between steps "
+                           f"({n} steps above {settings.max_angle_jump_deg:g} deg)")
+    return reasons
+
+
+def yarn_reasons(flags, settings: QualitySettings = QUALITY) -> list[str]:
+    """Reasons to doubt a run from the flags of its deposited yarn points (``YarnPaths.flags``)."""
+    flags = np.asarray(flags, dtype=np.int64)
+    reasons = []
+    for bit, what in ((FLAG_BRIDGE, "bridged"), (FLAG_CATCH, "caught")):
+        share = _share(flags, bit)
+        if share > settings.max_flag_share:
+            reasons.append(f"{share:.1%} of the deposited yarn points are {what} (above "
+                           f"{settings.max_flag_share:.0%}): the yarns do not follow the mandrel; "
+                           "check the pose ([process] pose_lead, eccentricity)")
+    return reasons
+
+
+def field_reasons(face_s, covered, braided_end, braided_start=0.0,
+                  settings: QualitySettings = QUALITY) -> list[str]:
+    """Reasons to doubt the surface fields.
+
+    face_s : (f,) float64, m, centerline arc length of each field face's centroid
+    covered : (f,) bool, faces some yarn crosses
+    braided_end : float, m, arc length of the furthest fell point at the end of the run
+    braided_start : float, m, arc length where the braid starts (the tie points)
+    """
+    face_s = np.asarray(face_s, dtype=float)
+    covered = np.asarray(covered, dtype=bool)
+    reasons = []
+    beyond = covered & (face_s > braided_end + settings.field_reach_margin)
+    if np.any(beyond):
+        reasons.append(f"{np.count_nonzero(beyond)} faces are covered up to {face_s[beyond].max():.4g} m "
+                       f"of centerline, beyond the braided length {braided_end:.4g} m")
+    inside = (face_s > braided_start + settings.field_reach_margin) & (face_s < braided_end - settings.field_reach_margin)
+    holes = inside & ~covered
+    if np.any(inside) and np.count_nonzero(holes) > settings.max_hole_share * np.count_nonzero(inside):
+        reasons.append(f"{np.count_nonzero(holes)} faces inside the braided region "
+                       f"({braided_start:.3g}-{braided_end:.3g} m) carry no yarn")
+    return reasons
+
+
+def verdict(reasons) -> dict:
+    """``{"verdict": "ok" | "suspect", "reasons": reasons}``."""
+    reasons = list(reasons)
+    return {"verdict": "suspect" if reasons else "ok", "reasons": reasons}
+
+
+def assess(result, settings: QualitySettings = QUALITY) -> dict:
+    """The verdict on a Result from its history and yarn flags (see module docstring)."""
+    reasons = []
+    if result.steps:
+        reasons += history_reasons(result.history, settings)
+    reasons += yarn_reasons(result.yarns.flags, settings)
+    return verdict(reasons)

@@ -1,0 +1,156 @@
+"""From braid to resin flow: fibre content and permeability per face (issue 19; DESIGN.md §1 ``rtm/``).
+
+Per face, from the yarn length the fields put on it (``L_g / A``, metres of yarn of group ``g``
+per square metre), the yarn's linear density ``tex`` (g/km) and the fibre density ``rho_f``:
+
+* areal weight ``A_w = sum_g tex 1e-6 L_g / A`` (kg/m^2);
+* fibre volume fraction ``V_f = A_w / (rho_f t)`` with ``t`` the local preform thickness, or the
+  mould's cavity thickness (the usual RTM case: the preform is compressed to it); porosity
+  ``1 - V_f``;
+* permeability of the aligned fibres of each yarn, along (``K_par``) and across (``K_perp``) them,
+  from one of the models below; the braid's in-plane tensor is the mean of its two yarn families',
+  ``K = sum_g w_g [K_par d_g d_g^T + K_perp (P - d_g d_g^T)]`` (``P`` the tangent-plane projector,
+  ``w_g`` the groups' shares of the yarn length), plus ``K3 = K_perp`` through the thickness along
+  the normal. For a braid the principal in-plane direction follows the yarns: along the mandrel
+  axis below a 45 deg braid angle, around it above, not a fixed axis.
+
+Models (``PermeabilityModel``):
+
+* **Gebart (1992)**, fibres of radius ``R`` in quadratic or hexagonal packing:
+  ``K_par = 8 R^2 (1 - V_f)^3 / (c V_f^2)`` with ``c = 57`` (quadratic) or ``53`` (hexagonal);
+  ``K_perp = C_1 (sqrt(V_fmax / V_f) - 1)^(5/2) R^2`` with ``C_1 = 16 / (9 pi sqrt(2))``,
+  ``V_fmax = pi / 4`` (quadratic) or ``C_1 = 16 / (9 pi sqrt(6))``, ``V_fmax = pi / (2 sqrt(3))``
+  (hexagonal).
+* **Kozeny-Carman rescaling** of a measured pair ``K_ref = (K_par, K_perp)`` at ``V_f_ref``:
+  ``K(V_f) = K_ref (1 - V_f)^3 / V_f^2 * V_f_ref^2 / (1 - V_f_ref)^3``.
+* **User table** of the braid's principal values ``K1, K2`` against braid angle and ``V_f``
+  (bilinear interpolation, clamped at the table's edges), for measured preforms.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Gebart's constants per packing: (c, C_1, V_f max)
+GEBART = {
+    "quadratic": (57.0, 16.0 / (9.0 * math.pi * math.sqrt(2.0)), math.pi / 4.0),
+    "hexagonal": (53.0, 16.0 / (9.0 * math.pi * math.sqrt(6.0)), math.pi / (2.0 * math.sqrt(3.0))),
+}
+
+
+def areal_weight(length_per_area, tex):
+    """kg/m^2 from metres of yarn per square metre (any shape) and the linear density (g/km)."""
+    return np.asarray(length_per_area, dtype=float) * (float(tex) * 1e-6)
+
+
+def fibre_volume_fraction(areal_weight_kg_m2, fibre_density, thickness):
+    """``V_f = A_w / (rho_f t)``; 0 where the thickness is 0 (no yarn)."""
+    aw = np.asarray(areal_weight_kg_m2, dtype=float)
+    t = np.broadcast_to(np.asarray(thickness, dtype=float), aw.shape)
+    return np.divide(aw, fibre_density * t, out=np.zeros_like(aw), where=t > 0)
+
+
+def gebart(vf, fibre_radius, packing="hexagonal"):
+    """(K_par, K_perp) in m^2 at fibre volume fractions ``vf`` (Gebart 1992; see module docstring).
+
+    K_perp is 0 at and above the packing's V_f max (the channels between fibres close)."""
+    c, c1, vf_max = GEBART[packing]
+    vf = np.asarray(vf, dtype=float)
+    r2 = float(fibre_radius) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k_par = np.where(vf > 0, 8.0 * r2 * (1.0 - vf) ** 3 / (c * vf * vf), np.inf)
+        gap = np.sqrt(np.divide(vf_max, vf, out=np.full_like(vf, np.inf), where=vf > 0)) - 1.0
+        k_perp = c1 * np.maximum(gap, 0.0) ** 2.5 * r2
+    return k_par, k_perp
+
+
+def kozeny_carman(vf, k_ref, vf_ref):
+    """``K_ref`` (a scalar or a pair) rescaled from ``vf_ref`` to ``vf`` by Kozeny-Carman."""
+    vf = np.asarray(vf, dtype=float)
+    shape = (1.0 - vf) ** 3 / np.where(vf > 0, vf * vf, np.nan)
+    ref = (1.0 - vf_ref) ** 3 / (vf_ref * vf_ref)
+    return tuple(np.asarray(k, dtype=float) * shape / ref for k in np.atleast_1d(k_ref))
+
+
+@dataclass(frozen=True)
+class PermeabilityTable:
+    """K1, K2 (m^2) of a braid on a grid: angles (na,) deg increasing, vf (nv,) increasing,
+    k1, k2 (na, nv)."""
+
+    angles_deg: np.ndarray
+    vf: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+
+    def __call__(self, angle_deg, vf):
+        from scipy.interpolate import RegularGridInterpolator
+
+        pts = np.column_stack([np.clip(angle_deg, self.angles_deg[0], self.angles_deg[-1]),
+                               np.clip(vf, self.vf[0], self.vf[-1])])
+        out = []
+        for k in (self.k1, self.k2):
+            out.append(RegularGridInterpolator((self.angles_deg, self.vf), k)(pts))
+        return tuple(out)
+
+
+def tensor_from_yarns(k_par, k_perp, k3, directions, shares, normals):
+    """The 3x3 permeability tensor per face (global frame) from its yarn families.
+
+    k_par, k_perp, k3 : (f,) m^2;  directions : (f, G, 3) unit yarn directions (zero rows for a
+    group absent from the face);  shares : (f, G), the groups' shares of the yarn on the face (sum
+    1 where there is yarn);  normals : (f, 3) unit. Returns (f, 3, 3).
+    """
+    n = np.asarray(normals, dtype=float)
+    P = np.eye(3)[None] - n[:, :, None] * n[:, None, :]
+    K = np.zeros((len(n), 3, 3))
+    for g in range(directions.shape[1]):
+        d = directions[:, g]
+        dd = d[:, :, None] * d[:, None, :]
+        K += shares[:, g, None, None] * (k_par[:, None, None] * dd + k_perp[:, None, None] * (P - dd))
+    return K + k3[:, None, None] * n[:, :, None] * n[:, None, :]
+
+
+def principal_in_plane(K, normals, reference):
+    """(k1, k2, direction): the in-plane principal values (k1 >= k2) and the unit tangent of k1.
+
+    K : (f, 3, 3);  normals : (f, 3);  reference : (f, 3), a tangent direction (e.g. the centerline
+    tangent) that fixes the in-plane basis and the sign of the direction.
+    """
+    n = np.asarray(normals, dtype=float)
+    e1 = reference - np.einsum("ij,ij->i", reference, n)[:, None] * n
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
+    e2 = np.cross(n, e1)
+    a = np.einsum("fi,fij,fj->f", e1, K, e1)
+    b = np.einsum("fi,fij,fj->f", e1, K, e2)
+    c = np.einsum("fi,fij,fj->f", e2, K, e2)
+    mean, half = 0.5 * (a + c), np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    theta = 0.5 * np.arctan2(2.0 * b, a - c)
+    direction = np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2
+    return mean + half, mean - half, direction
+
+
+def bin_cells(values, n_sets=4):
+    """Bin positive ``values`` into at most ``n_sets`` sets, for solvers that take few property sets.
+
+    Equal widths in ``log(value)``, each set represented by the geometric midpoint of its members'
+    range, which minimises the largest relative error within it. Returns (index (f,) int, the
+    sets' values (k,), the largest relative error ``|value / set value - 1|`` of any cell).
+    """
+    values = np.asarray(values, dtype=float)
+    logs = np.log(values)
+    lo, hi = float(logs.min()), float(logs.max())
+    if hi - lo <= 0:
+        return np.zeros(len(values), dtype=np.int64), np.array([values[0]]), 0.0
+    edges = np.linspace(lo, hi, n_sets + 1)
+    index = np.clip(np.searchsorted(edges, logs, side="right") - 1, 0, n_sets - 1)
+    used = np.unique(index)
+    remap = np.full(n_sets, -1)
+    remap[used] = np.arange(len(used))
+    index = remap[index]
+    rep = np.array([math.exp(0.5 * (logs[index == k].min() + logs[index == k].max()))
+                    for k in range(len(used))])
+    error = float(np.max(np.abs(values / rep[index] - 1.0)))
+    return index.astype(np.int64), rep, error

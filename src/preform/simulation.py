@@ -1,0 +1,130 @@
+"""A braiding run composed: geometry, machine, the zone of ``[model] kind``, the stepper, Ctrl-C
+and checkpoints (DESIGN.md §1, §4).
+
+``simulate(config)`` loads the mandrel and centerline, ties every yarn to the mandrel's tip and
+steps the process (``preform.stepping``) until ``braid_length`` of centerline is braided. It
+returns a :class:`preform.result.Result`; an interrupted (Ctrl-C) or failed run returns what it
+computed up to the last good step, with ``status`` saying so. The model is chosen here, once:
+``ZONES`` maps ``[model] kind`` to its zone class (``preform.zone.Zone``).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time as _time
+from contextlib import contextmanager
+
+from . import geometry
+from .checkpoint import Checkpoint, CheckpointError
+from .errors import ConfigError, SimulationError
+from .interaction.model import InteractionZone
+from .kinematic import KinematicZone
+from .machine import Machine
+from .reference import resolve_pose_lead
+from .result import Result
+from .stepping import Stepper
+from .tolerances import Tolerances, tol
+
+#: ``[model] kind`` -> the zone class of that model, built as ``cls(config, machine, mandrel)``
+ZONES = {"kinematic": KinematicZone, "interaction": InteractionZone}
+
+
+def load_geometry(config):
+    """(Mandrel, Centerline) of a config, in metres, mandrel frame."""
+    mc = config.mandrel
+    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit)
+    if isinstance(mc.centerline, str) and mc.centerline == "auto":
+        centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
+    else:
+        centerline = geometry.read_centerline_csv(mc.centerline, unit=mc.stl_unit,
+                                                  roll_reference=mc.roll_reference)
+    return mandrel, centerline
+
+
+def make_zone(config, machine, mandrel):
+    """A fresh zone of ``[model] kind`` (``ZONES``); ``mandrel`` (mandrel frame) for its contact
+    and deposition tests."""
+    try:
+        cls = ZONES[config.model.kind]
+    except KeyError:
+        raise ConfigError(f"[model] kind = {config.model.kind!r}: expected one of "
+                          f"{', '.join(map(repr, ZONES))}") from None
+    return cls(config, machine, mandrel)
+
+
+def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:
+    """The stepper of a run at its start (yarns tied, nothing braided yet)."""
+    machine = Machine.from_config(config.machine)
+    return Stepper(config, machine, mandrel, centerline, make_zone(config, machine, mandrel),
+                   tolerances)
+
+
+def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
+             tolerances: Tolerances = tol) -> Result:
+    """Run the configured model and return a Result (see module docstring).
+
+    config : preform.config.Config
+    progress : show a progress bar (tqdm) on stderr
+    mandrel, centerline : the config's, when already loaded (the CLI checks them first)
+    checkpoint : str or Path or None, a file where the run's state is saved every
+        ``stepping.CHECKPOINT_EVERY_S`` seconds of wall time and when it is interrupted
+        (``preform.checkpoint``); removed when the run is done
+    resume : continue from ``checkpoint``, giving the same results as a run that was never
+        stopped; a checkpoint of other inputs, another format or damaged is refused
+        (CheckpointError, naming what differs)
+    tolerances : step control and geometry settings (``preform.tolerances``)
+
+    Ctrl-C stops after the current step (a second Ctrl-C stops at once).
+    """
+    wall0 = _time.perf_counter()
+    if mandrel is None or centerline is None:
+        mandrel, centerline = load_geometry(config)
+    config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
+    ckpt = None if checkpoint is None else Checkpoint(checkpoint, config)
+    stepper = make_stepper(config, mandrel, centerline, tolerances)
+    if resume:
+        if ckpt is None:
+            raise ConfigError("--resume: no checkpoint file given to resume from; run without --resume")
+        arrays = ckpt.load()
+        try:
+            stepper.restore(arrays)
+        except ValueError as exc:
+            raise CheckpointError(f"--resume: the checkpoint {ckpt.path} is damaged or was not "
+                                  f"made by preform: {exc}; run without --resume") from None
+    status, message = "done", ""
+    with _graceful_interrupt(stepper):
+        try:
+            stepper.run(progress=progress, checkpoint=ckpt)
+        except KeyboardInterrupt:
+            status = "interrupted"
+            message = f"interrupted by the user at t = {stepper.clock.t:.4g} s"
+            if ckpt is not None and stepper.consistent:
+                ckpt.save(stepper.state_arrays())
+                message += "; resume with --resume"
+            elif ckpt is not None and ckpt.exists():
+                message += "; stopped inside a step: --resume continues from the last checkpoint"
+        except SimulationError as exc:
+            status, message = "failed", str(exc)
+    if status == "done" and ckpt is not None:
+        ckpt.remove()
+    return stepper.result(status, message, _time.perf_counter() - wall0)
+
+
+@contextmanager
+def _graceful_interrupt(stepper):
+    """First Ctrl-C: stop after the current step (state stays consistent); second: at once."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        if stepper.stop_requested:
+            raise KeyboardInterrupt
+        stepper.stop_requested = True
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -1,0 +1,305 @@
+"""Time stepping of a braiding run: pose, step control, deposition, the time loop (DESIGN.md §2, §3).
+
+A :class:`Stepper` ties every yarn to the mandrel's tip and advances the process step by step:
+each step the mandrel moves on by the take-up speed, the zone (``preform.zone.Zone``) says where
+each free yarn runs to, and the depositor walks the fell points over the mandrel
+(``preform.kinematic``). What each step leaves is kept by a ``preform.recording.Recording``;
+``state_arrays`` / ``restore`` give and take the whole state as plain arrays for checkpoints.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import plain
+from .analysis import CenterlineProjector, mandrel_friction
+from .errors import SimulationError
+from .geometry.pose import pose_at
+from .kinematic import Depositor
+from .recording import Recording
+from .result import Result
+from .tolerances import Tolerances, tol
+from .zone import ZoneStep
+
+#: seconds of wall time between checkpoints
+CHECKPOINT_EVERY_S = 30.0
+
+
+@dataclass(frozen=True)
+class Clock:
+    """Process state advanced by the stepper: time t (s) and the centerline length fed, travel (m)."""
+
+    t: float
+    travel: float
+
+
+def take_up_speed(table, braided_length):
+    """Take-up speed (m/s) from the config table ((length, speed), ...) at a braided length."""
+    table = np.asarray(table, dtype=float)
+    if len(table) == 1:
+        return float(table[0, 1])
+    return float(np.interp(braided_length, table[:, 0], table[:, 1]))
+
+
+def default_time_step(config, machine, mandrel, centerline, tolerances: Tolerances = tol):
+    """Step control (s): bound the carrier rotation and the fell-point advance per step.
+
+    The kinematic model integrates the fell points' equation of motion (second order in the
+    step): ``dt = min(max_carrier_rotation / omega, max_fell_advance * w / (omega r_max + v_max))``.
+    The interaction model without a guide ring is quasi-static: a step is one solve of the zone
+    with the friction history of the last; what it must resolve is the arrival of new crossings
+    (at most ``interaction_pass_fraction`` of the pass period per step: a yarn meets a new
+    crossing every third step at most) and the mandrel's shape under the fell points
+    (``interaction_fell_advance`` widths per step). Behind a guide ring the interaction model
+    keeps the kinematic step: its ring points slide explicitly once a step
+    (``InteractionZone.slide_rings``), so a longer step moves them further between solves.
+    The measurements behind these bounds are in docs/decisions.md.
+    """
+    omega = machine.omega
+    v_max = max(v for _, v in config.process.take_up_speed)
+    r_max = float(np.max(centerline.project(mandrel.vertices)[1]))
+    per_width = config.yarn.width / (omega * r_max + v_max)   # s for the fell points to advance a width
+    s = tolerances
+    if config.model.kind == "interaction" and not machine.has_ring:
+        return min(s.interaction_pass_fraction * machine.pass_period(),
+                   s.interaction_fell_advance * per_width)
+    return min(s.max_carrier_rotation / omega, s.max_fell_advance * per_width)
+
+
+def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tolerances = tol):
+    """Initial fell points (ny, 3) mandrel frame and faces (ny,): on the section near the tip, at
+    each carrier's azimuth (DESIGN.md §3.3); ``[model] start = "random"`` spreads them."""
+    s_tie = tolerances.tie_offset_widths * config.yarn.width
+    phi = machine.azimuths(0.0)
+    if config.model.start == "random":
+        phi = phi + rng.uniform(-np.pi, np.pi, size=phi.shape) / machine.n_per_group
+        s_tie = s_tie + rng.uniform(0.0, 2.0 * config.yarn.width, size=phi.shape)
+    s_tie = np.broadcast_to(np.asarray(s_tie, dtype=float), phi.shape)
+    c, T, _, _ = centerline.frames_at(s_tie)
+    u_machine = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
+    u = u_machine @ pose.R  # rows: R^T u
+    u -= np.einsum("ij,ij->i", u, T)[:, None] * T
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    far = c + u * mandrel.diagonal
+    # cast from outside inwards so the hit is the outer surface, whatever the section shape
+    hit, point, face, _ = mandrel.intersect_segments(far, c)
+    if not np.all(hit):
+        raise SimulationError(
+            f"could not tie {np.sum(~hit)} yarn(s) to the mandrel at {s_tie[0]:.4g} m from the tip: "
+            "the centerline there does not lie inside the mandrel")
+    return point, face.astype(np.int64)
+
+
+class Stepper:
+    """Holds the run's state; ``run`` advances it, ``result`` packs it (also after a stop).
+
+    config : preform.config.Config; machine : preform.machine.Machine; mandrel, centerline :
+    preform.geometry (mandrel frame, SI); zone : a fresh preform.zone.Zone of ``[model] kind``;
+    tolerances : the step control and geometry settings.
+    """
+
+    def __init__(self, config, machine, mandrel, centerline, zone, tolerances: Tolerances = tol):
+        s = tolerances
+        self.config = config
+        self.machine = machine
+        self.mandrel = mandrel
+        self.centerline = centerline
+        self.tolerances = tolerances
+        self.project = CenterlineProjector(centerline, spacing=s.projector_spacing)
+        self.dt = config.model.time_step or default_time_step(config, machine, mandrel, centerline, s)
+        clearance = max(s.catch_clearance_thickness * config.yarn.thickness,
+                        s.catch_clearance_diagonal * mandrel.diagonal)
+        self.depositor = Depositor(mandrel, clearance=clearance,
+                                   h_max=s.walk_piece_widths * config.yarn.width)
+        self.ecc = np.asarray(config.process.eccentricity, dtype=float)
+        self.lead = config.process.pose_lead
+        self.clock = Clock(0.0, config.process.initial_position)
+        pose = self.pose(self.clock.travel)
+        rng = np.random.default_rng(config.model.seed)
+        self.F, self.face = tie_points(config, machine, mandrel, centerline, pose, rng, s)
+        self.recording = Recording(len(self.F))
+        n_snap = config.output.snapshots if config.output is not None else 20
+        self.snapshot_stride = 0 if n_snap <= 0 else self._snapshot_stride(n_snap)
+        self.zone = zone
+        self.zone.start(0.0, pose.to_machine(self.F), pose)
+        self._record(pose, ZoneStep.kinematic(machine.supply_points(0.0)))
+        self.step = 0
+        self.braided = self.braided_length_estimate()
+        self.stop_requested = False
+        self.consistent = True   # False while a step is half applied
+
+    # -- process kinematics -------------------------------------------------------------------
+    def pose(self, travel):
+        return pose_at(self.centerline, travel, eccentricity=self.ecc, lead=self.lead)
+
+    def braided_length_estimate(self):
+        """Cheap braided length for the stopping test: mean arc length of the fell points."""
+        return float(np.mean(self.project(self.F)))
+
+    # -- stepping -----------------------------------------------------------------------------
+    def run(self, progress=True, checkpoint=None, checkpoint_every_s=CHECKPOINT_EVERY_S,
+            max_steps=None):
+        """Step until ``braid_length`` is braided (or the step count reaches ``max_steps``);
+        ``checkpoint`` (a preform.checkpoint.Checkpoint or None) saves the state every
+        ``checkpoint_every_s`` s of wall time. SimulationError when a step fails or the mandrel
+        runs out; KeyboardInterrupt once a stop was requested."""
+        cfg = self.config
+        target = cfg.process.braid_length
+        L = self.centerline.length
+        bar = progress_bar(target, progress)
+        last_save = _time.perf_counter()
+        try:
+            bar(self.braided)
+            while self.braided < target and (max_steps is None or self.step < max_steps):
+                if self.stop_requested:
+                    raise KeyboardInterrupt
+                v = take_up_speed(cfg.process.take_up_speed, self.braided)
+                self.advance(v)
+                if self.step % self.tolerances.braided_length_every == 0:
+                    self.braided = self.braided_length_estimate()
+                    bar(self.braided)
+                if self.clock.travel - self.lead > L:
+                    raise SimulationError(
+                        f"the mandrel's end passed the machine at t = {self.clock.t:.4g} s before "
+                        f"{target} m were braided ({self.braided:.4g} m): shorten [process] braid_length "
+                        "or lengthen the mandrel")
+                if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every_s:
+                    checkpoint.save(self.state_arrays())
+                    last_save = _time.perf_counter()
+        finally:
+            bar(None)
+
+    def advance(self, v):
+        """One time step; the state changes only at the end (an error leaves the last good step)."""
+        self.consistent = False   # a zone with state (interaction) changes during its step
+        s = self.tolerances
+        t0, dt = self.clock.t, self.dt
+        travel_end = self.clock.travel + v * dt
+        pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
+        pose_end = self.pose(travel_end)
+        zs = self.zone.step(t0, dt, pose_end.to_machine(self.F), pose_end)
+        F, face, deposited = self._deposit(zs.deposits, pose_end)
+        G_mid = pose_mid.to_mandrel(zs.G_mid)
+        G_end = pose_end.to_mandrel(zs.G_end)
+        max_len = max(s.walk_reach_factor * (self.machine.omega * self.mandrel.diagonal + v) * dt,
+                      s.walk_reach_widths * self.config.yarn.width)
+        laid = self.depositor.step(F, face, G_mid, G_end, max_len)
+        t1 = t0 + dt
+        if not np.all(np.isfinite(laid.final_F)):
+            bad = int(np.nonzero(~np.all(np.isfinite(laid.final_F), axis=1))[0][0])
+            raise SimulationError(f"non-finite fell point of yarn {bad} at step {self.step + 1}, t = {t1:.6g} s")
+        extra = [(k, -1.0, p, f, t1, 0) for k, p, f in deposited]
+        for k, items in laid.extra.items():
+            for order, (p, f, fl) in enumerate(items):
+                extra.append((k, order, p, f, t1, fl))
+        self.recording.lay(laid.moved, laid.end_flag, extra)
+        self.F, self.face = laid.final_F, laid.final_face
+        self.clock = Clock(t1, travel_end)
+        self.step += 1
+        self._record(pose_end, zs)
+        self.consistent = True
+
+    def _deposit(self, deposits, pose):
+        """Crossings that reached the mandrel become fell points (interaction model).
+
+        Returns new (F, face) arrays and the list of (yarn, point, face) laid this way.
+        """
+        if not deposits:
+            return self.F, self.face, []
+        last = {int(kk): p for kk, p in deposits}     # a yarn's deposits come lowest first: keep the last
+        k = np.array(list(last), dtype=np.int64)
+        points = pose.to_mandrel(np.array(list(last.values()), dtype=float))
+        on_surface, faces = self.mandrel.closest_points(points)
+        F = self.F.copy()
+        face = self.face.copy()
+        F[k] = on_surface
+        face[k] = np.asarray(faces, dtype=np.int64)
+        return F, face, [(int(kk), F[kk].copy(), int(face[kk])) for kk in k]
+
+    def _record(self, pose, zs):
+        F_machine = pose.to_machine(self.F)
+        H = F_machine[:, 2] - self.machine.supply_z
+        rec = self.recording
+        rec.record(self.clock.t, self.F, self.face, H, pose.to_mandrel(zs.G_end) - self.F,
+                   zs.contacts, zs.iterations, zs.residual)
+        if self.snapshot_stride and (rec.n_rows - 1) % self.snapshot_stride == 0:
+            rec.snapshots.append(self.zone.snapshot(self.clock.t, F_machine))
+
+    def _snapshot_stride(self, n_snap):
+        """Steps between snapshots so that a run writes about n_snap of them."""
+        cfg = self.config
+        v = max(s for _, s in cfg.process.take_up_speed)
+        n_steps_est = cfg.process.braid_length / (v * self.dt) + 1
+        return int(max(1, n_steps_est // n_snap))
+
+    # -- packing ------------------------------------------------------------------------------
+    def result(self, status, message, wall) -> Result:
+        rec = self.recording
+        surface = self.depositor.surface
+        group = self.machine.group
+        yarns = rec.yarn_paths(surface, self.project, self.centerline, group,
+                               mandrel_friction(self.config), self.tolerances.slip_curvature)
+        history, fell_s = rec.history(surface, self.project, self.centerline, group)
+        return Result(config=self.config, mandrel=self.mandrel, centerline=self.centerline,
+                      yarns=yarns, history=history, snapshots=list(rec.snapshots), fell_s=fell_s,
+                      convergence_length=rec.H.array.copy(), status=status, message=message,
+                      wall_time_s=wall)
+
+    # -- checkpoints --------------------------------------------------------------------------
+    def state_arrays(self) -> dict:
+        """The run's whole state as named plain arrays: the stepper's own (``stepper.*``: clock,
+        fell points, step count, braided length, and the time step and snapshot stride it runs
+        with, so that a run resumed by a version with other step control goes on as it started),
+        the record (``recording.*``) and the zone's (``zone.*``)."""
+        out = {"clock": np.array([self.clock.t, self.clock.travel]), "F": self.F.copy(),
+               "face": self.face.copy(), "step": np.int64(self.step),
+               "braided": np.float64(self.braided), "dt": np.float64(self.dt),
+               "snapshot_stride": np.int64(self.snapshot_stride)}
+        return {**plain.prefixed("stepper.", {k: np.asarray(v) for k, v in out.items()}),
+                **plain.prefixed("recording.", self.recording.to_arrays()),
+                **plain.prefixed("zone.", self.zone.export_state())}
+
+    def restore(self, arrays) -> None:
+        """Continue from ``state_arrays`` of a run of the same inputs; every array is checked
+        (shapes, dtypes, finite values, indices in range) before any is used: ValueError."""
+        ny = len(self.F)
+        n_faces = len(self.mandrel.faces)
+        own = plain.unprefixed("stepper.", arrays)
+        clock = plain.finite("clock", plain.take(own, "clock", (2,), np.float64))
+        F = plain.finite("F", plain.take(own, "F", (ny, 3), np.float64))
+        face = plain.in_range("face", plain.take(own, "face", (ny,), np.int64), 0, n_faces)
+        step = plain.scalar(own, "step", np.int64)
+        braided = plain.finite("braided", plain.take(own, "braided", (), np.float64)).item()
+        dt = plain.scalar(own, "dt", np.float64)
+        stride = plain.scalar(own, "snapshot_stride", np.int64)
+        if not (np.isfinite(dt) and dt > 0.0) or stride < 0:
+            raise ValueError(f"time step {dt} s or snapshot stride {stride} out of range")
+        recording = Recording.from_arrays(plain.unprefixed("recording.", arrays), ny, n_faces)
+        if recording.n_rows != step + 1 or recording.moved.n != step:
+            raise ValueError(f"{recording.n_rows} history rows for {step} steps")
+        self.zone.import_state(plain.unprefixed("zone.", arrays))
+        self.clock = Clock(float(clock[0]), float(clock[1]))
+        self.F, self.face, self.step, self.braided = F, face, step, braided
+        self.dt, self.snapshot_stride, self.recording = dt, stride, recording
+
+
+def progress_bar(total, enabled):
+    """A callable updated with the braided length; None closes it."""
+    if not enabled:
+        return lambda value: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=round(total, 6), unit="m", desc="braiding", leave=True,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.3f}/{total:.3f} m braided [{elapsed}<{remaining}]")
+
+    def update(value):
+        if value is None:
+            bar.close()
+            return
+        bar.n = round(min(value, total), 6)
+        bar.refresh()
+
+    return update

@@ -1,0 +1,66 @@
+"""Bounds on work (issue 17 item 7): estimates and refusals with their reasons."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from preform.budget import LIMITS, braiding_time, check_work, estimate_work
+from preform.config import load_config
+from preform.errors import ConfigError
+
+CASE_A = "examples/case_a.toml"
+#: case A's mandrel: a 150 mm cylinder (radius 0.075 m)
+RADIUS = 0.075
+
+
+@pytest.fixture(scope="module")
+def case_a():
+    return load_config(CASE_A)
+
+
+def _with(config, section, **values):
+    return dataclasses.replace(config, **{section: dataclasses.replace(getattr(config, section), **values)})
+
+
+def test_braiding_time_of_a_constant_speed_and_of_a_table(case_a):
+    assert braiding_time(case_a) == pytest.approx(1.0 / 0.01)
+    table = _with(case_a, "process", take_up_speed=((0.0, 0.01), (1.0, 0.02)))
+    # closed form of int_0^1 dL / (0.01 + 0.01 L) = 100 ln 2; trapezoids on 2000 intervals: 1e-6
+    assert braiding_time(table) == pytest.approx(100.0 * math.log(2.0), rel=1e-6)
+
+
+def test_estimate_counts_faces_from_area_and_edge(case_a):
+    cfg = _with(case_a, "output", field_edge_length=2e-3)
+    area = 2 * math.pi * RADIUS * 2.0
+    est = estimate_work(cfg, area, time_step=0.05)
+    assert est.field_faces == int(area / (math.sqrt(3) / 4 * 4e-6))
+    assert est.steps == int(100.0 / 0.05)
+    check_work(cfg, est, RADIUS)   # a normal case passes
+
+
+def test_a_tiny_field_edge_is_refused_unless_forced(case_a):
+    cfg = _with(case_a, "output", field_edge_length=1e-9)
+    est = estimate_work(cfg, 1.0, time_step=0.05)
+    with pytest.raises(ConfigError, match=r"field_edge_length = 1e-09 m asks for about .* --force"):
+        check_work(cfg, est, RADIUS)
+    check_work(cfg, est, RADIUS, force=True)
+
+
+def test_a_tiny_time_step_is_refused_unless_forced(case_a):
+    cfg = _with(case_a, "model", time_step=1e-300)
+    est = estimate_work(cfg, 1.0, time_step=1e-300)
+    assert est.steps > LIMITS.max_steps
+    with pytest.raises(ConfigError, match=r"time_step = 1e-300 s makes about"):
+        check_work(cfg, est, RADIUS)
+    check_work(cfg, est, RADIUS, force=True)
+
+
+def test_more_yarns_than_fit_the_perimeter_are_refused_even_when_forced(case_a):
+    cfg = _with(case_a, "machine", carriers=10_000)
+    est = estimate_work(cfg, 1.0, time_step=0.05)
+    # 5000 yarns x 4 mm = 20 m against a perimeter of 0.47 m
+    with pytest.raises(ConfigError, match=r"carriers = 10000: .* at most 235 carriers"):
+        check_work(cfg, est, RADIUS, force=True)
