@@ -181,3 +181,38 @@ def test_take_up_table_is_used_along_the_mandrel():
 def test_value_warnings(changes, word):
     warnings = preflight(config(**changes), *cylinder())
     assert len(warnings) == 1 and word in warnings[0]
+
+
+@pytest.mark.parametrize("sections", [16, 24, 100, 128])
+def test_cad_cylinder_in_mm_read_as_m_reaches_the_unit_message(tmp_path, sections):
+    # issue 15: trimesh's capped cylinders (long slivers) used to stop in the automatic centerline
+    # ("no cross-section near the tip") before the unit check could say what is wrong
+    import trimesh
+
+    from simcase import make_config
+    from preform.geometry import auto_centerline, load_mandrel
+
+    m = trimesh.creation.cylinder(radius=40.0, height=1600.0, sections=sections)   # mm
+    m.apply_translation([0.0, 0.0, 800.0])
+    path = tmp_path / "cyl_mm.stl"
+    m.export(path)
+    config = make_config(path, stl_unit="m")
+    mandrel = load_mandrel(path, unit="m")
+    with pytest.raises(ConfigError, match="millimetres"):
+        preflight(config, mandrel, auto_centerline(mandrel))
+
+
+def test_inside_out_cad_cylinder_is_turned_and_gets_a_centerline(tmp_path):
+    import trimesh
+
+    from preform.geometry import auto_centerline, load_mandrel
+
+    m = trimesh.creation.cylinder(radius=0.04, height=1.6, sections=128)
+    m.apply_translation([0.0, 0.0, 0.8])
+    m.invert()
+    path = tmp_path / "inside_out.stl"
+    m.export(path)
+    mandrel = load_mandrel(path)
+    assert any("turned the normals outwards" in r for r in mandrel.repairs)
+    cl = auto_centerline(mandrel)
+    assert cl.length == pytest.approx(1.6, rel=1e-6) and cl.points[0, 2] == pytest.approx(0.0, abs=1e-6)

@@ -186,35 +186,50 @@ def test_jamming_caps_cover_factor_and_flags_faces():
     assert np.allclose(fields.cell_data["coverage_warp"][inner], 0.9, rtol=0.03)  # as above
 
 
-def test_mesh_independence_stl_versus_refined_field_mesh():
+def test_fields_do_not_depend_on_the_field_edge_length():
     # braid angle varying along the mandrel, so the fields are not uniform
     def alpha(z):
         return np.radians(25.0 + 15.0 * z / HEIGHT)
 
+    z = np.linspace(0.0, HEIGHT, 2001)
+    truth = {"coverage_warp": coverage_closed_form(16, alpha(z)).mean(),
+             "braid_angle_deg": np.degrees(alpha(z)).mean()}
+    truth["coverage_weft"] = truth["coverage_warp"]
+    truth["thickness_m"] = 2 * THICKNESS * truth["coverage_warp"]
     result = make_result(cylinder(), helices(alpha, 16))
-    coarse = map_to_surface(result, edge_length=np.inf)     # the STL's own slivers
-    fine = map_to_surface(result, edge_length=0.01)
-    for fields in (coarse, fine):
+    means = []
+    for h in (0.01, 0.006):
+        fields = map_to_surface(result, edge_length=h)
         assert fields.unmapped_length_m == pytest.approx(0.0, abs=1e-12)
-    side_c, areas_c = side_faces(coarse)
-    side_f, areas_f = side_faces(fine)
-    for name, rtol in (("coverage_warp", 0.01), ("coverage_weft", 0.01), ("thickness_m", 0.01),
-                       ("cover_factor", 0.02), ("braid_angle_deg", 0.01)):
-        # 1-2 %: the pooling window smooths the ends of the braided zone differently on the two
-        # meshes; the unpooled length sums agree exactly (test_fields_kernels)
-        assert area_mean(fine, name, side_f, areas_f) == pytest.approx(
-            area_mean(coarse, name, side_c, areas_c), rel=rtol), name
+        side, areas = side_faces(fields)
+        means.append({name: area_mean(fields, name, side, areas) for name in truth})
+    for name, value in truth.items():
+        # 1 %: the pooling window smooths the ends of the braided zone (seen: 0.4 %), and the
+        # field mesh's chords (r = 50 mm, h = 10 mm: perimeter 0.3 % short) add yarn per area
+        for m in means:
+            assert m[name] == pytest.approx(value, rel=0.01), name
+        assert means[0][name] == pytest.approx(means[1][name], rel=0.01), name
 
 
-def test_input_mesh_is_untouched_and_refinement_bounds_edges():
+def test_input_mesh_is_untouched_and_field_mesh_is_isotropic():
     mandrel = cylinder()
     before = (mandrel.vertices.copy(), mandrel.faces.copy())
-    fields = map_to_surface(make_result(mandrel, helices(np.radians(30.0), 8)), edge_length=0.015)
+    h = 0.015
+    fields = map_to_surface(make_result(mandrel, helices(np.radians(30.0), 8)), edge_length=h)
     assert np.array_equal(mandrel.vertices, before[0]) and np.array_equal(mandrel.faces, before[1])
     tri = fields.vertices[fields.faces]
-    assert np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max() <= 0.015
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
+    # Botsch-Kobbelt keep edges in [4/5 h, 4/3 h] after convergence; the slack is for feature
+    # lines, whose vertices only slide along the rim
+    assert 0.8 * h <= np.median(edges) <= 1.2 * h and edges.max() <= 2 * h
     assert fields.source_faces.shape == (len(fields.faces),)
     assert np.array_equal(fields.cell_data["source_face"], fields.source_faces)
+    # every field face lies on its source face: its centroid is within the chord sag of that face's plane
+    n0, _, c0 = face_geometry(mandrel.vertices, mandrel.faces)
+    c = tri.mean(axis=1)
+    gap = np.abs(np.einsum("ij,ij->i", c - c0[fields.source_faces], n0[fields.source_faces]))
+    # bound: the sag of the longest field edge on the circle (its vertices lie on the surface)
+    assert gap.max() < edges.max() ** 2 / (8 * R)
 
 
 def test_default_edge_length_comes_from_config_or_yarn_width():

@@ -86,7 +86,15 @@ def test_pool_sums_matches_dense_reference():
     w = np.clip(1 - (d / radius[:, None]) ** 2, 0, None) ** 2
     w[normals @ normals.T < 0.5] = 0.0
     np.fill_diagonal(w, 1.0)
-    got = K.pool_sums(centroids, normals, radius, values, 0.5)
+    got = K.pool_sums(centroids, centroids, normals, radius, values, 0.5)
+    assert np.allclose(got, w @ values, rtol=1e-12, atol=1e-12)
+    # values sitting elsewhere than the window centres: distances from c_f to s_g
+    sources = centroids + rng.uniform(-0.01, 0.01, (300, 3))
+    d = np.linalg.norm(sources[None] - centroids[:, None], axis=2)
+    w = np.clip(1 - (d / radius[:, None]) ** 2, 0, None) ** 2
+    w[normals @ normals.T < 0.5] = 0.0
+    np.fill_diagonal(w, 1.0)
+    got = K.pool_sums(centroids, sources, normals, radius, values, 0.5)
     assert np.allclose(got, w @ values, rtol=1e-12, atol=1e-12)
 
 

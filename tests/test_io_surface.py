@@ -109,3 +109,16 @@ def test_rendering_failure_warns_and_writes_data(monkeypatch, tmp_path):
         paths = write_surface(fields, tmp_path)
     assert {p.name for p in paths} == {VTU, XDMF, H5}
     assert not list((tmp_path / "plots").glob("*.png"))
+
+
+def test_every_file_keeps_the_users_umask(tmp_path):
+    # issue 15: the pictures were 0600 (mkstemp's mode) while the data files followed the umask
+    fields = map_to_surface(make_result(cylinder(), helices(np.radians(30.0), 8)), edge_length=0.02)
+    old = os.umask(0o022)
+    try:
+        paths = write_surface(fields, tmp_path / "out")
+    finally:
+        os.umask(old)
+    assert any(p.suffix == ".png" for p in paths)
+    for p in paths:
+        assert (p.stat().st_mode & 0o777) == 0o644, p

@@ -1,16 +1,17 @@
 """Deposited yarns -> per-face fields on the mandrel surface (DESIGN.md §3.4).
 
-:func:`map_to_surface` clips every deposited yarn to the faces of a *field mesh* (the mandrel
-mesh refined so no edge is longer than a target length; the input mesh is never modified), sums
-per face and group (warp 0, weft 1) the yarn length ``L`` and the direction moment
-``sum l d d^T``, pools those sums over a small neighbourhood (see :func:`map_to_surface`), and turns
-them into fields: mean fibre direction, braid angle, coverage, cover factor, thickness.
+:func:`map_to_surface` clips every deposited yarn to the faces of a *field mesh*, sums per face and
+group (warp 0, weft 1) the yarn length ``L`` and the direction moment ``sum l d d^T``, pools those
+sums over a small neighbourhood (see :func:`map_to_surface`), and turns them into fields: mean
+fibre direction, braid angle, coverage, cover factor, thickness.
 
-Refinement: :func:`refine_to_edge_length` splits every edge longer than the target at its midpoint
-and each face by the pattern of its split edges (1, 2 or 3), repeatedly. Unlike
-``trimesh.remesh.subdivide_to_size`` (a triangle soup with hanging nodes) the result is a
-conforming mesh, which the edge-to-edge walk of the clipping needs; the new vertices lie on the
-input facets, so the surface itself does not change.
+The field mesh is an isotropic remesh of the mandrel surface to the field edge length
+(:func:`preform.geometry.remesh.isotropic_remesh`: near-equilateral faces of about that edge,
+sharp feature edges kept, vertices on the input surface), so the fields do not depend on how the
+STL happens to be triangulated: CAD slivers, coarse facets and over-fine exports all give faces of
+one size. The input mesh is never modified; ``source_face`` says which input triangle each field
+face lies on, and :func:`fields_on_input` carries the fields over to the input triangles
+(area-weighted) for tools that need the user's own mesh.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from scipy.spatial import cKDTree
 
 from ._kernels import fields as _k
 from .errors import PreformError
+from .geometry.remesh import RemeshSettings, isotropic_remesh, locate_faces, subdivide_long_edges
 from .tolerances import tol
 
 #: default field-mesh edge length, in yarn widths (issue 3: "a few yarn widths")
@@ -38,6 +40,14 @@ TANGENT_MIN = 1e-6
 MAX_HOPS = 100_000
 #: refinement guard: at most this many edge-splitting passes (each halves the longest edges)
 MAX_REFINE_PASSES = 60
+#: fields_on_input samples each input face with pieces of at most this many field edge lengths:
+#: the midpoint rule over pieces of h / 2 puts a piece in the wrong field face only along field
+#: face edges, within h / 4 of them
+TRANSFER_PIECE_EDGES = 0.5
+#: locate_faces casts its rays from this many field edge lengths outside the surface: beyond the
+#: chord sag of the field mesh (h^2 / (8 r), 0.05 h at r = 2.5 h) and well inside a yarn width of
+#: wall thickness for the usual h
+LOCATE_REACH_EDGES = 0.5
 
 GROUPS = ("warp", "weft")
 
@@ -52,7 +62,7 @@ class SurfaceFields:
     cell_data : dict name -> (nf,) or (nf, 3) array, see :func:`map_to_surface`
     jammed : (nf,) bool, a group's yarn width exceeds its available width here
     unmapped_length_m : float, m, deposited yarn length that could not be put on any face
-    edge_length_m : float, m, the field mesh's maximum edge length (inf: the input mesh as is)
+    edge_length_m : float, m, the field mesh's target edge length (inf: the input mesh as is)
     pool_radius_m : float, m, radius of the neighbourhood each face borrows from
     """
 
@@ -73,10 +83,10 @@ def refine_to_edge_length(vertices, faces, max_edge):
 
     Longest-edge bisection (Rivara): each pass bisects the longest edge of every face that has an
     edge above ``max_edge``, plus, for conformity, the longest edge of every face sharing a split
-    edge (repeated until closed). Bisection keeps a face's shape: a needle of length L and width
-    w becomes needles of L / 2 and w / 2, so long CAD slivers are over-refined (a cylinder of
-    1 m x 5 mm slivers refined to 12 mm edges: 52 times the faces of an even mesh of that edge,
-    median aspect ratio 51), though every edge ends up below ``max_edge``.
+    edge (repeated until closed). Bisection keeps a face's shape (a needle of length L and width
+    w becomes needles of L / 2 and w / 2), so it suits faces that are already about as wide as
+    long: :func:`fields_on_input` uses it after cutting long edges into pieces
+    (:func:`preform.geometry.remesh.subdivide_long_edges`); the field mesh itself is remeshed.
 
     vertices : (nv, 3) float64, m;  faces : (nf, 3) int64;  max_edge : float, m (> 0)
     returns : (vertices (nv', 3) float64, faces (nf', 3) int64, source_faces (nf',) int64), the
@@ -190,10 +200,11 @@ def edge_planes(vertices, faces, normals):
     return m.reshape(nf, 3, 3), offset.reshape(nf, 3), neighbour.reshape(nf, 3)
 
 
-def field_mesh(result, edge_length=None):
-    """The mesh the fields live on: the mandrel refined to ``edge_length`` (see map_to_surface).
+def field_mesh(result, edge_length=None, remesh: RemeshSettings = RemeshSettings()):
+    """The mesh the fields live on: the mandrel remeshed isotropically to ``edge_length``.
 
-    returns : vertices (nv, 3), faces (nf, 3), source_faces (nf,), edge length used (m; inf if none)
+    returns : vertices (nv, 3), faces (nf, 3), source_faces (nf,) (the input face under each
+    field face's centroid), edge length used (m; inf: the input mesh itself, welded).
     Vertices with identical coordinates (an STL triangle soup) are welded first.
     """
     V = np.asarray(result.mandrel.vertices, dtype=np.float64)
@@ -202,8 +213,12 @@ def field_mesh(result, edge_length=None):
     h = default_edge_length(result) if edge_length is None else float(edge_length)
     if np.isinf(h):
         return V.copy(), F.copy(), np.arange(len(F), dtype=np.int64), h
-    V, F, source = refine_to_edge_length(V, F, h)
-    return V, F, source, h
+    if not (np.isfinite(h) and h > 0):
+        raise PreformError(f"[output] field_edge_length = {h!r}: expected a positive length in m")
+    U, G = isotropic_remesh(V, F, h, remesh)
+    normals, _, centroids = face_geometry(U, G)
+    source = locate_faces(V, F, centroids, normals, LOCATE_REACH_EDGES * h)
+    return U, G, source, h
 
 
 def default_edge_length(result) -> float:
@@ -215,24 +230,28 @@ def default_edge_length(result) -> float:
 
 # ------------------------------------------------------------------------------------ clipping
 
-def clip_yarns(yarns, vertices, faces, normals, centroids):
-    """Per-face, per-group yarn length (nf, 2) m, direction moment (nf, 2, 3, 3) m, unmapped m.
+def clip_yarns(yarns, vertices, faces, normals, centroids, with_first=False):
+    """Per-face, per-group yarn length (nf, 2) m, direction moment (nf, 2, 3, 3) m, unmapped m;
+    with ``with_first`` also the first moment ``sum l x_mid`` (nf, 2, 3) m^2 (before unmapped).
 
     Every segment of every deposited yarn (including bridges over concave stretches, which lie
     over the faces below them) is clipped exactly to the edge-plane wedges of the faces.
     """
     points = np.ascontiguousarray(yarns.points, dtype=np.float64)
     if len(points) == 0 or len(faces) == 0:
-        return np.zeros((len(faces), 2)), np.zeros((len(faces), 2, 3, 3)), 0.0
+        empty = np.zeros((len(faces), 2)), np.zeros((len(faces), 2, 3, 3))
+        return (*empty, np.zeros((len(faces), 2, 3)), 0.0) if with_first else (*empty, 0.0)
     plane_normal, plane_offset, neighbour = edge_planes(vertices, faces, normals)
     _, seed = cKDTree(centroids).query(points)
-    length, m6, unmapped = _k.clip_polylines(
+    length, m6, first, unmapped = _k.clip_polylines(
         points, np.asarray(yarns.offsets, dtype=np.int64), np.asarray(yarns.group, dtype=np.int64),
         np.asarray(seed, dtype=np.int64), np.ascontiguousarray(centroids), plane_normal,
         plane_offset, neighbour, len(faces), MAX_HOPS)
     xx, yy, zz, xy, xz, yz = np.moveaxis(m6, -1, 0)
     moment = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1),
                        np.stack([xz, yz, zz], -1)], -2)
+    if with_first:
+        return length, moment, first, float(unmapped)
     return length, moment, float(unmapped)
 
 
@@ -244,19 +263,40 @@ def default_pool_radius(edge_length, width) -> float:
     return POOL_EDGES * h
 
 
-def pool(centroids, normals, radius, values):
+def pool(centroids, normals, radius, values, sources=None):
     """Biweight-kernel sums of per-face values over neighbourhoods (see map_to_surface).
 
     centroids, normals : (nf, 3) float64;  radius : float or (nf,) float64, m
-    values : (nf, c) float64;  returns (nf, c) float64
+    values : (nf, c) float64;  sources : (nf, 3) float64, where each face's values sit (default
+    its centroid);  returns (nf, c) float64
     """
     radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(centroids),))
     cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
-    return _k.pool_sums(np.ascontiguousarray(centroids), np.ascontiguousarray(normals),
+    sources = centroids if sources is None else sources
+    return _k.pool_sums(np.ascontiguousarray(centroids), np.ascontiguousarray(sources),
+                        np.ascontiguousarray(normals),
                         np.ascontiguousarray(radius), np.ascontiguousarray(values), cos_crease)
 
 
 # ------------------------------------------------------------------------------------- fields
+
+def centroid_normals(vertices, faces, normals):
+    """Smooth unit normal at each face centroid (nf, 3): the mean of the face's crease-split,
+    angle-weighted corner normals (as the mandrel's, tolerances.crease_angle_deg).
+
+    A chord face of a curved surface is tilted against the surface under its centroid by up to
+    ``h / (2 r)`` (on a prism the tilt can be about any axis, as the corners sit at different
+    heights), so the centerline tangent projected onto the facet is not its projection onto the
+    surface; the smooth normal is the surface's to second order in ``h``. The braid angle is
+    measured in the frame of this normal (DESIGN.md §2: the angle to the projection of the
+    tangent onto the surface's tangent plane).
+    """
+    from .geometry.mandrel import _corner_normals
+
+    cn = _corner_normals(vertices, faces, normals).sum(axis=1)
+    norm = np.linalg.norm(cn, axis=1)
+    return np.divide(cn, norm[:, None], out=normals.copy(), where=norm[:, None] > 0)
+
 
 def surface_tangent(result, centroids, normals):
     """Unit surface projection of the centerline tangent at each centroid (nf, 3); 0 on end caps."""
@@ -287,11 +327,26 @@ def local_frames(normals, tangent):
 
 
 def planar_moments(moment, e1, e2):
-    """3D direction moments (nf, 2, 3, 3) in each face's frame: (nf, 2, 3) = (aa, ab, bb), m."""
+    """3D direction moments (nf, 2, 3, 3) in each face's frame: (nf, 2, 3) = (aa, ab, bb), m.
+
+    e1, e2 span the plane normal to ``n = e1 x e2`` (the smooth normal, :func:`centroid_normals`).
+    A yarn direction ``d = a e1 + b e2 + c n`` with ``c != 0`` (the yarn, on the mandrel, is not
+    quite tangent to the smooth plane of a chord face) is unfolded into the plane keeping its
+    angle to e1: ``b' = sign(b) sqrt(b^2 + c^2)``, so ``bb' = bb + cc`` exactly and
+    ``ab' = ab sqrt(bb' / bb)`` (exact when the pieces of a group in a face share one ``c / b``,
+    as neighbouring pieces of a yarn on a smooth surface do); projecting instead would shorten
+    ``b`` and the braid angle with it (``tan alpha' = tan alpha cos(tilt)``).
+    """
+    n = np.cross(e1, e2)
     ma = np.einsum("fgij,fj->fgi", moment, e1)
     mb = np.einsum("fgij,fj->fgi", moment, e2)
-    return np.stack([np.einsum("fgi,fi->fg", ma, e1), np.einsum("fgi,fi->fg", ma, e2),
-                     np.einsum("fgi,fi->fg", mb, e2)], axis=-1)
+    aa = np.einsum("fgi,fi->fg", ma, e1)
+    ab = np.einsum("fgi,fi->fg", ma, e2)
+    bb = np.einsum("fgi,fi->fg", mb, e2)
+    cc = np.einsum("fgij,fi,fj->fg", moment, n, n)
+    bb_unfolded = bb + cc
+    scale = np.sqrt(np.divide(bb_unfolded, bb, out=np.ones_like(bb), where=bb > 0))
+    return np.stack([aa, ab * scale, bb_unfolded], axis=-1)
 
 
 def principal_direction_2d(aa, ab, bb):
@@ -300,12 +355,15 @@ def principal_direction_2d(aa, ab, bb):
     return np.cos(phi), np.sin(phi)
 
 
-def map_to_surface(result, edge_length=None, pool_radius_m=None) -> SurfaceFields:
+def map_to_surface(result, edge_length=None, pool_radius_m=None,
+                   remesh: RemeshSettings = RemeshSettings()) -> SurfaceFields:
     """Map the deposited yarns of ``result`` onto the mandrel surface (DESIGN.md §3.4).
 
     result : preform.result.Result (uses yarns, mandrel, centerline, config.yarn, config.output)
-    edge_length : float, m, maximum edge of the field mesh; None: ``[output] field_edge_length``,
-        else DEFAULT_EDGE_WIDTHS yarn widths; ``float("inf")``: map onto the input mesh as it is
+    edge_length : float, m, target edge of the isotropic field mesh (edges between 4/5 and 4/3
+        of it); None: ``[output] field_edge_length``, else DEFAULT_EDGE_WIDTHS yarn widths;
+        ``float("inf")``: map onto the input mesh as it is
+    remesh : settings of the isotropic remesher (preform.geometry.remesh.RemeshSettings)
     pool_radius_m : float, m, radius of the neighbourhood a face borrows from; None:
         POOL_EDGES field edge lengths; 0: no pooling (raw per-face values)
     returns : SurfaceFields on the field mesh
@@ -338,28 +396,48 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None) -> SurfaceField
 
     Pooling (how small faces borrow from their neighbours): below the yarn spacing coverage is
     binary (a point lies on a yarn or between two), so per-face sums flicker on faces smaller than
-    a few spacings, and refining long CAD slivers makes thin faces. Each face therefore adds to
-    its own sums those of the faces whose centroids lie within ``pool_radius_m`` of its centroid,
-    weighted by the biweight kernel ``(1 - (d / rho)^2)^2`` of the centroid distance ``d``;
+    a few spacings. Each face therefore adds to its own sums those of the faces near it, weighted
+    by the biweight kernel ``(1 - (d / rho)^2)^2`` of the distance ``d`` from its centroid to
+    where a neighbour's sum sits, up to ``rho = pool_radius_m``: a neighbour's area at its
+    centroid, its yarn sums of a group at the length-weighted centre of its yarn pieces of that
+    group (placing them at the face centroid would move each yarn by up to half a face and make
+    the window's count of yarns depend on how the faces fall);
     facets turned by more than the crease angle (``tolerances.crease_angle_deg``) are left out, so
     the far side of a thin part or an end cap never leaks in. A uniform field stays exactly
     uniform, and the area-weighted means change only by the smoothing near the edges of the
-    braided zone. Long slivers of the input need no special care once refined: the field mesh
-    caps every edge, so no face averages along a long stretch.
+    braided zone. The field mesh's faces are near-equilateral whatever the input, so no face
+    averages along a long stretch; ``yarn_length_{group}_m_per_m2`` = L / A is the pooled yarn
+    length per area (its integral over the surface is the deposited length, up to the pooling's
+    smoothing at the ends of the braided zone).
     """
-    V, F, source, h = field_mesh(result, edge_length)
+    V, F, source, h = field_mesh(result, edge_length, remesh)
     normals, areas, centroids = face_geometry(V, F)
-    length, moment, unmapped = clip_yarns(result.yarns, V, F, normals, centroids)
+    length, moment, first, unmapped = clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
     width = float(result.config.yarn.width)
     thickness = float(result.config.yarn.thickness)
-    tangent = surface_tangent(result, centroids, normals)
-    e1, e2 = local_frames(normals, tangent)
+    smooth = centroid_normals(V, F, normals)
+    tangent = surface_tangent(result, centroids, smooth)
+    e1, e2 = local_frames(smooth, tangent)
     rho = default_pool_radius(h, width) if pool_radius_m is None else float(pool_radius_m)
-    sums = np.column_stack([areas, length, planar_moments(moment, e1, e2).reshape(len(F), 6)])
+    planar = planar_moments(moment, e1, e2)
     if rho > 0:
-        sums = pool(centroids, normals, rho, sums)
-    A, L, M = sums[:, 0], sums[:, 1:3], sums[:, 3:].reshape(len(F), 2, 3)
+        A = pool(centroids, normals, rho, areas[:, None])[:, 0]
+        L = np.empty((len(F), 2))
+        M = np.empty((len(F), 2, 3))
+        for g in range(2):
+            at = np.where(length[:, g, None] > 0, first[:, g]
+                          / np.where(length[:, g, None] > 0, length[:, g, None], 1.0), centroids)
+            s = pool(centroids, normals, rho, np.column_stack([length[:, g], planar[:, g]]), at)
+            L[:, g], M[:, g] = s[:, 0], s[:, 1:]
+    else:
+        A, L, M = areas, length, planar
     data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width)
+    for name in GROUPS:  # directions shown in the facet's plane (the angle is the smooth frame's)
+        d = data[f"{name}_direction"]
+        d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
+        norm = np.linalg.norm(d, axis=1)
+        data[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
+                                              where=norm[:, None] > 0)
     jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
     k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
     hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
@@ -370,6 +448,8 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None) -> SurfaceField
     data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft)
     data["thickness_m"] = thickness * (k_warp + k_weft)
     data["jammed"] = jammed.astype(np.uint8)
+    for g, name in enumerate(GROUPS):
+        data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
     data["source_face"] = source.copy()
     for name, values in data.items():
         if not np.all(np.isfinite(values)):  # a bug, not a user error
@@ -399,3 +479,76 @@ def _group_fields(A, L, M, e1, e2, has_tangent, width):
         data[f"reached_{name}"] = hit.astype(np.uint8)
         data[f"_jammed_{name}"] = hit & (width > spacing * (1.0 + JAM_RTOL))
     return data
+
+
+# ------------------------------------------------------------------- fields on the input mesh
+
+def fields_on_input(fields: SurfaceFields, mandrel) -> SurfaceFields:
+    """The fields carried over to the input (STL) triangles, area-weighted.
+
+    Each input face is cut into pieces no longer than ``TRANSFER_PIECE_EDGES`` field edge lengths
+    (:func:`preform.geometry.remesh.subdivide_long_edges`, then bisection of what is still too
+    long); each piece takes the values of the field face under its centroid
+    (:func:`preform.geometry.remesh.locate_faces`); an input face gets the area-weighted mean of
+    its pieces, ``v_i = sum_p a_p v_f(p) / A_i`` (the pieces partition it, so ``sum_p a_p = A_i``).
+    So ``sum_i A_i v_i`` is the midpoint-rule integral of the field over the surface, the same
+    as on the field mesh up to the pieces that straddle field-face edges.
+
+    Intensive values (coverage, cover factor, thickness, yarn length per area) are averaged over
+    the whole face; a group's braid angle and direction over the part of the face that group
+    reached (and the direction normalised), so a face half reached keeps the angle of its yarns;
+    ``reached_{group}`` is 1 where any piece was reached, ``jammed`` where at least half the area
+    is; ``braid_angle_deg`` is recombined from the groups as in :func:`map_to_surface`.
+
+    mandrel : anything with ``vertices`` (nv, 3) m and ``faces`` (nf, 3); returns SurfaceFields
+    on those triangles (``source_faces`` = 0 .. nf - 1).
+    """
+    V = np.asarray(mandrel.vertices, dtype=np.float64)
+    F = np.asarray(mandrel.faces, dtype=np.int64)
+    nf = len(F)
+    h = fields.edge_length_m
+    if np.isinf(h):
+        h = float(np.median(np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)))
+    piece = TRANSFER_PIECE_EDGES * h
+    Vp, Fp, src = subdivide_long_edges(V, F, piece)
+    Vp, Fp, src2 = refine_to_edge_length(Vp, Fp, piece)
+    src = src[src2]
+    normals, areas, centroids = face_geometry(Vp, Fp)
+    on = locate_faces(fields.vertices, fields.faces, centroids, normals, LOCATE_REACH_EDGES * h)
+    ok = on >= 0
+    src, areas, on = src[ok], areas[ok], on[ok]
+    A = np.bincount(src, areas, nf)
+
+    def mean(values, weights):
+        num = np.bincount(src, weights * values, nf)
+        den = np.bincount(src, weights, nf)
+        return np.divide(num, den, out=np.zeros(nf), where=den > 0), den
+
+    cd = fields.cell_data
+    out = {}
+    reached = {}
+    for name in GROUPS:
+        hit = cd[f"reached_{name}"][on].astype(float)
+        angle, den = mean(cd[f"braid_angle_{name}_deg"][on], areas * hit)
+        out[f"braid_angle_{name}_deg"] = angle
+        reached[name] = den > 0
+        out[f"reached_{name}"] = reached[name].astype(np.uint8)
+        d = np.column_stack([mean(cd[f"{name}_direction"][on, c], areas * hit)[0] for c in range(3)])
+        norm = np.linalg.norm(d, axis=1)
+        out[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
+                                             where=norm[:, None] > 0)
+    for key, values in cd.items():
+        if key in out or key in ("source_face", "jammed", "braid_angle_deg") or values.ndim != 1:
+            continue
+        out[key] = mean(values[on].astype(float), areas)[0]
+    jammed = mean(cd["jammed"][on].astype(float), areas)[0] >= 0.5
+    out["jammed"] = jammed.astype(np.uint8)
+    hw, hf = reached["warp"], reached["weft"]
+    n_present = hw.astype(float) + hf
+    out["braid_angle_deg"] = np.divide(out["braid_angle_warp_deg"] * hw + out["braid_angle_weft_deg"] * hf,
+                                       n_present, out=np.zeros(nf), where=n_present > 0)
+    out["source_face"] = np.arange(nf, dtype=np.int64)
+    out = {k: out[k] for k in cd if k in out}
+    return SurfaceFields(vertices=V.copy(), faces=F.copy(), source_faces=np.arange(nf, dtype=np.int64),
+                         cell_data=out, jammed=jammed, unmapped_length_m=fields.unmapped_length_m,
+                         edge_length_m=fields.edge_length_m, pool_radius_m=fields.pool_radius_m)

@@ -28,11 +28,12 @@ from numba import njit
 
 @njit(cache=True)
 def _walk(plane_normal, plane_offset, neighbour, f, x0, y0, z0, x1, y1, z1, group,
-          length, moment, accumulate, max_hops):
+          length, moment, first, accumulate, max_hops):
     """Walk the segment (x0, y0, z0) -> (x1, y1, z1) starting in face f.
 
-    If ``accumulate``, add each clipped piece's length to ``length[face, group]`` and its
-    length-weighted direction moment ``l d d^T`` (xx, yy, zz, xy, xz, yz) to ``moment[face, group]``.
+    If ``accumulate``, add each clipped piece's length to ``length[face, group]``, its
+    length-weighted direction moment ``l d d^T`` (xx, yy, zz, xy, xz, yz) to ``moment[face, group]``
+    and its first moment ``l x_mid`` (x_mid the piece's midpoint) to ``first[face, group]``.
     Returns (face holding the end point or -1 if the walk left the mesh, length not assigned, m).
     """
     dx = x1 - x0
@@ -70,6 +71,10 @@ def _walk(plane_normal, plane_offset, neighbour, f, x0, y0, z0, x1, y1, z1, grou
             moment[f, group, 3] += piece * ux * uy
             moment[f, group, 4] += piece * ux * uz
             moment[f, group, 5] += piece * uy * uz
+            t_mid = 0.5 * (t + t_exit)
+            first[f, group, 0] += piece * (x0 + t_mid * dx)
+            first[f, group, 1] += piece * (y0 + t_mid * dy)
+            first[f, group, 2] += piece * (z0 + t_mid * dz)
         if exit_edge < 0:
             return f, 0.0
         g = neighbour[f, exit_edge]
@@ -91,11 +96,13 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
         of a polyline (or the first point after the walk left the mesh) is located, by walking
         from that face's centroid to the point
     returns : length (n_faces, 2) float64 m; moment (n_faces, 2, 6) float64 m (sum of l d d^T,
-        components xx, yy, zz, xy, xz, yz); unmapped (float64, m, yarn length that lies beyond
+        components xx, yy, zz, xy, xz, yz); first (n_faces, 2, 3) float64 m^2 (sum of l x_mid);
+        unmapped (float64, m, yarn length that lies beyond
         a boundary edge of an open mesh or was not located)
     """
     length = np.zeros((n_faces, 2))
     moment = np.zeros((n_faces, 2, 6))
+    first = np.zeros((n_faces, 2, 3))
     unmapped = 0.0
     for k in range(offsets.size - 1):
         g = group[k]
@@ -110,7 +117,8 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
             if f < 0:  # locate the start point: walk there from a nearby centroid
                 s = seed_face[i]
                 f, _ = _walk(plane_normal, plane_offset, neighbour, s, centroid[s, 0], centroid[s, 1],
-                             centroid[s, 2], x0, y0, z0, g, length, moment, False, max_hops)
+                             centroid[s, 2], x0, y0, z0, g, length, moment, first, False,
+                             max_hops)
             if f < 0:
                 dx = x1 - x0
                 dy = y1 - y0
@@ -118,21 +126,23 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
                 unmapped += np.sqrt(dx * dx + dy * dy + dz * dz)
                 continue
             f, lost = _walk(plane_normal, plane_offset, neighbour, f, x0, y0, z0, x1, y1, z1, g,
-                            length, moment, True, max_hops)
+                            length, moment, first, True, max_hops)
             unmapped += lost
-    return length, moment, unmapped
+    return length, moment, first, unmapped
 
 
 @njit(cache=True)
-def pool_sums(centroids, normals, radius, values, cos_crease):
+def pool_sums(centroids, sources, normals, radius, values, cos_crease):
     """Kernel-weighted sums of per-face values over each face's neighbourhood.
 
-    out[f] = values[f] + sum over g != f with |c_g - c_f| < radius[f] and n_f . n_g >= cos_crease
-    of (1 - (d / radius[f])^2)^2 values[g]  (biweight kernel of the centroid distance d).
+    out[f] = values[f] + sum over g != f with |s_g - c_f| < radius[f] and n_f . n_g >= cos_crease
+    of (1 - (d / radius[f])^2)^2 values[g]  (biweight kernel of the distance d = |s_g - c_f|
+    from the window's centre, face f's centroid c_f, to where face g's value sits, s_g: its
+    centroid for areas, the centre of its yarn pieces for yarn sums).
     Neighbours are found on a uniform grid of cell size max(radius) (sorted cell keys, binary
     search), so memory stays O(nf) however many neighbours a face has.
 
-    centroids, normals : (nf, 3) float64;  radius : (nf,) float64, m, > 0
+    centroids, sources, normals : (nf, 3) float64;  radius : (nf,) float64, m, > 0
     values : (nf, c) float64;  returns (nf, c) float64
     """
     nf = centroids.shape[0]
@@ -144,23 +154,26 @@ def pool_sums(centroids, normals, radius, values, cos_crease):
     lo = np.empty(3)
     dims = np.empty(3, dtype=np.int64)
     for a in range(3):
-        lo[a] = centroids[:, a].min()
-        dims[a] = int((centroids[:, a].max() - lo[a]) / cell) + 1
+        lo[a] = min(centroids[:, a].min(), sources[:, a].min())
+        dims[a] = int((max(centroids[:, a].max(), sources[:, a].max()) - lo[a]) / cell) + 1
     idx = np.empty((nf, 3), dtype=np.int64)
     keys = np.empty(nf, dtype=np.int64)
     for f in range(nf):
         for a in range(3):
-            idx[f, a] = int((centroids[f, a] - lo[a]) / cell)
+            idx[f, a] = int((sources[f, a] - lo[a]) / cell)
         keys[f] = idx[f, 0] + dims[0] * (idx[f, 1] + dims[1] * idx[f, 2])
     order = np.argsort(keys)
     sorted_keys = keys[order]
+    cidx = np.empty(3, dtype=np.int64)
     for f in range(nf):
         r = radius[f]
         r2 = r * r
         reach = int(np.ceil(r / cell))
-        for cz in range(max(0, idx[f, 2] - reach), min(dims[2], idx[f, 2] + reach + 1)):
-            for cy in range(max(0, idx[f, 1] - reach), min(dims[1], idx[f, 1] + reach + 1)):
-                for cx in range(max(0, idx[f, 0] - reach), min(dims[0], idx[f, 0] + reach + 1)):
+        for a in range(3):
+            cidx[a] = int((centroids[f, a] - lo[a]) / cell)
+        for cz in range(max(0, cidx[2] - reach), min(dims[2], cidx[2] + reach + 1)):
+            for cy in range(max(0, cidx[1] - reach), min(dims[1], cidx[1] + reach + 1)):
+                for cx in range(max(0, cidx[0] - reach), min(dims[0], cidx[0] + reach + 1)):
                     key = cx + dims[0] * (cy + dims[1] * cz)
                     start = np.searchsorted(sorted_keys, key)
                     q = start
@@ -170,9 +183,9 @@ def pool_sums(centroids, normals, radius, values, cos_crease):
                         if g == f:
                             weight = 1.0
                         else:
-                            ex = centroids[g, 0] - centroids[f, 0]
-                            ey = centroids[g, 1] - centroids[f, 1]
-                            ez = centroids[g, 2] - centroids[f, 2]
+                            ex = sources[g, 0] - centroids[f, 0]
+                            ey = sources[g, 1] - centroids[f, 1]
+                            ez = sources[g, 2] - centroids[f, 2]
                             d2 = ex * ex + ey * ey + ez * ez
                             if d2 >= r2:
                                 continue

@@ -42,3 +42,44 @@ def corner_normals(T, FN, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
                 out[f, k, 1] = FN[f, 1]
                 out[f, k, 2] = FN[f, 2]
     return out
+
+
+@njit(cache=True)
+def project_to_polyline(points, P, S, out_s, out_d):
+    """Closest point of the polyline P (n, 3) (arc lengths S (n,)) to each of points (m, 3).
+
+    For every point, every segment ``a + u (b - a)``, ``u = clip((p - a).(b - a) / |b - a|^2, 0, 1)``,
+    keeps the nearest (the first of equal ones). Writes the arc length of the closest point
+    into out_s (m,) and its distance into out_d (m,). Degenerate segments project to their start.
+    """
+    n = P.shape[0]
+    for i in range(points.shape[0]):
+        px = points[i, 0]
+        py = points[i, 1]
+        pz = points[i, 2]
+        best = np.inf
+        best_s = 0.0
+        for j in range(n - 1):
+            ax = P[j, 0]
+            ay = P[j, 1]
+            az = P[j, 2]
+            ex = P[j + 1, 0] - ax
+            ey = P[j + 1, 1] - ay
+            ez = P[j + 1, 2] - az
+            L2 = ex * ex + ey * ey + ez * ez
+            u = 0.0
+            if L2 > 0.0:
+                u = ((px - ax) * ex + (py - ay) * ey + (pz - az) * ez) / L2
+                if u < 0.0:
+                    u = 0.0
+                elif u > 1.0:
+                    u = 1.0
+            dx = ax + u * ex - px
+            dy = ay + u * ey - py
+            dz = az + u * ez - pz
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < best:
+                best = d2
+                best_s = S[j] + u * (S[j + 1] - S[j])
+        out_s[i] = best_s
+        out_d[i] = np.sqrt(best)

@@ -79,6 +79,9 @@ class Mandrel:
         dirs = np.zeros_like(d)
         dirs[ok] = d[ok] / length[ok, None]
         idx = np.nonzero(ok)[0]
+        scene = getattr(self.mesh.ray, "_scene", None)
+        if scene is not None and hasattr(scene, "scene"):
+            return self._first_hits_embree(scene, starts, dirs, length, idx, hit, point, face, dist)
         loc, ray, tri = self.mesh.ray.intersects_location(starts[idx], dirs[idx], multiple_hits=True)
         if len(ray) == 0:
             return hit, point, face, dist
@@ -95,6 +98,36 @@ class Mandrel:
         point[r] = loc[first]
         face[r] = tri[first]
         dist[r] = t[first]
+        return hit, point, face, dist
+
+    def _first_hits_embree(self, scene, starts, dirs, length, idx, hit, point, face, dist):
+        """intersect_segments with one embree query: rays from ``start + offset d`` limited to the
+        segment (tfar, a little past the end as float32 resolves 6e-8 of a distance; the end is
+        then enforced in float64), the hit point recomputed in float64 on the hit triangle's plane
+        (embree works in float32). The same hits as trimesh's multiple-hit query, which sends
+        every ray on through the mandrel and re-casts it after each hit."""
+        offset = tol.ray_offset * self.diagonal
+        live = idx[length[idx] > offset]
+        if len(live) == 0:
+            return hit, point, face, dist
+        origin = starts[live] + offset * dirs[live]
+        slack = 1e-6 * (length[live] + self.diagonal)
+        far = ((length[live] - offset + slack) * scene.scale).astype(np.float32)
+        prim = np.asarray(scene.run(origin, dirs[live], dists=far), dtype=np.int64)
+        got = prim >= 0
+        rays, tris = live[got], prim[got]
+        n = self.face_normals[tris]
+        a = self.vertices[self.faces[tris, 0]]
+        den = np.einsum("ij,ij->i", n, dirs[rays])
+        safe = np.abs(den) > 1e-300
+        t = np.where(safe, np.einsum("ij,ij->i", n, a - starts[rays]) / np.where(safe, den, 1.0), 0.0)
+        t = np.maximum(t, offset)                  # grazing hits: not before the ray's origin
+        inside = t <= length[rays]
+        rays, tris, t = rays[inside], tris[inside], t[inside]
+        hit[rays] = True
+        face[rays] = tris
+        dist[rays] = t
+        point[rays] = starts[rays] + t[:, None] * dirs[rays]
         return hit, point, face, dist
 
     def closest_points(self, points):

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import atomic_path
+
 VTU = "surface.vtu"
 XDMF = "surface.xdmf"
 H5 = "surface.h5"
@@ -81,13 +83,10 @@ def write_surface_pictures(fields, plots_dir) -> list[Path]:
     try:
         for file_name, array, title in PICTURES:
             path = plots_dir / file_name
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=plots_dir)
-            os.close(fd)
-            try:
+            # atomic_path leaves the temporary name free, so the renderer creates the file with
+            # the user's umask (mkstemp's own file is 0600, and writing into it kept that mode)
+            with atomic_path(path) as tmp:
                 _render(fields, array, title, tmp)
-                os.replace(tmp, path)
-            finally:
-                Path(tmp).unlink(missing_ok=True)
             written.append(path)
     except Exception as error:  # noqa: BLE001 - any VTK/GL failure: pictures are optional
         warnings.warn(f"surface pictures not written to {plots_dir}: off-screen rendering failed "
