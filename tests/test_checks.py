@@ -153,11 +153,17 @@ def test_warning_jamming():
 
 
 def test_jamming_estimate_against_the_closed_form():
-    # jamming angle acos(96 * 4e-3 / (4 pi 0.05)) = 52.3 deg; Ko angle atan(omega r / v):
-    # v = 0.0113 m/s gives 54.3 deg (jams), v = 0.0130 m/s gives 50.4 deg (does not)
-    jam = lambda v: [w for w in preflight(config(process={"take_up_speed": ((0.0, v),)}), *cylinder())
-                     if "jam" in w]
+    # yarns that cannot narrow (min_width = width): jamming angle acos(96 * 4e-3 / (4 pi 0.05))
+    # = 52.3 deg; Ko angle atan(omega r / v): v = 0.0113 m/s gives 54.3 deg (jams), v = 0.0130 m/s
+    # gives 50.4 deg (does not)
+    def jam(v, least=4e-3):
+        cfg = config(process={"take_up_speed": ((0.0, v),)}, yarn={"min_width": least})
+        return [w for w in preflight(cfg, *cylinder()) if "jam" in w]
+
     assert jam(0.0113) and not jam(0.0130)
+    # narrowing to the default least width, 2 mm: they jam only above acos(96 x 2e-3 / (4 pi 0.05))
+    # = 72.3 deg, so not at 54.3 deg
+    assert not jam(0.0113, least=2e-3)
 
 
 def test_warning_braid_angle_out_of_range():

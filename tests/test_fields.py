@@ -67,7 +67,8 @@ def helices(alpha, n_per_group, z0=0.0, z1=HEIGHT, dz=1e-3, r=R, phase=0.1):
 
 
 def make_result(mandrel, yarns, width=WIDTH, thickness=THICKNESS, edge=None):
-    config = NS(yarn=NS(width=width, thickness=thickness), output=NS(field_edge_length=edge))
+    config = NS(yarn=NS(width=width, thickness=thickness, least_width=0.5 * width),
+                output=NS(field_edge_length=edge))
     return NS(config=config, mandrel=mandrel, centerline=ZCenterline(), yarns=yarns)
 
 
@@ -166,24 +167,48 @@ def test_no_yarns_at_all_gives_zero_fields():
             assert not values.any(), name
 
 
-def test_jamming_caps_cover_factor_and_flags_faces():
-    alpha, n = np.radians(30.0), 24
-    available = 2 * np.pi * R * np.cos(alpha) / n  # paper §2.4.2, perpendicular yarn spacing
-    width = 1.5 * available
-    fields = map_to_surface(make_result(cylinder(), helices(alpha, n), width=width), edge_length=0.012)
-    inner, areas = side_faces(fields, margin=2 * fields.pool_radius_m)
-    cd = fields.cell_data
-    assert np.allclose(cd["cover_factor"][inner], 1.0, atol=1e-9)
-    assert np.allclose(cd["coverage_warp"][inner], 1.0, atol=1e-9)
-    assert np.allclose(cd["thickness_m"][inner], 2 * THICKNESS, atol=1e-12)  # width capped
-    assert fields.jammed[inner].all() and (cd["jammed"][inner] == 1).all()
-    assert cd["cover_factor"].max() <= 1.0
-    # just below the available width: nothing jammed, k just below 1
-    fields = map_to_surface(make_result(cylinder(), helices(alpha, n), width=0.9 * available),
-                            edge_length=0.012)
-    assert not fields.jammed.any()
+def test_yarns_narrow_to_the_available_width_and_jam_only_below_their_least_width():
+    """Issue 16: 144 yarns of 4 mm on the 150 mm cylinder at 60 deg (the paper's case A) narrow to
+    the available width 4 pi r cos(alpha) / N = 3.27 mm (paper §2.4.2) and get thicker by w / w'
+    (cross-section kept): full coverage, thickness 2 t w / w', not jammed; with a least width
+    above 3.27 mm they cannot, and the faces are flagged jammed."""
+    r, alpha, n = 0.075, np.radians(60.0), 72
+    narrowed = 4 * np.pi * r * np.cos(alpha) / (2 * n)
+    yarns = helices(alpha, n, r=r, dz=2e-3)
+    mandrel = cylinder(r=r, sections=96)
+
+    def fields_with(least):
+        result = make_result(mandrel, yarns)
+        result.config.yarn.least_width = least
+        return map_to_surface(result, edge_length=0.012)
+
+    fields = fields_with(0.5 * WIDTH)
     inner, _ = side_faces(fields, margin=2 * fields.pool_radius_m)
-    assert np.allclose(fields.cell_data["coverage_warp"][inner], 0.9, rtol=0.03)  # as above
+    cd = fields.cell_data
+    # 3 %: pooling over ~4 discrete yarns per window, as for the coverage above
+    assert np.allclose(cd["yarn_width_warp_m"][inner], narrowed, rtol=0.03)
+    assert np.allclose(cd["cover_factor"][inner], 1.0, atol=1e-9)
+    assert np.allclose(cd["thickness_m"][inner], 2 * THICKNESS * WIDTH / narrowed, rtol=0.03)
+    assert not fields.jammed[inner].any()
+    assert cd["cover_factor"].max() <= 1.0
+    jammed = fields_with(3.5e-3)
+    assert jammed.jammed[inner].all() and (jammed.cell_data["jammed"][inner] == 1).all()
+    np.testing.assert_allclose(jammed.cell_data["thickness_m"], cd["thickness_m"])   # same yarn volume
+
+
+def test_the_jamming_warning_fires_only_below_the_least_width():
+    from preform.checks import _braid_angle_warnings
+
+    def config(least):
+        return NS(machine=NS(carriers=144, angular_speed=np.radians(13.232)),
+                  yarn=NS(width=4e-3, least_width=least), process=NS(take_up_speed=((0.0, 0.01),)))
+
+    s, distance = np.linspace(0.0, 1.0, 200), np.full(200, 0.075)
+    # Ko's 60 deg; yarns of 2 mm least width jam above acos(144 x 2e-3 / (4 pi 0.075)) = 72.2 deg
+    assert not any("jam" in w for w in _braid_angle_warnings(config(2e-3), s, distance))
+    # of 3.5 mm: above 57.7 deg, so at Ko's 60 deg they jam
+    assert any("will likely jam" in w and "least width" in w
+               for w in _braid_angle_warnings(config(3.5e-3), s, distance))
 
 
 def test_fields_do_not_depend_on_the_field_edge_length():

@@ -152,13 +152,16 @@ def _braid_angle_warnings(config, s, distance) -> list[str]:
     v = np.interp(centre, table[:, 0], table[:, 1])  # braided length ~ arc length from the tip
     ma, y = config.machine, config.yarn
     alpha = np.degrees(analytic.ko_braid_angle(ma.angular_speed, r, v))
-    jam = np.degrees(analytic.jamming_angle(ma.carriers, y.width, r))
+    # the yarns narrow to the available width (paper §2.4.2): they jam only where even their
+    # least width does not fit
+    jam = np.degrees(analytic.jamming_angle(ma.carriers, y.least_width, r))
     lo, hi = BRAID_ANGLE_RANGE_DEG
     warnings = []
     if np.any(alpha > jam):
         k = int(np.argmax(alpha - jam))
         warnings.append(f"the yarns will likely jam: Ko's braid angle estimate {alpha[k]:.1f} deg exceeds "
-                        f"the jamming angle {jam[k]:.1f} deg at {centre[k]:.3g} m from the tip "
+                        f"the jamming angle {jam[k]:.1f} deg of yarns narrowed to their least width "
+                        f"({y.least_width:g} m, [yarn] min_width) at {centre[k]:.3g} m from the tip "
                         "(check [machine] angular_speed, [process] take_up_speed, [yarn] width)")
     if alpha.min() < lo or alpha.max() > hi:
         warnings.append(f"Ko's braid angle estimate spans {alpha.min():.1f}-{alpha.max():.1f} deg, outside "

@@ -379,11 +379,15 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
       pooling, so pooling round a curved surface does not tilt the mean direction;
     - ``braid_angle_{group}_deg``: angle between that direction and the surface projection of
       the centerline tangent at the face centroid, 0..90 deg;
-    - ``coverage_{group}`` = min(1, L w_eff / A), ``w_eff = min(w, p)``: the yarn width limited
-      to the available width ``p = A / L``, the perpendicular spacing of neighbouring yarns of
-      the group (paper §2.4.2; on a cylinder ``p = 2 pi r cos(alpha) / n``). Where ``w > p`` the
-      face is ``jammed``;
-    - ``cover_factor`` = 1 - (1 - k_warp)(1 - k_weft); ``thickness_m`` = t_n (k_warp + k_weft);
+    - ``yarn_width_{group}_m`` = ``w_eff = max(min(w, p), w_min)``: the yarn width narrowed to
+      the available width ``p = A / L``, the perpendicular spacing of neighbouring yarns of the
+      group (paper §2.4.2; on a cylinder ``p = 2 pi r cos(alpha) / n``), but not below the least
+      width ``w_min`` (``[yarn] min_width``); where ``p < w_min`` the yarns cannot lie side by side
+      and the face is ``jammed``;
+    - ``coverage_{group}`` = min(1, L w_eff / A);
+    - ``cover_factor`` = 1 - (1 - k_warp)(1 - k_weft); ``thickness_m`` = t_n w (L_warp + L_weft)
+      / A, the yarns' volume per area: a narrowed yarn keeps its cross-section ``w t_n`` and gets
+      thicker, ``t_n w / w_eff`` (where the yarns leave gaps this is ``t_n (k_warp + k_weft)``);
     - ``braid_angle_deg``: mean of the braid angles of the groups present;
     - ``reached_warp``, ``reached_weft``, ``jammed``: 0/1 (uint8); ``source_face`` (int64): the
       input STL face each field face lies in.
@@ -431,7 +435,8 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
             L[:, g], M[:, g] = s[:, 0], s[:, 1:]
     else:
         A, L, M = areas, length, planar
-    data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width)
+    data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width,
+                         float(result.config.yarn.least_width))
     for name in GROUPS:  # directions shown in the facet's plane (the angle is the smooth frame's)
         d = data[f"{name}_direction"]
         d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
@@ -446,7 +451,10 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
         data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
         n_present, out=np.zeros(len(F)), where=n_present > 0)
     data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft)
-    data["thickness_m"] = thickness * (k_warp + k_weft)
+    # a narrowed yarn keeps its cross-section w t, so it gets thicker: the thickness is the yarn
+    # volume per area, t w L / A per group (= t k where the yarns leave gaps, t k w / w_eff where
+    # they narrowed side by side)
+    data["thickness_m"] = thickness * width * np.divide(L[:, 0] + L[:, 1], A, out=np.zeros(len(F)), where=A > 0)
     data["jammed"] = jammed.astype(np.uint8)
     for g, name in enumerate(GROUPS):
         data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
@@ -458,18 +466,21 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
                          unmapped_length_m=unmapped, edge_length_m=h, pool_radius_m=rho)
 
 
-def _group_fields(A, L, M, e1, e2, has_tangent, width):
-    """Direction, braid angle, coverage, reached and jammed of each group from pooled sums.
+def _group_fields(A, L, M, e1, e2, has_tangent, width, least_width=0.0):
+    """Direction, braid angle, coverage, width, reached and jammed of each group from pooled sums.
 
     A : (nf,) m^2;  L : (nf, 2) m;  M : (nf, 2, 3) m, planar moments (aa, ab, bb) in (e1, e2);
-    e1, e2 : (nf, 3) face frames;  has_tangent : (nf,) bool, e1 is the centerline direction
+    e1, e2 : (nf, 3) face frames;  has_tangent : (nf,) bool, e1 is the centerline direction;
+    width, least_width : m, the yarn's width and the least it narrows to
     """
     data = {}
     for g, name in enumerate(GROUPS):
         hit = L[:, g] > 0
         spacing = np.divide(A, L[:, g], out=np.full_like(A, np.inf), where=hit)
-        w_eff = np.minimum(width, spacing)  # paper §2.4.2: width limited to the available width
+        # paper §2.4.2: the width narrows to the available width, down to the least width
+        w_eff = np.maximum(np.minimum(width, spacing), least_width)
         k = np.minimum(1.0, np.divide(L[:, g] * w_eff, A, out=np.zeros_like(A), where=A > 0))
+        data[f"yarn_width_{name}_m"] = np.where(hit, w_eff, 0.0)
         a, b = principal_direction_2d(M[:, g, 0], M[:, g, 1], M[:, g, 2])
         d = (a[:, None] * e1 + b[:, None] * e2) * hit[:, None]
         angle = np.degrees(np.arctan2(np.abs(b), a))
@@ -477,7 +488,8 @@ def _group_fields(A, L, M, e1, e2, has_tangent, width):
         data[f"coverage_{name}"] = k
         data[f"{name}_direction"] = d
         data[f"reached_{name}"] = hit.astype(np.uint8)
-        data[f"_jammed_{name}"] = hit & (width > spacing * (1.0 + JAM_RTOL))
+        # jammed: the yarns would have to narrow below their least width to lie side by side
+        data[f"_jammed_{name}"] = hit & (least_width > spacing * (1.0 + JAM_RTOL))
     return data
 
 
