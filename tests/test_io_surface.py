@@ -84,7 +84,7 @@ def test_pictures_show_the_mandrel(written):
     from PIL import Image
 
     _, out, paths, _ = written
-    for file_name, _, _ in PICTURES:
+    for file_name, *_ in PICTURES:
         path = out / "plots" / file_name
         assert path in paths and path.exists()
         image = np.asarray(Image.open(path).convert("RGB")).astype(int)
@@ -95,6 +95,9 @@ def test_pictures_show_the_mandrel(written):
         # colours, not only grey: the braided part is coloured by the field
         rgb_spread = image.max(axis=2) - image.min(axis=2)
         assert (rgb_spread > 60).mean() > 0.02, file_name
+        # two views: the top half and the bottom half each show the mandrel
+        half = WINDOW_SIZE[1] // 2
+        assert drawn[:half].mean() > 0.02 and drawn[half:].mean() > 0.02, file_name
 
 
 def test_rendering_failure_warns_and_writes_data(monkeypatch, tmp_path):

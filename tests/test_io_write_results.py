@@ -46,8 +46,9 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
 
     calls = []
 
-    def write_surface(fields, out_dir):
+    def write_surface(fields, out_dir, title=""):
         calls.append((fields, out_dir))
+        assert "kinematic model" in title
         path = out_dir / "surface.vtu"
         path.write_text("stub")
         return [path]

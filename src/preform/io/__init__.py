@@ -20,7 +20,7 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def _write_surface(fields, out_dir) -> list[Path]:
+def _write_surface(fields, out_dir, title="") -> list[Path]:
     """``preform.io.surface.write_surface`` when that module exists (surface.vtu/.xdmf/.h5, PNGs)."""
     try:
         from .surface import write_surface
@@ -29,7 +29,7 @@ def _write_surface(fields, out_dir) -> list[Path]:
             raise
         return []
 
-    written = write_surface(fields, out_dir)
+    written = write_surface(fields, out_dir, title)
     return [Path(p) for p in (written or [])]
 
 
@@ -54,7 +54,9 @@ def write_results(result, fields, out_dir) -> list[Path]:
                write_yarns_vtp(result.yarns, out_dir / YARNS),
                *write_convergence(result.snapshots, out_dir)]
     if fields is not None:
-        written += _write_surface(fields, out_dir)
+        from .plots import run_label
+
+        written += _write_surface(fields, out_dir, run_label(result))
         if result.centerline is not None:
             from .maps import MAP, write_surface_map
             from .plots import run_title

@@ -33,13 +33,18 @@ def _column(result, name):
     return np.asarray(result.history[name], dtype=np.float64)
 
 
-def run_title(result, what: str) -> str:
-    """``what`` with the case, the model and the run's status (an unfinished run says so)."""
+def run_label(result) -> str:
+    """``case · model · status`` of a run (an unfinished run says so)."""
     config = result.config
     case = Path(config.source).stem if config is not None and config.source else "run"
     model = config.model.kind if config is not None else "?"
     status = result.status if result.status == "done" else f"{result.status.upper()}: partial results"
-    return f"{what}\n{case} · {model} model · {status}"
+    return f"{case} · {model} model · {status}"
+
+
+def run_title(result, what: str) -> str:
+    """``what`` over the run's label (:func:`run_label`)."""
+    return f"{what}\n{run_label(result)}"
 
 
 #: the start-up rows left out of the axis range: while the yarns wind from their tie points to

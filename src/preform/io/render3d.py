@@ -126,3 +126,14 @@ def render_braided_mandrel(result, path, title: str) -> None:
         plotter.screenshot(str(path))
     finally:
         plotter.close()
+
+
+def frame_parallel(plotter, points, centre, view, up, aspect, margin=1.08):
+    """Parallel projection along ``-view`` (unit) with ``up``, fitting ``points`` in a viewport of
+    width / height ``aspect``."""
+    right = np.cross(view, up)
+    rel = points - centre
+    half_w = float(np.max(np.abs(rel @ right)))
+    half_h = float(np.max(np.abs(rel @ up)))
+    _camera(plotter, centre, view, up, half_w, half_h, aspect)
+    plotter.camera.parallel_scale = margin * max(half_h, half_w / aspect)

@@ -26,12 +26,13 @@ VTU = "surface.vtu"
 XDMF = "surface.xdmf"
 H5 = "surface.h5"
 PLOTS = "plots"
-#: picture size, pixels (width, height)
-WINDOW_SIZE = (1200, 800)
-#: (file name, cell array, scalar-bar title with units)
+#: picture size, pixels (width, height): two views stacked, each wide like a long part
+WINDOW_SIZE = (1400, 1000)
+#: (file name, cell array, scalar-bar title with units, scale to the shown unit)
 PICTURES = (
-    ("surface_braid_angle.png", "braid_angle_deg", "braid angle (deg)"),
-    ("surface_cover_factor.png", "cover_factor", "cover factor (-)"),
+    ("surface_braid_angle.png", "braid_angle_deg", "braid angle (deg)", 1.0),
+    ("surface_cover_factor.png", "cover_factor", "cover factor (-)", 1.0),
+    ("surface_thickness.png", "thickness_m", "thickness (mm)", 1e3),
 )
 BACKGROUND = "white"
 UNREACHED_COLOR = "lightgray"
@@ -46,7 +47,7 @@ def surface_mesh(fields):
                        [("triangle", np.asarray(fields.faces, dtype=np.int64))], cell_data=cell_data)
 
 
-def write_surface(fields, out_dir) -> list[Path]:
+def write_surface(fields, out_dir, title: str = "") -> list[Path]:
     """Write ``surface.vtu``, ``surface.xdmf`` + ``surface.h5`` and the pictures into ``out_dir``.
 
     fields : preform.fields.SurfaceFields
@@ -68,25 +69,27 @@ def write_surface(fields, out_dir) -> list[Path]:
             written.append(out_dir / name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return written + write_surface_pictures(fields, out_dir / PLOTS)
+    return written + write_surface_pictures(fields, out_dir / PLOTS, title)
 
 
-def write_surface_pictures(fields, plots_dir) -> list[Path]:
-    """Off-screen renders of the braid angle and the cover factor on the mandrel.
+def write_surface_pictures(fields, plots_dir, title: str = "") -> list[Path]:
+    """Off-screen renders of the braid angle, the cover factor and the thickness on the mandrel.
 
-    Faces no yarn reached are drawn grey. Returns the PNG paths written; on a rendering failure
-    returns [] and warns.
+    Each picture shows the braided part from two opposite sides (all four sides of a square
+    section), titled with ``title`` (case, model, status); faces no yarn reached are drawn grey
+    and the colour range is that of the braided faces only. Returns the PNG paths written; on a
+    rendering failure returns [] and warns.
     """
     plots_dir = Path(plots_dir)
     plots_dir.mkdir(parents=True, exist_ok=True)
     written = []
     try:
-        for file_name, array, title in PICTURES:
+        for file_name, array, label, scale in PICTURES:
             path = plots_dir / file_name
             # atomic_path leaves the temporary name free, so the renderer creates the file with
             # the user's umask (mkstemp's own file is 0600, and writing into it kept that mode)
             with atomic_path(path) as tmp:
-                _render(fields, array, title, tmp)
+                _render(fields, array, label, tmp, title, scale)
             written.append(path)
     except Exception as error:  # noqa: BLE001 - any VTK/GL failure: pictures are optional
         warnings.warn(f"surface pictures not written to {plots_dir}: off-screen rendering failed "
@@ -94,50 +97,53 @@ def write_surface_pictures(fields, plots_dir) -> list[Path]:
     return written
 
 
-def _render(fields, array, title, path):
-    """One picture: reached faces coloured by ``array``, the rest grey, whole mandrel in view.
+def _render(fields, array, label, path, title="", scale=1.0):
+    """One picture: reached faces coloured by ``array`` (times ``scale``), the rest grey, the
+    braided part from the front (top) and the back (bottom).
 
     Grey: no yarn reached the face (or, for the braid angle, the angle is undefined there).
     """
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
 
+    from .render3d import frame_parallel, view_axes
+
     faces = np.asarray(fields.faces, dtype=np.int64)
+    vertices = np.asarray(fields.vertices, dtype=np.float64)
     cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
-    surface = pv.PolyData(np.asarray(fields.vertices, dtype=np.float64), cells)
-    values = np.asarray(fields.cell_data[array], dtype=np.float64)
+    surface = pv.PolyData(vertices, cells)
+    values = np.asarray(fields.cell_data[array], dtype=np.float64) * scale
     reached = (fields.cell_data["reached_warp"] > 0) | (fields.cell_data["reached_weft"] > 0)
     if array == "braid_angle_deg":  # 0 there means "undefined" (end caps): grey, not a colour
         reached &= values > 0
-    surface.cell_data[title] = values
-    plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE)
+    surface.cell_data[label] = values
+    focus = vertices[np.unique(faces[reached])] if reached.any() else vertices
+    centre, _, across, third = view_axes(focus)
+    w, h = WINDOW_SIZE
+    plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 1), border=False)
     try:
-        plotter.set_background(BACKGROUND)
-        if (~reached).any():
-            plotter.add_mesh(surface.extract_cells(np.flatnonzero(~reached)), color=UNREACHED_COLOR)
-        if reached.any():
-            lo, hi = float(values[reached].min()), float(values[reached].max())
-            if hi - lo < 1e-9 * max(1.0, abs(hi)):
-                lo, hi = lo - 0.5 * max(1e-3, abs(lo) * 1e-2), hi + 0.5 * max(1e-3, abs(hi) * 1e-2)
-            plotter.add_mesh(surface.extract_cells(np.flatnonzero(reached)), scalars=title,
-                             cmap="viridis", clim=(lo, hi),
-                             scalar_bar_args=dict(title=title, color="black", vertical=True,
-                                                  position_x=0.85, position_y=0.1))
-        _frame(plotter, np.asarray(fields.vertices))
+        for row, sign in enumerate((1.0, -1.0)):
+            plotter.subplot(row, 0)
+            plotter.set_background(BACKGROUND)
+            if (~reached).any():
+                plotter.add_mesh(surface.extract_cells(np.flatnonzero(~reached)), color=UNREACHED_COLOR,
+                                 ambient=0.5, diffuse=0.5)
+            if reached.any():
+                lo, hi = float(values[reached].min()), float(values[reached].max())
+                if hi - lo < 1e-9 * max(1.0, abs(hi)):
+                    lo, hi = lo - 0.5 * max(1e-3, abs(lo) * 1e-2), hi + 0.5 * max(1e-3, abs(hi) * 1e-2)
+                plotter.add_mesh(surface.extract_cells(np.flatnonzero(reached)), scalars=label,
+                                 cmap="viridis", clim=(lo, hi), show_scalar_bar=row == 1,
+                                 ambient=0.5, diffuse=0.5,   # colours readable on shaded faces
+                                 scalar_bar_args=dict(title=label, color="black", vertical=False,
+                                                      position_x=0.3, position_y=0.02, width=0.4,
+                                                      height=0.1, title_font_size=18,
+                                                      label_font_size=14))
+            side = "front" if sign > 0 else "back; grey: no yarn"
+            text = f"{title}: {label} ({side})" if row == 0 and title else side if row else label
+            plotter.add_text(text, font_size=11, color="black", position="upper_left")
+            frame_parallel(plotter, focus, centre, sign * (across + third) / np.sqrt(2.0),
+                           (third - across) / np.sqrt(2.0), w / (h / 2))
         plotter.screenshot(str(path))
     finally:
         plotter.close()
-
-
-def _frame(plotter, vertices):
-    """Look at the mandrel across its longest extent, slightly from above, all of it in view."""
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    centre, extent = 0.5 * (lo + hi), hi - lo
-    long_axis = int(np.argmax(extent))
-    side = np.eye(3)[(long_axis + 1) % 3]
-    up = np.eye(3)[(long_axis + 2) % 3]
-    view = side + 0.35 * up + 0.25 * np.eye(3)[long_axis]
-    plotter.camera_position = [tuple(centre + view * 2.0 * float(np.linalg.norm(extent))),
-                               tuple(centre), tuple(up)]
-    plotter.reset_camera()
-    plotter.camera.zoom(1.1)
