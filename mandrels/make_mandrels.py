@@ -4,7 +4,8 @@ Run from anywhere: ``python mandrels/make_mandrels.py``. Every mandrel has its t
 and runs along +z (the bent tube turns towards +x).
 
 - case_a: the reference paper's case A cylinder, diameter 150 mm (Ko's formula with the steady
-  60 deg angle: r = v tan(60) / omega = 0.01 * 1.732 / 0.2309 = 75 mm), 2 m long.
+  60 deg angle: r = v tan(60) / omega = 0.01 * 1.732 / 0.2309 = 75 mm), 3 m long: long enough
+  for examples/case_a.toml to braid to steady state (1.6 m braided, 0.8 m convergence zone).
 - case_b: rounded square (90 mm, corner radius 15 mm) blending into a circle of the same
   perimeter between 0.9 and 1.1 m, 1.5 m long (like the paper's Fig. 11).
 - bent_tube: rounded square 60 mm, 0.4 m straight, a 90 deg bend of radius 0.35 m, 0.4 m straight.
@@ -33,7 +34,7 @@ def straight(length):
 
 
 MANDRELS = {
-    "case_a": (lambda: shapes.cylinder(0.075, 2.0, n_around=128), straight(2.0)),
+    "case_a": (lambda: shapes.cylinder(0.075, 3.0, n_around=128), straight(3.0)),
     "case_b": (lambda: shapes.case_b(n_around=128, spacing=0.01), straight(1.5)),
     "bent_tube": (lambda: shapes.bent_tube(n_around=96, spacing=0.008), shapes.bent_tube_path()),
     "cone": (lambda: shapes.cone(0.04, 0.08, 1.0, n_around=128, n_along=100), straight(1.0)),

@@ -26,8 +26,8 @@ def _with(config, section, **values):
 
 
 def test_braiding_time_of_a_constant_speed_and_of_a_table(case_a):
-    assert braiding_time(case_a) == pytest.approx(1.0 / 0.01)
-    table = _with(case_a, "process", take_up_speed=((0.0, 0.01), (1.0, 0.02)))
+    assert braiding_time(case_a) == pytest.approx(case_a.process.braid_length / 0.01)
+    table = _with(case_a, "process", take_up_speed=((0.0, 0.01), (1.0, 0.02)), braid_length=1.0)
     # closed form of int_0^1 dL / (0.01 + 0.01 L) = 100 ln 2; trapezoids on 2000 intervals: 1e-6
     assert braiding_time(table) == pytest.approx(100.0 * math.log(2.0), rel=1e-6)
 
@@ -37,7 +37,7 @@ def test_estimate_counts_faces_from_area_and_edge(case_a):
     area = 2 * math.pi * RADIUS * 2.0
     est = estimate_work(cfg, area, time_step=0.05)
     assert est.field_faces == int(area / (math.sqrt(3) / 4 * 4e-6))
-    assert est.steps == int(100.0 / 0.05)
+    assert est.steps == int(case_a.process.braid_length / 0.01 / 0.05)
     check_work(cfg, est, RADIUS)   # a normal case passes
 
 

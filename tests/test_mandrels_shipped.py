@@ -70,7 +70,7 @@ def test_shipped_mandrel_loads_closed_with_its_centerline(loaded, name):
 
 
 @pytest.mark.parametrize("name, r_min, r_max, length", [
-    ("case_a", 0.075, 0.075, 2.0),            # Ko: r = v tan 60 / omega = 75 mm
+    ("case_a", 0.075, 0.075, 3.0),            # Ko: r = v tan 60 / omega = 75 mm
     ("cone", 0.04, 0.08, 1.0),
     ("waist", 0.045, 0.075, 1.2),
     ("bulge", 0.05, 0.09, 1.2),

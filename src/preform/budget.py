@@ -61,8 +61,10 @@ def braiding_time(config) -> float:
 
 def estimate_work(config, mandrel_area: float, time_step: float) -> WorkEstimate:
     """The work of ``config`` on a mandrel of ``mandrel_area`` (m^2) with ``time_step`` (s)."""
+    from .fields import DEFAULT_EDGE_WIDTHS
+
     edge = config.output.field_edge_length if config.output is not None else None
-    edge = edge or 0.5 * config.yarn.width
+    edge = edge or DEFAULT_EDGE_WIDTHS * config.yarn.width
     faces = mandrel_area / (math.sqrt(3.0) / 4.0 * edge * edge)
     steps = braiding_time(config) / time_step
     points = config.machine.carriers * min(steps, 1e12)
