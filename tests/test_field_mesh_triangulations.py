@@ -17,7 +17,7 @@ from preform.fields import face_geometry, fields_on_input, map_to_surface
 from preform.geometry import shapes
 from preform.geometry.remesh import feature_edges
 from preform.result import YarnPaths
-from test_fields import THICKNESS, WIDTH, ZCenterline, make_result
+from test_helpers_fields import THICKNESS, WIDTH, ZCenterline, make_result
 
 LENGTH = 0.2
 H = 0.012                     # field edge length, m (3 yarn widths, the default)

@@ -7,7 +7,7 @@ import pytest
 
 from preform import fields as F
 from preform._kernels import fields as K
-from test_fields import cylinder, helices
+from test_helpers_fields import cylinder, helices
 
 
 def naive_face_lengths(points, offsets, group, vertices, faces, pieces=400):

@@ -100,6 +100,19 @@ def estimate(config, mandrel, centerline, *, force=False):
     return work
 
 
+def with_rtm_fields(result, fields):
+    """``fields`` with the RTM arrays (``preform.rtm``) when the config has tow material data."""
+    from .rtm import missing_material, rtm_fields
+
+    if fields is None or missing_material(result.config):
+        return fields
+    V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
+    s, _ = result.centerline.project(V[F].mean(axis=1))
+    tangents = result.centerline.frames_at(s)[1]
+    fields.cell_data.update(rtm_fields(fields, result.config, tangents))
+    return fields
+
+
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
@@ -123,6 +136,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
                           checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
         fields = map_to_surface(result) if len(result.yarns.points) else None
+        fields = with_rtm_fields(result, fields)
         try:
             written = write_results(result, fields, out_dir)
         except OSError as err:

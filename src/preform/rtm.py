@@ -154,3 +154,100 @@ def bin_cells(values, n_sets=4):
                     for k in range(len(used))])
     error = float(np.max(np.abs(values / rep[index] - 1.0)))
     return index.astype(np.int64), rep, error
+
+
+# ------------------------------------------------------------------------------ per face
+
+#: where no yarn lies (or its fibres pack beyond the model's range) the face is no preform:
+#: porosity 1 and zero permeability, flagged by ``rtm_valid`` = 0 for the solver's set-up
+RTM_ARRAYS = ("areal_weight_kg_m2", "fibre_volume_fraction", "porosity", "permeability_m2",
+              "permeability_k1_m2", "permeability_k2_m2", "permeability_k3_m2",
+              "permeability_direction", "rtm_valid")
+
+
+def missing_material(config) -> str:
+    """Why the RTM fields cannot be made for ``config`` ("" if they can)."""
+    if not config.yarn.has_material:
+        return ("no tow material data: give [yarn] linear_density_tex, fibre_density and fibre_radius "
+                "for fibre volume fraction and permeability")
+    return ""
+
+
+def _principal_values(config, vf, angle_deg):
+    """(K_par, K_perp) of the fibres, or (K1, K2) of the braid for a table model."""
+    model = config.rtm
+    if model.permeability == "gebart":
+        return gebart(vf, config.yarn.fibre_radius, model.packing)
+    if model.permeability == "kozeny_carman":
+        return kozeny_carman(vf, model.k_ref, model.vf_ref)
+    table = read_permeability_table(model.table)
+    return table(angle_deg, vf)
+
+
+def read_permeability_table(path) -> PermeabilityTable:
+    """A CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 rows on a full grid."""
+    from .errors import ConfigError
+
+    try:
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"[rtm] table = {path}: cannot be read as braid_angle_deg, "
+                          f"fibre_volume_fraction, k1_m2, k2_m2 rows ({err})") from None
+    angles, vfs = np.unique(data[:, 0]), np.unique(data[:, 1])
+    if len(data) != len(angles) * len(vfs) or len(angles) < 2 or len(vfs) < 2:
+        raise ConfigError(f"[rtm] table = {path}: expected a full grid of at least 2 braid angles x 2 "
+                          f"fibre volume fractions, found {len(data)} rows for {len(angles)} x {len(vfs)}")
+    order = np.lexsort((data[:, 1], data[:, 0]))
+    grid = data[order].reshape(len(angles), len(vfs), 4)
+    return PermeabilityTable(angles_deg=angles, vf=vfs, k1=grid[..., 2], k2=grid[..., 3])
+
+
+def rtm_fields(fields, config, tangents) -> dict:
+    """The RTM cell arrays of :data:`RTM_ARRAYS` on the field mesh (see module docstring).
+
+    fields : preform.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
+    tangents : (nf, 3), the centerline tangent at each face (fixes the in-plane reference)
+    """
+    cd = fields.cell_data
+    V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    normals = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
+    per_area = np.column_stack([cd["yarn_length_warp_m_per_m2"], cd["yarn_length_weft_m_per_m2"]])
+    total = per_area.sum(axis=1)
+    aw = areal_weight(total, config.yarn.linear_density_tex)
+    thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
+        np.full(len(F), config.rtm.cavity_thickness)
+    vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
+    valid = (total > 0) & (vf > 0) & (vf < 1)
+    angle = cd["braid_angle_deg"]
+    k1 = np.zeros(len(F))
+    k2 = np.zeros(len(F))
+    k3 = np.zeros(len(F))
+    K = np.zeros((len(F), 3, 3))
+    direction = np.zeros((len(F), 3))
+    if np.any(valid):
+        shares = per_area[valid] / total[valid, None]
+        d = np.stack([cd["warp_direction"][valid], cd["weft_direction"][valid]], axis=1)
+        a, b = _principal_values(config, vf[valid], angle[valid])
+        if config.rtm.permeability == "table":
+            # the braid's own principal values: K1 along the axis below 45 deg, around it above
+            n = normals[valid]
+            t = tangents[valid] - np.einsum("ij,ij->i", tangents[valid], n)[:, None] * n
+            t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
+            hoop = np.cross(n, t)
+            first = np.where((angle[valid] < 45.0)[:, None], t, hoop)
+            second = np.cross(n, first)
+            Kv = (a[:, None, None] * first[:, :, None] * first[:, None, :]
+                  + b[:, None, None] * second[:, :, None] * second[:, None, :]
+                  + np.minimum(a, b)[:, None, None] * n[:, :, None] * n[:, None, :])
+        else:
+            Kv = tensor_from_yarns(a, b, b, d, shares, normals[valid])
+        K[valid] = Kv
+        p1, p2, dirv = principal_in_plane(Kv, normals[valid], tangents[valid])
+        k1[valid], k2[valid], direction[valid] = p1, p2, dirv
+        k3[valid] = np.einsum("fi,fij,fj->f", normals[valid], Kv, normals[valid])
+    ok = valid & (k2 > 0)
+    return {"areal_weight_kg_m2": aw, "fibre_volume_fraction": np.where(valid, vf, 0.0),
+            "porosity": np.where(valid, 1.0 - vf, 1.0), "permeability_m2": K.reshape(len(F), 9),
+            "permeability_k1_m2": k1, "permeability_k2_m2": k2, "permeability_k3_m2": k3,
+            "permeability_direction": direction, "rtm_valid": ok.astype(np.uint8)}

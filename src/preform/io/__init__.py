@@ -63,12 +63,29 @@ def write_results(result, fields, out_dir) -> list[Path]:
 
             written.append(write_surface_map(fields, result.centerline, out_dir / PLOTS / MAP,
                                              run_title(result, "Surface fields, unrolled")))
+    rtm = _write_rtm(result, fields, out_dir, written)
     if result.steps:
         written += plot_history(result, out_dir / PLOTS)
     written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
     files = [_relative(p, out_dir) for p in [*written, summary]]
-    written.append(write_summary(result, summary, extra={"files": files}))
+    written.append(write_summary(result, summary, extra={"files": files, "rtm": rtm}))
     return written
+
+
+def _write_rtm(result, fields, out_dir, written) -> dict:
+    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says."""
+    from ..rtm import missing_material
+
+    reason = missing_material(result.config) if result.config is not None else "no config"
+    if reason:
+        return {"written": False, "reason": reason}
+    if fields is None or "fibre_volume_fraction" not in fields.cell_data:
+        return {"written": False, "reason": "no surface fields"}
+    from .rtm_files import write_rtm
+
+    paths, said = write_rtm(fields, out_dir)
+    written += paths
+    return said
 
 
 __all__ = [

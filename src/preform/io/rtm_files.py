@@ -90,3 +90,52 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
         rows.append(",".join([str(k), *(repr(float(v)) for v in (t, phi, k1, a, *d))]))
     sets = atomic_write_text(path.with_name("rtmsim_sets.csv"), "\n".join(rows) + "\n")
     return [path, sets]
+
+
+RTM_DIR = "rtm"
+
+
+def write_rtm(fields, out_dir, n_sets=4) -> tuple[list[Path], dict]:
+    """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
+
+    Cells with no preform (``rtm_valid`` 0: no yarn) get porosity 1; for RTMsim's few property
+    sets they form a set of their own (the largest K1 of the preform, an open channel), and the
+    preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is preform).
+    """
+    from ..rtm import bin_cells
+    from .atomic import safe_folder
+
+    folder = safe_folder(out_dir, RTM_DIR)
+    cd = fields.cell_data
+    valid = cd["rtm_valid"] > 0
+    if not np.any(valid):
+        return [], {"written": False, "reason": "no face carries preform (no yarn reached the mandrel)"}
+    thickness = np.where(valid, cd["thickness_m"], 0.0)
+    k1 = cd["permeability_k1_m2"]
+    alpha = np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0)
+    direction = cd["permeability_direction"]
+    written = [write_lcmsim_h5(folder / "lcmsim.h5", fields.vertices, fields.faces, thickness,
+                               cd["porosity"], k1, alpha, direction)]
+    sets = n_sets - 1 if np.any(~valid) else n_sets
+    index_valid, rep, error = bin_cells(k1[valid], sets)
+    index = np.full(len(k1), len(rep), dtype=np.int64)
+    index[valid] = index_valid
+    values = []
+    for k in range(len(rep)):
+        members = index == k
+        values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
+                       float(rep[k]), float(np.mean(alpha[members])),
+                       _mean_direction(direction[members])))
+    if np.any(~valid):
+        values.append((0.0, 1.0, float(np.max(k1[valid])), 1.0, (1.0, 0.0, 0.0)))
+    written += write_rtmsim_bdf(folder / "rtmsim.bdf", fields.vertices, fields.faces, index, values)
+    return written, {"written": True, "sets": len(values), "binning_error_k1": error,
+                     "preform_faces": int(np.count_nonzero(valid)), "faces": int(len(k1))}
+
+
+def _mean_direction(d):
+    """A sign-free mean of unit directions (principal axis of sum d d^T)."""
+    if len(d) == 0:
+        return (1.0, 0.0, 0.0)
+    w, v = np.linalg.eigh(d.T @ d)
+    return tuple(float(x) for x in v[:, -1])
