@@ -202,3 +202,12 @@ def test_bounds_on_work_are_said_by_check(tmp_path, capsys, extra, carriers, wor
         assert code == 0 and "estimated work:" in err and "Ko's braid angle" in err
     else:
         assert code == 2 and words in err, err
+
+
+def test_the_summary_wall_time_is_the_commands_with_its_stages(reference):
+    _, out, _ = reference
+    summary = json.loads((out / "summary.json").read_text())
+    stages = summary["stages_s"]
+    assert set(stages) == {"load_and_check", "simulate", "map", "write"}
+    assert summary["wall_time_s"] == pytest.approx(sum(stages.values()))
+    assert summary["wall_time_s"] > summary["simulation_wall_time_s"]

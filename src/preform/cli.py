@@ -34,10 +34,20 @@ def _fmt(value, spec=".3f"):
 
 
 def summary_lines(result, out_dir, n_files) -> list[str]:
-    """The three lines ``preform run`` prints at the end."""
+    """The three lines ``preform run`` prints at the end (the wall time and its stages from the
+    written summary.json, when there is one: the command's, not only the simulation's)."""
+    import json
+
     from .io.tables import summary_dict
 
     s = summary_dict(result)
+    try:
+        written = json.loads((Path(out_dir) / "summary.json").read_text(encoding="utf-8"))
+        s["wall_time_s"], stages = written["wall_time_s"], written.get("stages_s") or {}
+    except (OSError, ValueError, KeyError):
+        stages = {}
+    stage_text = (" (" + ", ".join(f"{k.replace('_', ' ')} {v:.1f}" for k, v in stages.items()) + ")"
+                  if stages else "")
     angle = s["braid_angle_deg"]["final"]
     conv = s["convergence_length_m"]["final"]
     steady = s.get("steady_state") or {}
@@ -48,7 +58,7 @@ def summary_lines(result, out_dir, n_files) -> list[str]:
     status = s["status"] + (f" ({s['message']})" if s["message"] else "")
     return [
         f"results: {out_dir} ({n_files} files)",
-        f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall, "
+        f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall{stage_text}, "
         f"braided length {_fmt(s['braided_length_m'])} m",
         f"final braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
         f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])}); "
@@ -72,12 +82,15 @@ def cmd_run(args) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
+    import time
+
+    started = time.perf_counter()
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
     mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                       force=args.force, geometry=(mandrel, centerline, []))
+                       force=args.force, geometry=(mandrel, centerline, []), started=started)
     _print_notes(outcome.notes)
     result = outcome.result
     for line in summary_lines(result, out_dir, len(outcome.written)):

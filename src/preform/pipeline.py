@@ -113,10 +113,13 @@ def with_rtm_fields(result, fields):
     return fields
 
 
-def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None) -> CaseOutcome:
+def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
+             started=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
+    started : ``time.perf_counter()`` when the command began (before loading the geometry), so
+        the summary's wall time is the command's; None: from this call.
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
@@ -126,6 +129,9 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
+    import time
+
+    t0 = time.perf_counter() if started is None else started
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
     work = estimate(config, mandrel, centerline, force=force)
@@ -133,12 +139,16 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     check_results_folder(out_dir, work.result_bytes)
     checkpoint = out_dir / CHECKPOINT
     with RunLock(out_dir):
+        stages = {"load_and_check": time.perf_counter() - t0}
+        t = time.perf_counter()
         result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
                           checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
         fields = map_to_surface(result) if len(result.yarns.points) else None
         fields = with_rtm_fields(result, fields)
+        stages["map"] = time.perf_counter() - t
         try:
-            written = write_results(result, fields, out_dir)
+            written = write_results(result, fields, out_dir, stages=stages)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "

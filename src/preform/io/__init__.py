@@ -38,14 +38,19 @@ def _relative(path, out_dir) -> str:
     return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
 
 
-def write_results(result, fields, out_dir) -> list[Path]:
+def write_results(result, fields, out_dir, stages=None) -> list[Path]:
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
     fields : preform.fields.SurfaceFields or None (no surface files then)
     out_dir : str or Path, created if missing
+    stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
+        ``wall_time_s`` is then the whole command's, these stages and this writing included
     returns : the paths written, summary.json last
     """
+    import time
+
+    t_write = time.perf_counter()
     out_dir = safe_folder(out_dir)
     safe_folder(out_dir, PLOTS)   # a symlink planted as plots/ is replaced, never followed
     summary = out_dir / SUMMARY
@@ -68,7 +73,12 @@ def write_results(result, fields, out_dir) -> list[Path]:
         written += plot_history(result, out_dir / PLOTS)
     written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
     files = [_relative(p, out_dir) for p in [*written, summary]]
-    written.append(write_summary(result, summary, extra={"files": files, "rtm": rtm}))
+    extra = {"files": files, "rtm": rtm}
+    if stages is not None:
+        stages = {**stages, "write": time.perf_counter() - t_write}
+        extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
+                     simulation_wall_time_s=float(result.wall_time_s))
+    written.append(write_summary(result, summary, extra=extra))
     return written
 
 
