@@ -103,7 +103,7 @@ take_up_speed = 0.01
 initial_position = 0.08
 braid_length = 0.08
 [rtm]
-cavity_thickness = 1e-3
+cavity_thickness = 1e-4
 [output]
 snapshots = 0
 """)

@@ -158,8 +158,11 @@ def bin_cells(values, n_sets=4):
 
 # ------------------------------------------------------------------------------ per face
 
-#: where no yarn lies (or its fibres pack beyond the model's range) the face is no preform:
-#: porosity 1 and zero permeability, flagged by ``rtm_valid`` = 0 for the solver's set-up
+#: where no yarn lies, or so little that the face is a resin channel rather than preform (fibre
+#: volume fraction below MIN_VF: Gebart's and Kozeny-Carman's laws hold for packed fibres, and
+#: their K grows as 1 / V_f^2 towards an empty cavity), the face is no preform: its permeability
+#: arrays are 0 and ``rtm_valid`` = 0 (the solver files give such cells the cavity's own)
+MIN_VF = 0.05
 RTM_ARRAYS = ("areal_weight_kg_m2", "fibre_volume_fraction", "porosity", "permeability_m2",
               "permeability_k1_m2", "permeability_k2_m2", "permeability_k3_m2",
               "permeability_direction", "rtm_valid")
@@ -218,7 +221,7 @@ def rtm_fields(fields, config, tangents) -> dict:
     thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
         np.full(len(F), config.rtm.cavity_thickness)
     vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
-    valid = (total > 0) & (vf > 0) & (vf < 1)
+    valid = (total > 0) & (vf >= MIN_VF) & (vf < 1)
     angle = cd["braid_angle_deg"]
     k1 = np.zeros(len(F))
     k2 = np.zeros(len(F))
@@ -247,7 +250,7 @@ def rtm_fields(fields, config, tangents) -> dict:
         k1[valid], k2[valid], direction[valid] = p1, p2, dirv
         k3[valid] = np.einsum("fi,fij,fj->f", normals[valid], Kv, normals[valid])
     ok = valid & (k2 > 0)
-    return {"areal_weight_kg_m2": aw, "fibre_volume_fraction": np.where(valid, vf, 0.0),
-            "porosity": np.where(valid, 1.0 - vf, 1.0), "permeability_m2": K.reshape(len(F), 9),
+    vf = np.minimum(vf, 1.0)
+    return {"areal_weight_kg_m2": aw, "fibre_volume_fraction": vf, "porosity": 1.0 - vf, "permeability_m2": K.reshape(len(F), 9),
             "permeability_k1_m2": k1, "permeability_k2_m2": k2, "permeability_k3_m2": k3,
             "permeability_direction": direction, "rtm_valid": ok.astype(np.uint8)}

@@ -93,7 +93,7 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
         return {"written": False, "reason": "no surface fields"}
     from .rtm_files import write_rtm
 
-    paths, said = write_rtm(fields, out_dir)
+    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness)
     written += paths
     return said
 

@@ -25,6 +25,12 @@ PANELS = (("braid_angle_deg", "braid angle (deg)", 1.0),
           ("cover_factor", "cover factor (-)", 1.0),
           ("thickness_m", "thickness (mm)", 1e3))
 UNREACHED = "0.82"
+#: arrays whose 0 means "undefined here" (end caps, no preform): drawn grey like unreached faces
+POSITIVE_ONLY = ("braid_angle_deg", "permeability_k1_m2", "permeability_k2_m2", "fibre_volume_fraction")
+#: the RTM hand-off's map (``examples/rtm_chain.py``)
+RTM_PANELS = (("fibre_volume_fraction", "fibre volume fraction (-)", 1.0),
+              ("permeability_k1_m2", "permeability K1 (1e-12 m^2, log scale)", 1e12),
+              ("porosity", "porosity (-)", 1.0))
 DPI = 130
 
 
@@ -50,17 +56,17 @@ def unrolled_coordinates(vertices, faces, centerline):
     return np.stack([s_v, phi], axis=2)
 
 
-def surface_map_figure(fields, centerline, title: str) -> Figure:
-    """The three unrolled panels (see module docstring)."""
+def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
+    """The unrolled panels (see module docstring); ``panels``: (cell array, label, scale) each."""
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
     reached = (np.asarray(data["reached_warp"]) > 0) | (np.asarray(data["reached_weft"]) > 0)
-    fig = Figure(figsize=(10.0, 9.0), layout="constrained")
-    axes = fig.subplots(len(PANELS), 1, sharex=True)
+    fig = Figure(figsize=(10.0, 3.0 * len(panels)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
     fig.suptitle(title)
-    for ax, (name, label, scale) in zip(axes, PANELS):
+    for ax, (name, label, scale) in zip(axes, panels):
         values = np.asarray(data[name], dtype=float) * scale
-        shown = reached & (values > 0) if name == "braid_angle_deg" else reached
+        shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
         if np.any(~shown):
             ax.add_collection(PolyCollection(polys[~shown], facecolors=UNREACHED, edgecolors=UNREACHED,
                                           linewidths=0.1))
@@ -71,7 +77,12 @@ def surface_map_figure(fields, centerline, title: str) -> Figure:
                 lo, hi = lo - pad, hi + pad
             coll = PolyCollection(polys[shown], array=values[shown], cmap="viridis", edgecolors="face",
                                   linewidths=0.1)
-            coll.set_clim(lo, hi)
+            if name.startswith("permeability") and lo > 0:
+                from matplotlib.colors import LogNorm   # permeability spans decades: log colours
+
+                coll.set_norm(LogNorm(lo, hi))
+            else:
+                coll.set_clim(lo, hi)
             ax.add_collection(coll)
             fig.colorbar(coll, ax=ax, label=label, pad=0.01)
         ax.set_ylim(-180.0, 180.0)
@@ -84,9 +95,9 @@ def surface_map_figure(fields, centerline, title: str) -> Figure:
     return fig
 
 
-def write_surface_map(fields, centerline, path, title: str) -> Path:
-    """Write ``surface_map.png`` atomically; return its path."""
-    fig = surface_map_figure(fields, centerline, title)
+def write_surface_map(fields, centerline, path, title: str, panels=PANELS) -> Path:
+    """Write ``surface_map.png`` (or another map of ``panels``) atomically; return its path."""
+    fig = surface_map_figure(fields, centerline, title, panels)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI)

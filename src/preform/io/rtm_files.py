@@ -95,12 +95,14 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
 RTM_DIR = "rtm"
 
 
-def write_rtm(fields, out_dir, n_sets=4) -> tuple[list[Path], dict]:
+def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Path], dict]:
     """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
 
-    Cells with no preform (``rtm_valid`` 0: no yarn) get porosity 1; for RTMsim's few property
-    sets they form a set of their own (the largest K1 of the preform, an open channel), and the
-    preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is preform).
+    Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
+    Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (or, without a cavity thickness, the
+    largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set of their
+    own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is
+    preform).
     """
     from ..rtm import bin_cells
     from .atomic import safe_folder
@@ -110,9 +112,10 @@ def write_rtm(fields, out_dir, n_sets=4) -> tuple[list[Path], dict]:
     valid = cd["rtm_valid"] > 0
     if not np.any(valid):
         return [], {"written": False, "reason": "no face carries preform (no yarn reached the mandrel)"}
-    thickness = np.where(valid, cd["thickness_m"], 0.0)
-    k1 = cd["permeability_k1_m2"]
-    alpha = np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0)
+    thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
+    channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
+    k1 = np.where(valid, cd["permeability_k1_m2"], channel)
+    alpha = np.where(valid, np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0), 1.0)
     direction = cd["permeability_direction"]
     written = [write_lcmsim_h5(folder / "lcmsim.h5", fields.vertices, fields.faces, thickness,
                                cd["porosity"], k1, alpha, direction)]
@@ -127,7 +130,8 @@ def write_rtm(fields, out_dir, n_sets=4) -> tuple[list[Path], dict]:
                        float(rep[k]), float(np.mean(alpha[members])),
                        _mean_direction(direction[members])))
     if np.any(~valid):
-        values.append((0.0, 1.0, float(np.max(k1[valid])), 1.0, (1.0, 0.0, 0.0)))
+        values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
+                       channel, 1.0, (1.0, 0.0, 0.0)))
     written += write_rtmsim_bdf(folder / "rtmsim.bdf", fields.vertices, fields.faces, index, values)
     return written, {"written": True, "sets": len(values), "binning_error_k1": error,
                      "preform_faces": int(np.count_nonzero(valid)), "faces": int(len(k1))}
