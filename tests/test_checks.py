@@ -182,7 +182,7 @@ def test_take_up_table_is_used_along_the_mandrel():
     ({"yarn": {"thickness": 5e-3}}, "swapped"),
     ({"yarn": {"friction": 1.5}}, "[yarn] friction = 1.5"),
     ({"yarn": {"ring_friction": 1.2}}, "[yarn] ring_friction = 1.2"),
-    ({"model": {"time_step": 5.0}}, "[model] time_step = 5"),
+    ({"model": {"time_step": 0.35}}, "[model] time_step = 0.35"),   # 6.3 deg: coarse, not refused
 ])
 def test_value_warnings(changes, word):
     warnings = preflight(config(**changes), *cylinder())
@@ -222,3 +222,11 @@ def test_inside_out_cad_cylinder_is_turned_and_gets_a_centerline(tmp_path):
     assert any("turned the normals outwards" in r for r in mandrel.repairs)
     cl = auto_centerline(mandrel)
     assert cl.length == pytest.approx(1.6, rel=1e-6) and cl.points[0, 2] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_time_step_that_skips_carrier_passes_is_refused_naming_time_step():
+    # 96 carriers at 18 deg/s: 7.5 deg between two carriers of a group, at most 0.417 s a step
+    with pytest.raises(ConfigError, match=r"\[model\] time_step = 10 s turns the carriers by 180 deg.*"
+                                          r"at most 0.417 s"):
+        preflight(config(model={"time_step": 10.0}), *cylinder())
+    preflight(config(model={"time_step": 0.4}), *cylinder())

@@ -57,6 +57,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
     reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
     warnings = _check_fit(config, reach)
     warnings += _braid_angle_warnings(config, s[passing], distance[passing])
+    _check_time_step(config)
     warnings += _value_warnings(config)
     return warnings
 
@@ -168,6 +169,23 @@ def _braid_angle_warnings(config, s, distance) -> list[str]:
                         f"the usual {lo:g}-{hi:g} deg (check [machine] angular_speed and "
                         "[process] take_up_speed)")
     return warnings
+
+
+def _check_time_step(config) -> None:
+    """A fixed time step must resolve every pass of two carriers: within a step the carriers may
+    turn by at most the angle between two carriers of a group, 2 pi / (N / 2); beyond it the yarns
+    skip crossings and the fell points jump (the run then fails far from its cause)."""
+    ma, mo = config.machine, config.model
+    if mo.time_step is None:
+        return
+    between = 2.0 * math.pi / (ma.carriers / 2)
+    turn = ma.angular_speed * mo.time_step
+    if turn > between:
+        raise ConfigError(
+            f"[model] time_step = {mo.time_step:g} s turns the carriers by {math.degrees(turn):.3g} deg "
+            f"a step, more than the {math.degrees(between):.3g} deg between two carriers of a group: "
+            f"expected at most {between / ma.angular_speed:.3g} s (leave time_step out for the "
+            "automatic step control)")
 
 
 def _value_warnings(config) -> list[str]:

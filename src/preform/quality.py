@@ -88,7 +88,7 @@ def yarn_reasons(flags, settings: QualitySettings = QUALITY) -> list[str]:
     return reasons
 
 
-def field_reasons(face_s, covered, braided_end, braided_start=0.0,
+def field_reasons(face_s, covered, braided_end, braided_start=0.0, smoothing=0.0,
                   settings: QualitySettings = QUALITY) -> list[str]:
     """Reasons to doubt the surface fields.
 
@@ -96,15 +96,17 @@ def field_reasons(face_s, covered, braided_end, braided_start=0.0,
     covered : (f,) bool, faces some yarn crosses
     braided_end : float, m, arc length of the furthest fell point at the end of the run
     braided_start : float, m, arc length where the braid starts (the tie points)
+    smoothing : float, m, how far the fields' pooling spreads coverage (added to the margins)
     """
     face_s = np.asarray(face_s, dtype=float)
     covered = np.asarray(covered, dtype=bool)
+    margin = settings.field_reach_margin + smoothing
     reasons = []
-    beyond = covered & (face_s > braided_end + settings.field_reach_margin)
+    beyond = covered & (face_s > braided_end + margin)
     if np.any(beyond):
         reasons.append(f"{np.count_nonzero(beyond)} faces are covered up to {face_s[beyond].max():.4g} m "
                        f"of centerline, beyond the braided length {braided_end:.4g} m")
-    inside = (face_s > braided_start + settings.field_reach_margin) & (face_s < braided_end - settings.field_reach_margin)
+    inside = (face_s > braided_start + margin) & (face_s < braided_end - margin)
     holes = inside & ~covered
     if np.any(inside) and np.count_nonzero(holes) > settings.max_hole_share * np.count_nonzero(inside):
         reasons.append(f"{np.count_nonzero(holes)} faces inside the braided region "
@@ -116,6 +118,19 @@ def verdict(reasons) -> dict:
     """``{"verdict": "ok" | "suspect", "reasons": reasons}``."""
     reasons = list(reasons)
     return {"verdict": "suspect" if reasons else "ok", "reasons": reasons}
+
+
+def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list[str]:
+    """:func:`field_reasons` of a run's surface fields (faces located on its centerline)."""
+    if fields is None or result.centerline is None or result.fell_s is None or not len(result.fell_s):
+        return []
+    V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
+    s, _ = result.centerline.project(V[F].mean(axis=1))
+    cd = fields.cell_data
+    covered = (np.asarray(cd["reached_warp"]) > 0) | (np.asarray(cd["reached_weft"]) > 0)
+    fell = np.asarray(result.fell_s)
+    return field_reasons(s, covered, float(fell[-1].max()), float(fell[0].min()),
+                         2.0 * float(fields.pool_radius_m), settings)
 
 
 def assess(result, settings: QualitySettings = QUALITY) -> dict:

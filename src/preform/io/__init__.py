@@ -73,7 +73,9 @@ def write_results(result, fields, out_dir, stages=None) -> list[Path]:
         written += plot_history(result, out_dir / PLOTS)
     written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
     files = [_relative(p, out_dir) for p in [*written, summary]]
-    extra = {"files": files, "rtm": rtm}
+    from ..quality import surface_reasons
+
+    extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields)}
     if stages is not None:
         stages = {**stages, "write": time.perf_counter() - t_write}
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
