@@ -268,7 +268,7 @@ class InteractionZone:
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
                                  where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
-        return _snapshot(st, bc, report.f_top, t, self.machine)
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def slide_rings(self, st, bc, theta):
         """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
@@ -480,11 +480,18 @@ def creation_point(px, gx, po, go, lowest=0.0):
     return C, N
 
 
-def _snapshot(st, bc, f_top, t, machine) -> Snapshot:
+def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT) -> Snapshot:
+    """The zone as a :class:`Snapshot`: per yarn its fell point, its crossings' centerline
+    points, its ring point (guide ring) and its top point; ``external_force_N`` at a crossing's
+    points the jamming and wall forces (``frontal.point_forces``), at a ring point the ring's
+    contact force (normal and friction: the point is held by the ring, so it balances the two
+    tensions there), zero at the fell and spool points (held ends: their supports, the laid yarn
+    and the carrier, are outside the zone)."""
     n = machine.n_per_group
     ny = machine.n_yarns
     ring = machine.has_ring
-    points, offsets, tension, cid, slip = [], [0], [], [], []
+    ext_c = frontal.point_forces(st, bc, settings)
+    points, offsets, tension, cid, slip, ext = [], [0], [], [], [], []
     for k in range(ny):
         side = 0 if k < n else 1
         chain = st.chain(k)
@@ -492,18 +499,29 @@ def _snapshot(st, bc, f_top, t, machine) -> Snapshot:
         ten = [st.tension[c, side] for c in chain] + [f_top[k]]
         ids = [-1] + [int(st.uid[c]) for c in chain] + [-1]
         sl = [0] + [int(st.slip[c, side] != 0) for c in chain] + [0]
+        fx = [np.zeros(3)] + [ext_c[c, side] for c in chain] + [np.zeros(3)]
         if ring:
             pts.append(bc.spool[k])
             ten.append(bc.f_spool)
             ids.append(-1)
             sl.append(0)
+            fx.append(np.zeros(3))
+            below, at, above = pts[-3], pts[-2], pts[-1]
+            fx[-2] = -(f_top[k] * _unit(below - at) + bc.f_spool * _unit(above - at))
         points.extend(pts)
         tension.extend(ten)
         cid.extend(ids)
         slip.extend(sl)
+        ext.extend(fx)
         offsets.append(len(points))
     return Snapshot(time_s=float(t), points=np.array(points, dtype=float).reshape(-1, 3),
                     offsets=np.array(offsets, dtype=np.int64),
                     tension_N=np.array(tension, dtype=float),
                     contact_id=np.array(cid, dtype=np.int64),
-                    slip=np.array(slip, dtype=np.int8), group=machine.group.copy())
+                    slip=np.array(slip, dtype=np.int8), group=machine.group.copy(),
+                    external_force_N=np.array(ext, dtype=float).reshape(-1, 3))
+
+
+def _unit(v):
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.0 else np.zeros(3)
