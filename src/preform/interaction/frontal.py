@@ -85,7 +85,11 @@ class Boundary:
     spool : (2n, 3) spool points; f_spool : N; mu, mu_r : friction; has_ring : bool; h : m, half
     the yarn thickness; plane : (m, 6) or None, per crossing a point and the outward unit normal
     of the mandrel surface nearest to it (the crossings may not pass behind it); width : m, the
-    yarn width, the least distance of two crossings along a yarn (jamming; 0: none).
+    yarn width, the least distance of two crossings along a yarn (jamming; 0: none); capstan :
+    (2n,) or None, per yarn the direction its material slides over the guide ring (+1 towards
+    the mandrel, -1 towards the spool, 0 stick; None: -1, the paper's eq. 9 as written) and
+    f_hold : (2n,) N, the tension a sticking yarn holds below the ring
+    (``_kernels.frontal.top_tensions``).
     """
 
     fell: np.ndarray
@@ -98,6 +102,16 @@ class Boundary:
     h: float
     plane: np.ndarray | None = None
     width: float = 0.0
+    capstan: np.ndarray | None = None
+    f_hold: np.ndarray | None = None
+
+    def capstan_arguments(self) -> tuple[np.ndarray, np.ndarray]:
+        """(capstan, f_hold) as (2n,) float64 arrays for the kernels (defaults filled in)."""
+        n = len(self.fell)
+        c = np.full(n, -1.0) if self.capstan is None else np.asarray(self.capstan, dtype=float)
+        f = np.full(n, float(self.f_spool)) if self.f_hold is None else np.asarray(
+            self.f_hold, dtype=float)
+        return np.ascontiguousarray(c), np.ascontiguousarray(f)
 
 
 @dataclass(frozen=True)
@@ -215,7 +229,7 @@ class _Network:
         f_top = np.empty(st.n_yarns)
         frontal_kernels.top_tensions(st.n_yarns, st.highest, st.pos, st.normal, st.over, bc.fell,
                                      bc.top, bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring,
-                                     f_top)
+                                     *bc.capstan_arguments(), f_top)
         frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
                                         bc.fell, bc.top, self.tension, f_top, bc.h, bc.mu, bound,
                                         psi)

@@ -526,7 +526,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     lat = lattice_of(state)
     f_top = np.empty(ny)
     FK.top_tensions(ny, state.highest, state.pos, state.normal, state.over, bc.fell, bc.top,
-                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, f_top)
+                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, *bc.capstan_arguments(),
+                    f_top)
     d_below = np.empty((m, 2, 3))
     l_below = np.empty((m, 2))
     d_top = np.empty((ny, 3))
@@ -552,11 +553,12 @@ def ring_top_tensions(state, bc):
     from .._kernels import frontal as FK
     ny = state.n_yarns
     fell = np.ascontiguousarray(bc.fell, dtype=float)
+    capstan, f_hold = bc.capstan_arguments()
 
     def f(pos):
         out = np.empty(ny)
         FK.top_tensions(ny, state.highest, pos, state.normal, state.over, fell, bc.top,
-                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, out)
+                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, capstan, f_hold, out)
         return out
     return f
 
