@@ -5,7 +5,9 @@ What is solved
 The same equations as the Newton reference (``interaction/frontal.py``, ``_kernels/frontal.
 assemble``): at every crossing the pair balance of both yarns' segment tensions, the jamming
 pushes and the mandrel wall; along every yarn the friction law at every crossing (the smoothed
-Coulomb term ``g |s - s_old|`` with the bounds ``g`` and top tensions ``f_top`` held, or, with
+Coulomb term ``g |s - s_old|``, written here with ``s`` the material coordinates (the state's
+``material``), ``s_old`` the friction centres and ``g`` the friction bounds (``bound``), with the
+bounds and top tensions ``f_top`` held, or, with
 ``RelaxSettings.consistent_bounds``, the bounds of the converged geometry itself); segments are
 stiff tows ``f = EA (l - q) / q`` of material length ``q``; thickness offsets of the yarn points
 (paper eq. 16). Only the wall differs: here it is an exact constraint (no crossing behind its
