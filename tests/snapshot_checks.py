@@ -1,5 +1,7 @@
 """Force balance and the friction law of written convergence-zone snapshots, read back from their
-.vtp files (issue 4); shared by the interaction tests."""
+.vtp files alone (issues 4 and 14): each crossing's four tension vectors from the file's own
+points and ``tension_N``, plus its points' ``external_force_N``; shared by the interaction
+tests. Nothing here calls preform's solver code."""
 
 from __future__ import annotations
 
@@ -47,17 +49,56 @@ def balance_and_psi(yarns, mu):
     return max(err), max(psis)
 
 
+def read_external_forces(path):
+    """Per yarn the point data ``external_force_N`` (k, 3) of its points, in the order of
+    ``read_snapshot``'s points."""
+    poly = pv.read(path)
+    lines = np.asarray(poly.lines).reshape(-1, 3)[:, 1:]
+    yid = np.asarray(poly.cell_data["yarn_id"])
+    ext = np.asarray(poly.point_data["external_force_N"], dtype=float).reshape(-1, 3)
+    out = []
+    for k in np.unique(yid):
+        cells = np.nonzero(yid == k)[0]
+        out.append(ext[np.concatenate([[lines[cells[0], 0]], lines[cells, 1]])])
+    return out
+
+
+def crossing_balance(yarns, external):
+    """Per crossing (contact id) of a snapshot read back from its file: the net force of its two
+    points, the two tension vectors along the written segments at each point (tension_N times
+    the unit vector from the point to its neighbour) plus both points' external_force_N.
+    Returns (largest |net| / the largest tension of the file, largest |net| / the sum of the
+    crossing's four tensions, crossings, crossings with a non-zero external force)."""
+    net, total = {}, {}
+    pushed = set()
+    f_max = max(float(np.max(ten)) for _, ten, _ in yarns)
+    for (pts, ten, cid), ext in zip(yarns, external):
+        for i in range(1, len(pts) - 1):
+            if cid[i] < 0:
+                continue
+            lo, hi = pts[i - 1] - pts[i], pts[i + 1] - pts[i]
+            f = ten[i - 1] * lo / np.linalg.norm(lo) + ten[i] * hi / np.linalg.norm(hi) + ext[i]
+            net[cid[i]] = net.get(cid[i], 0.0) + f
+            total[cid[i]] = total.get(cid[i], 0.0) + ten[i - 1] + ten[i]
+            if np.any(ext[i] != 0.0):
+                pushed.add(cid[i])
+    size = np.array([np.linalg.norm(v) for v in net.values()])
+    rel = size / np.array([total[c] for c in net])
+    return float(size.max() / f_max), float(rel.max()), len(net), len(pushed)
+
+
 def checked_snapshot_files(snapshots, out_dir, mu):
-    """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance and
-    the friction law at every crossing (issue 4); the yarns (``read_snapshot``) of every file
-    that has crossings."""
+    """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance
+    (with ``external_force_N``) and the friction law at every crossing (issues 4 and 14); the
+    yarns (``read_snapshot``) of every file that has crossings."""
     out = []
     for p in write_convergence(snapshots, out_dir)[1:]:
         yarns = read_snapshot(p)
         if not any(np.any(c >= 0) for _, _, c in yarns):
             continue
-        err, psi = balance_and_psi(yarns, mu)
-        assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
+        _, psi = balance_and_psi(yarns, mu)
+        err, _, _, _ = crossing_balance(yarns, read_external_forces(p))
+        assert err < 1e-3     # issue 14: tensions + external forces balance to 1e-3 x max tension
         assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
         out.append(yarns)
     return out

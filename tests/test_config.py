@@ -457,3 +457,13 @@ def test_rtm_material_and_section(tmp_path):
                                                            "fibre_density": 1.78, "fibre_radius": 3.5e-6}))
     with pytest.raises(ConfigError, match="needs k_ref"):
         load_config(make_case(tmp_path, name="kc", rtm={"permeability": "kozeny_carman"}))
+
+
+def test_model_solver_key(tmp_path):
+    """``[model] solver``: "newton" by default, "relax" accepted and echoed, anything else refused
+    with the key, the value and the choices named."""
+    assert load_config(make_case(tmp_path)).model.solver == "newton"
+    cfg = load_config(make_case(tmp_path, model={"kind": "interaction", "solver": "relax"}))
+    assert cfg.model.solver == "relax" and dump_config(cfg)["model"]["solver"] == "relax"
+    config_error(tmp_path, "solver", "cholesky", '"newton"', '"relax"',
+                 model={"solver": "cholesky"})

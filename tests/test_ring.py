@@ -49,6 +49,55 @@ def test_tension_ratio_is_the_capstan_factor(capstan_sign):
         assert s.f_int / s.f_ext == pytest.approx(np.exp(capstan_sign * mu * s.eta), rel=1e-13)
 
 
+def test_stick_along_the_ring_holds_its_tension_within_the_cone():
+    """capstan_sign 0: f_int is the held tension clipped to f_ext exp(-+mu eta), and the
+    transverse solve matches the NumPy/SciPy twin with that tension."""
+    seen = set()
+    for A, B, f, th, mu in problems(40, seed=11):
+        for hold in (0.5 * f, f, 1.05 * f, 2.0 * f):
+            s = solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=0, f_hold=hold)
+            assert s.ok, s.message
+            lo, hi = f * np.exp(-mu * s.eta), f * np.exp(mu * s.eta)
+            assert s.f_int == pytest.approx(min(max(hold, lo), hi), rel=1e-13)
+            seen.add("inside" if lo < hold < hi else "clipped")
+            ref = naive.solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=0, f_hold=hold)
+            assert ref["ok"]
+            assert s.theta_r == pytest.approx(ref["theta"], abs=1e-9)
+            assert s.f_int == pytest.approx(ref["f_int"], rel=REL)
+    assert seen == {"inside", "clipped"}
+
+
+def test_sliding_along_the_ring_leaves_no_transverse_stick():
+    """With a slide s_long along the ring in the step, along and across are one Coulomb cone:
+    any transverse pull moves the ring point, to where |F^t| = mu r |dtheta| / |(s_long,
+    r dtheta)| |F^n| (the NumPy/SciPy twin); a larger s_long leaves less transverse friction,
+    so the point moves further; s_long -> 0 gives Amontons' stick back."""
+    moved = 0
+    for A, B, f, th, mu in problems(40, seed=12):
+        if mu == 0.0:
+            continue
+        plain = solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=0.5)
+        prev = None
+        for s_long in (1e-3, 1e-2, 1e-1):
+            s = solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=0.5, s_long=s_long)
+            assert s.ok, s.message
+            ref = naive.solve_ring(A, B, f, R_RING, Z_RING, th, mu, capstan_sign=0.5,
+                                   s_long=s_long)
+            assert ref["ok"] and s.theta_r == pytest.approx(ref["theta"], abs=1e-9)
+            a = R_RING * abs(s.theta_r - th)
+            mu_t = mu * a / np.hypot(s_long, a)
+            Fr = s.F_r
+            t = np.array([-np.sin(s.theta_r), np.cos(s.theta_r), 0.0])
+            ft = Fr @ t
+            assert abs(abs(ft) - mu_t * np.linalg.norm(Fr - ft * t)) < 1e-9 * (s.f_int + f)
+            if prev is not None:
+                assert abs(s.theta_r - th) >= abs(prev - th) - 1e-12
+            prev = s.theta_r
+        if plain.slip == 0:
+            moved += abs(prev - th) > 0       # Amontons held it; the cone does not
+    assert moved > 5
+
+
 def test_paper_eq9_default_lowers_the_mandrel_side():
     A, B, f, th, mu = problems(1, seed=2)[0]
     s = solve_ring(A, B, f, R_RING, Z_RING, th, 0.3)
@@ -126,8 +175,8 @@ def test_batch_kernel_matches_wrapper():
     A, B = np.array([p[0] for p in ps]), np.array([p[1] for p in ps])
     f, th = np.array([p[2] for p in ps]), np.array([p[3] for p in ps])
     out, status = ring_kernels.empty_out(len(ps)), np.zeros(len(ps), np.int64)
-    ring_kernels.solve_rings(A, B, f, R_RING, Z_RING, th, 0.2, -1.0,
-                             *ring_arguments(RingSettings()), out, status)
+    ring_kernels.solve_rings(A, B, f, R_RING, Z_RING, th, 0.2, np.full(len(ps), -1.0), f,
+                             np.zeros(len(ps)), *ring_arguments(RingSettings()), out, status)
     for i, p in enumerate(ps):
         s = solve_ring(p[0], p[1], p[2], R_RING, Z_RING, p[3], 0.2)
         assert status[i] == s.status and out[i, ring_kernels.RING_OUT_THETA] == s.theta_r
@@ -140,6 +189,10 @@ def test_status_and_errors():
     with pytest.raises(ContactInputError, match="f_ext"):
         solve_ring([0, 0, 0.2], B, -1.0, R_RING, Z_RING, 0.0, 0.2)
     with pytest.raises(ContactInputError, match="capstan_sign"):
+        solve_ring([0, 0, 0.2], B, 1.0, R_RING, Z_RING, 0.0, 0.2, capstan_sign=2)
+    with pytest.raises(ContactInputError, match="s_long"):
+        solve_ring([0, 0, 0.2], B, 1.0, R_RING, Z_RING, 0.0, 0.2, s_long=-1.0)
+    with pytest.raises(ContactInputError, match="f_hold"):
         solve_ring([0, 0, 0.2], B, 1.0, R_RING, Z_RING, 0.0, 0.2, capstan_sign=0)
     with pytest.raises(ContactInputError, match="mu_r"):
         solve_ring([0, 0, 0.2], B, 1.0, R_RING, Z_RING, 0.0, np.nan)

@@ -47,7 +47,7 @@ from .errors import PreformError
 
 FORMAT = "preform-checkpoint"
 #: version of the arrays' layout and meaning; bump it when either changes
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2   # 2: snapshots carry external_force_N (snapshot_external_force)
 #: the archive member holding the JSON header
 HEADER = "header"
 #: dtype kinds a checkpoint may hold: bool, signed and unsigned integers, floats

@@ -100,6 +100,9 @@ class ModelConfig:
     time_step: float | None = None  # s; None: automatic step control
     start: str = "tip"              # "tip" | "random": initial fell points
     seed: int = 0                   # for start = "random"
+    #: the interaction model's zone solver: "newton" (the validated reference) | "relax"
+    #: (force-density relaxation, ``interaction/relax.py``)
+    solver: str = "newton"
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,7 @@ KEYS = {
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
-    "model": ("kind", "time_step", "start", "seed"),
+    "model": ("kind", "time_step", "start", "seed", "solver"),
     "output": ("dir", "field_edge_length", "snapshots"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
 }
@@ -158,6 +161,7 @@ STL_UNITS = ("m", "mm")
 PATTERNS = tuple(PATTERN_M)  # "diamond", "regular", "hercules"
 MODEL_KINDS = ("kinematic", "interaction")
 STARTS = ("tip", "random")
+SOLVERS = ("newton", "relax")
 
 #: coefficients of friction must lie in [0, MAX_FRICTION)
 MAX_FRICTION = 2.0
@@ -574,6 +578,7 @@ def _model(sec: _Section) -> ModelConfig:
         time_step=sec.number("time_step", "s", default=None, positive=True),
         start=sec.choice("start", STARTS, default=ModelConfig.start),
         seed=sec.integer("seed", "a non-negative integer", default=ModelConfig.seed, minimum=0),
+        solver=sec.choice("solver", SOLVERS, default=ModelConfig.solver),
     )
 
 
@@ -618,7 +623,8 @@ def dump_config(config: Config) -> dict:
                     "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
                     "braid_length": p.braid_length,
                     "pose_lead": "auto" if p.pose_lead is None else p.pose_lead},
-        "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed},
+        "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed,
+                  "solver": mo.solver},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},
         "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,

@@ -184,6 +184,8 @@ class Recording:
             snapshot_tension=cat("tension_N", np.float64, ()),
             snapshot_contact_id=cat("contact_id", np.int64, ()),
             snapshot_slip=cat("slip", np.int8, ()),
+            snapshot_external_force=(np.concatenate([s.external_forces() for s in snaps])
+                                     if snaps else np.zeros((0, 3))),
             snapshot_group=np.array([s.group for s in snaps], dtype=np.int8).reshape(-1, self.n_yarns))
         return out
 
@@ -233,6 +235,8 @@ def _snapshots_from_arrays(arrays, ny):
     tension = finite("snapshot_tension", take(arrays, "snapshot_tension", (total - k * ny,), np.float64))
     cid = take(arrays, "snapshot_contact_id", (total,), np.int64)
     slip = take(arrays, "snapshot_slip", (total,), np.int8)
+    external = finite("snapshot_external_force",
+                      take(arrays, "snapshot_external_force", (total, 3), np.float64))
     group = plain.in_range("snapshot_group", take(arrays, "snapshot_group", (k, ny), np.int8), 0, 2)
     out, t0 = [], 0
     for i in range(k):
@@ -244,6 +248,7 @@ def _snapshots_from_arrays(arrays, ny):
         t1 = t0 + (b - a) - ny
         out.append(Snapshot(time_s=float(times[i]), points=point[a:b].copy(), offsets=o.copy(),
                             tension_N=tension[t0:t1].copy(), contact_id=cid[a:b].copy(),
-                            slip=slip[a:b].copy(), group=group[i].copy()))
+                            slip=slip[a:b].copy(), group=group[i].copy(),
+                            external_force_N=external[a:b].copy()))
         t0 = t1
     return out

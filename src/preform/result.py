@@ -76,6 +76,10 @@ class Snapshot:
     contact_id : (m,) int64, -1 where the point is no yarn-yarn contact
     slip : (m,) int8, 0 stick, 1 slip
     group : (n_yarns,) int8
+    external_force_N : (m, 3) float64, N, every force at the point other than the yarns'
+        tensions (jamming and mandrel wall at a crossing, the ring's contact force at a ring
+        point; zero at fell and spool points, the held ends), so that the tensions along the
+        segments plus these balance at every crossing; None: zeros (the kinematic zone)
     """
 
     time_s: float
@@ -85,6 +89,13 @@ class Snapshot:
     contact_id: np.ndarray
     slip: np.ndarray
     group: np.ndarray
+    external_force_N: np.ndarray | None = None
+
+    def external_forces(self) -> np.ndarray:
+        """external_force_N as an (m, 3) array (zeros where it is None)."""
+        if self.external_force_N is None:
+            return np.zeros((len(self.points), 3))
+        return np.asarray(self.external_force_N, dtype=np.float64).reshape(-1, 3)
 
 
 @dataclass(frozen=True)

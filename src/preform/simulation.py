@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from . import geometry
 from .checkpoint import Checkpoint, CheckpointError
 from .errors import ConfigError, SimulationError
+from .interaction import relax
 from .interaction.model import InteractionZone
 from .kinematic import KinematicZone
 from .machine import Machine
@@ -30,6 +31,9 @@ from .tolerances import Tolerances, tol
 
 #: ``[model] kind`` -> the zone class of that model, built as ``cls(config, machine, mandrel)``
 ZONES = {"kinematic": KinematicZone, "interaction": InteractionZone}
+#: ``[model] solver`` -> the interaction zone's solver of a step (``InteractionZone(solve_zone=)``;
+#: None: the zone's default, Newton's ``frontal.solve_zone_inplace``)
+SOLVERS = {"newton": None, "relax": relax.solve_zone}
 
 
 def load_geometry(config):
@@ -45,14 +49,21 @@ def load_geometry(config):
 
 
 def make_zone(config, machine, mandrel):
-    """A fresh zone of ``[model] kind`` (``ZONES``); ``mandrel`` (mandrel frame) for its contact
-    and deposition tests."""
+    """A fresh zone of ``[model] kind`` (``ZONES``), the interaction zone with the solver of
+    ``[model] solver`` (``SOLVERS``); ``mandrel`` (mandrel frame) for its contact and deposition
+    tests."""
     try:
         cls = ZONES[config.model.kind]
     except KeyError:
         raise ConfigError(f"[model] kind = {config.model.kind!r}: expected one of "
                           f"{', '.join(map(repr, ZONES))}") from None
-    return cls(config, machine, mandrel)
+    if cls is not InteractionZone:
+        return cls(config, machine, mandrel)
+    solver = getattr(config.model, "solver", "newton")
+    if solver not in SOLVERS:
+        raise ConfigError(f"[model] solver = {solver!r}: expected one of "
+                          f"{', '.join(map(repr, SOLVERS))}")
+    return cls(config, machine, mandrel, solve_zone=SOLVERS[solver])
 
 
 def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:

@@ -503,10 +503,14 @@ def reanchor(n_yarns, lowest, yarn, pos, normal, over, fell, material, tension, 
 
 @njit(cache=True)
 def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spool, mu_r,
-                 has_ring, f_top):
+                 has_ring, capstan, f_hold, f_top):
     """Tension (N) of every yarn's top segment into f_top (2n,): the spool tension, or behind a
-    guide ring the Capstan law of the paper's eq. 9, f_spool = f exp(mu_r eta): f = f_spool
-    exp(-mu_r eta), eta the yarn's deflection at the ring point (``interaction/model.py``)."""
+    guide ring Capstan over the ring point (paper eq. 9) by the direction the yarn's material
+    slides over it, ``capstan[k]``: +1 towards the mandrel (the zone draws yarn from the spool:
+    the mandrel side carries the higher tension, f = f_spool exp(mu_r eta)), -1 towards the spool
+    (the tensioner takes yarn back: f = f_spool exp(-mu_r eta), eq. 9 as the paper writes it), 0
+    stick: the held tension f_hold[k] within that cone. eta is the yarn's deflection at the ring
+    point (``interaction/model.py``)."""
     n = n_yarns // 2
     p = np.empty(3)
     for k in range(n_yarns):
@@ -525,7 +529,11 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
         nb = math.sqrt(bx * bx + by * by + bz * bz)
         cb = (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)
         eta = math.pi - math.acos(min(1.0, max(-1.0, cb)))
-        f_top[k] = f_spool * math.exp(-mu_r * eta)
+        if capstan[k] != 0.0:
+            f_top[k] = f_spool * math.exp(capstan[k] * mu_r * eta)
+        else:
+            f_top[k] = min(max(f_hold[k], f_spool * math.exp(-mu_r * eta)),
+                           f_spool * math.exp(mu_r * eta))
 
 
 @njit(cache=True)

@@ -85,7 +85,11 @@ class Boundary:
     spool : (2n, 3) spool points; f_spool : N; mu, mu_r : friction; has_ring : bool; h : m, half
     the yarn thickness; plane : (m, 6) or None, per crossing a point and the outward unit normal
     of the mandrel surface nearest to it (the crossings may not pass behind it); width : m, the
-    yarn width, the least distance of two crossings along a yarn (jamming; 0: none).
+    yarn width, the least distance of two crossings along a yarn (jamming; 0: none); capstan :
+    (2n,) or None, per yarn the direction its material slides over the guide ring (+1 towards
+    the mandrel, -1 towards the spool, 0 stick; None: -1, the paper's eq. 9 as written) and
+    f_hold : (2n,) N, the tension a sticking yarn holds below the ring
+    (``_kernels.frontal.top_tensions``).
     """
 
     fell: np.ndarray
@@ -98,6 +102,16 @@ class Boundary:
     h: float
     plane: np.ndarray | None = None
     width: float = 0.0
+    capstan: np.ndarray | None = None
+    f_hold: np.ndarray | None = None
+
+    def capstan_arguments(self) -> tuple[np.ndarray, np.ndarray]:
+        """(capstan, f_hold) as (2n,) float64 arrays for the kernels (defaults filled in)."""
+        n = len(self.fell)
+        c = np.full(n, -1.0) if self.capstan is None else np.asarray(self.capstan, dtype=float)
+        f = np.full(n, float(self.f_spool)) if self.f_hold is None else np.asarray(
+            self.f_hold, dtype=float)
+        return np.ascontiguousarray(c), np.ascontiguousarray(f)
 
 
 @dataclass(frozen=True)
@@ -215,7 +229,7 @@ class _Network:
         f_top = np.empty(st.n_yarns)
         frontal_kernels.top_tensions(st.n_yarns, st.highest, st.pos, st.normal, st.over, bc.fell,
                                      bc.top, bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring,
-                                     f_top)
+                                     *bc.capstan_arguments(), f_top)
         frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
                                         bc.fell, bc.top, self.tension, f_top, bc.h, bc.mu, bound,
                                         psi)
@@ -470,3 +484,46 @@ def new_material(state, c, side, below_point, f, bc, settings: InteractionSettin
     p = state.centerline_point(c, side, bc.h)
     l = float(np.sqrt(np.sum((p - below_point) ** 2) + settings.energy.length_smoothing))
     return u_below + l / (1.0 + f / axial_stiffness(bc.f_spool, settings))
+
+
+def point_forces(state, bc, settings: InteractionSettings = DEFAULT):
+    """(m, 2, 3) N: every force on yarn ``side``'s centerline point at crossing ``c`` other than
+    the yarns' tensions, as the step's energy E has them (``_kernels/frontal.assemble``), so that
+    at every crossing the tensions of its four segments plus these forces sum to ``-dE/dC``, zero
+    at a balanced state:
+
+    * jamming: a segment between two crossings of a yarn shorter than the yarn width ``w``
+      (``l < w``, ``l`` the smoothed length of the segment between the two yarn points) pushes
+      them apart along it with ``f_j = k_jam (w - l)``, ``k_jam = jam_force f_spool / w``: on
+      the upper crossing ``+f_j d``, on the lower ``-f_j d`` (``d`` the unit vector from the
+      lower yarn point to the upper), both on that yarn's points;
+    * the mandrel wall (``bc.plane``): a crossing behind its tangent plane by ``-s > 0`` is
+      pushed out along the plane's normal ``n`` with ``k_wall (-s) n``, on the point of the inner
+      yarn (the one lying on the mandrel: the weft where ``over = +1``)."""
+    m = state.m
+    out = np.zeros((m, 2, 3))
+    if m == 0:
+        return out
+    e = settings.energy
+    pos, normal, over = state.pos[:m], state.normal[:m], state.over[:m]
+    sign = np.stack([over, -over], axis=1)                        # (m, 2): warp +over, weft -over
+    pts = pos[:, None, :] + (sign * bc.h)[:, :, None] * normal[:, None, :]
+    width = float(bc.width)
+    if width > 0.0:
+        k_jam = e.jam_force * bc.f_spool / width
+        for side in range(2):
+            lo = state.low[:m, side]
+            c = np.nonzero(lo >= 0)[0]
+            d = pts[c, side] - pts[lo[c], side]
+            l = np.sqrt(np.sum(d * d, axis=1) + e.length_smoothing)
+            gap = np.maximum(width - l, 0.0)
+            f = (k_jam * gap / l)[:, None] * d
+            np.add.at(out[:, side], c, f)
+            np.add.at(out[:, side], lo[c], -f)
+    if bc.plane is not None:
+        plane = bc.plane[:m]
+        sd = np.einsum("ij,ij->i", pos - plane[:, :3], plane[:, 3:])
+        push = (e.wall_stiffness * np.maximum(-sd, 0.0))[:, None] * plane[:, 3:]
+        inner = np.where(over > 0, 1, 0)
+        out[np.arange(m), inner] += push
+    return out

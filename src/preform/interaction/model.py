@@ -27,9 +27,17 @@ Each step (``step``):
 Guide ring (paper §2.3): every yarn's ring point ``R(theta_r)`` sticks or slips across the ring
 with Amontons friction (``slide_rings``, the single ring-contact solver, after each step's solve:
 the ring point lags the yarn by a step), and the tension below it follows Capstan from the spool
-tension as the paper's eq. 9 writes it, ``f_spool = f exp(mu_r eta)`` (``_kernels/frontal.
-top_tensions``; the ring solver's default ``capstan_sign = -1``): the mandrel side carries the
-lower tension (the reverse sign stops the braid, ``docs/decisions-interaction.md``).
+tension by the direction the yarn's material slides over the ring (``_kernels/frontal.
+top_tensions``): towards the mandrel while the zone draws yarn from the spool, ``f = f_spool
+exp(mu_r eta)`` (the mandrel side higher); towards the spool while the carrier's tensioner takes
+yarn back, ``f = f_spool exp(-mu_r eta)`` (the paper's eq. 9 as written); in between the yarn
+sticks along the ring and holds its tension within that cone. The slide along the ring is the
+change, over the step, of the material coordinate at the ring point (``ring_material``: the
+highest crossing's material plus the top segment's material length); along and across the ring
+are one Coulomb cone (``_ring_flow``, ``_kernels/ring.py``): while the yarn slides along, it cannot
+stick across, and the Capstan exponent is scaled by the share of the slide that runs along.
+Explicit, like the ring point's transverse slip: the next step's solve uses this step's slide
+(``RingSettings.capstan``, ``stick_slide``).
 
 The numerical settings (deposit height, creation, staging, the snapshot's ring alternation and
 everything the solver uses) are an :class:`~preform.interaction.settings.InteractionSettings`,
@@ -55,6 +63,9 @@ from . import frontal
 from .ring import ring_arguments, ring_point
 from .settings import DEFAULT, InteractionSettings
 from .zone_state import ZoneState
+
+#: ``RingSettings.capstan`` -> the Capstan direction a yarn starts with (``_ring_flow``)
+CAPSTAN_MODES = {"flow": 0.0, "paper": -1.0, "drawn": 1.0}
 
 
 class MandrelDistance:
@@ -125,6 +136,12 @@ class InteractionZone:
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
         self.ring_anchor = None       # (2n,) rad, ring angles at the start of the last step
+        self.ring_capstan = None      # (2n,) in [-1, 1]: Capstan factor by the yarn's slide (_ring_flow)
+        self.ring_u = None            # (2n,) m, material coordinate at the ring point, last step
+        self.ring_s_long = None       # (2n,) m, slide along the ring in the last step (``_ring_flow``)
+        if self.settings.ring.capstan not in CAPSTAN_MODES:
+            raise ValueError(f"RingSettings.capstan = {self.settings.ring.capstan!r}: expected one "
+                             f"of {', '.join(map(repr, CAPSTAN_MODES))}")
 
     # -- interface --------------------------------------------------------------------------
     def start(self, t, F_machine, pose):
@@ -138,6 +155,11 @@ class InteractionZone:
         if self.machine.has_ring:    # ring points start at the carriers' azimuths
             self.ring_theta = np.arctan2(self.G_prev[:, 1], self.G_prev[:, 0])
             self.ring_anchor = self.ring_theta
+            # no yarn has slid over the ring yet: it sticks at the spool tension
+            self.ring_capstan = np.full(self.machine.n_yarns, CAPSTAN_MODES[
+                self.settings.ring.capstan])
+            self.ring_u = np.full(self.machine.n_yarns, np.nan)
+            self.ring_s_long = np.zeros(self.machine.n_yarns)
 
     def boundary(self, t, F_machine, ring_theta=None) -> frontal.Boundary:
         """The zone's boundary at time t: fell points F_machine, ring points at ``ring_theta``
@@ -148,10 +170,12 @@ class InteractionZone:
             top = ring_point(theta, m.ring_radius, m.supply_z)
         else:
             top = m.supply_points(t)
+        ring = dict(capstan=self.ring_capstan.astype(float), f_hold=np.array(self.f_top, float)) \
+            if m.has_ring and self.ring_capstan is not None else {}
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
                                 top=top, spool=m.spool_points(t),
                                 f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
-                                has_ring=bool(m.has_ring), h=self.h, width=self.width)
+                                has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
         t1 = t0 + dt
@@ -179,7 +203,13 @@ class InteractionZone:
         self.f_top = self.last_report.f_top
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
+            u = self.ring_material(st, bc)
+            if self.settings.ring.capstan == "flow":
+                du = u - self.ring_u
+                self.ring_s_long = np.where(np.isfinite(du), du, 0.0)
+            self.ring_u = u
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
+            self._ring_flow()
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
         for k, p in deposits:
@@ -268,7 +298,7 @@ class InteractionZone:
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
                                  where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
-        return _snapshot(st, bc, report.f_top, t, self.machine)
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def slide_rings(self, st, bc, theta):
         """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
@@ -280,12 +310,48 @@ class InteractionZone:
         A = np.array([self._top_point(k, bc.fell, st) for k in range(n)])
         out = ring_kernels.empty_out(n)
         status = np.empty(n, dtype=np.int64)
+        capstan, _ = bc.capstan_arguments()
+        # a yarn sticking along the ring holds the tension the solve left below it
+        hold = np.ascontiguousarray(self.f_top, dtype=float)
+        # sliding along the ring in this step, the yarn has one friction cone along and across
+        s_long = np.ascontiguousarray(np.abs(self.ring_s_long), dtype=float)
         ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
                                  self.machine.ring_radius, self.machine.supply_z,
-                                 np.asarray(theta, float), self.mu_r, -1.0,
+                                 np.asarray(theta, float), self.mu_r, capstan, hold, s_long,
                                  *ring_arguments(self.settings.ring), out, status)
         ok = status == ring_kernels.RING_OK
         return np.where(ok, out[:, ring_kernels.RING_OUT_THETA], theta)
+
+    def ring_material(self, st, bc) -> np.ndarray:
+        """(2n,) m: the material coordinate of every yarn at its ring point, its highest
+        crossing's (or fell point's) plus the top segment's material length at its tension,
+        ``l_top / (1 + f_top / EA)`` (``frontal.new_material``)."""
+        n = st.n_yarns
+        EA = frontal.axial_stiffness(self.f_spool, self.settings)
+        out = np.empty(n)
+        for k in range(n):
+            c = st.highest[k]
+            side = 0 if k < self.machine.n_per_group else 1
+            u = st.material[c, side] if c >= 0 else st.material_fell[k]
+            l = float(np.linalg.norm(bc.top[k] - self._top_point(k, bc.fell, st)))
+            out[k] = u + l / (1.0 + self.f_top[k] / EA)
+        return out
+
+    def _ring_flow(self):
+        """The Capstan factor of every yarn for the next step (``RingSettings.capstan``). "flow":
+        the yarn slid ``s = ring_s_long`` along the ring (positive: material from the spool side
+        arrived at the ring point, the yarn slides towards the mandrel) and ``r dtheta`` across
+        it in this step; one Coulomb cone opposes that slide, so the Capstan exponent is
+        ``sign(s) mu_r eta |s| / |(s, r dtheta)|`` (the factor ``ring_capstan``); below
+        ``stick_slide`` in all the yarn sticks (0: holding its tension within the cone)."""
+        rs = self.settings.ring
+        if rs.capstan != "flow":
+            return
+        s = self.ring_s_long
+        a = self.machine.ring_radius * np.abs(self.ring_theta - self.ring_anchor)
+        total = np.hypot(s, a)
+        self.ring_capstan = np.where(total > rs.stick_slide,
+                                     s / np.maximum(total, 1e-300), 0.0)
 
     # -- checkpoints ------------------------------------------------------------------------
     def export_state(self) -> dict:
@@ -305,7 +371,9 @@ class InteractionZone:
         if self.pose_end is not None:
             out.update(pose_R=self.pose_end.R, pose_t=self.pose_end.t)
         if self.ring_theta is not None:
-            out.update(ring_theta=self.ring_theta, ring_anchor=self.ring_anchor)
+            out.update(ring_theta=self.ring_theta, ring_anchor=self.ring_anchor,
+                       ring_capstan=self.ring_capstan, ring_u=self.ring_u,
+                       ring_s_long=self.ring_s_long)
         return {k: np.array(v) for k, v in out.items()}
 
     def import_state(self, arrays) -> None:
@@ -337,11 +405,19 @@ class InteractionZone:
                         t=plain.finite("pose_t", plain.take(arrays, "pose_t", (3,), f64)))
         if self.machine.has_ring != ("ring_theta" in arrays):
             raise ValueError("the ring angles do not match the machine's guide ring")
-        theta = anchor = None
+        theta = anchor = capstan = ring_u = s_long = None
         if self.machine.has_ring:
             theta = plain.finite("ring_theta", plain.take(arrays, "ring_theta", (ny,), f64))
             anchor = plain.finite("ring_anchor", plain.take(arrays, "ring_anchor", (ny,), f64))
+            capstan = plain.finite("ring_capstan", plain.take(arrays, "ring_capstan", (ny,), f64))
+            if np.any(np.abs(capstan) > 1.0):
+                raise ValueError("array 'ring_capstan' holds values outside [-1, +1]")
+            s_long = plain.finite("ring_s_long", plain.take(arrays, "ring_s_long", (ny,), f64))
+            # NaN: no step solved yet
+            ring_u = plain.finite("ring_u", plain.take(arrays, "ring_u", (ny,), f64),
+                                  allow_nan=True)
         self.ring_theta, self.ring_anchor = theta, anchor
+        self.ring_capstan, self.ring_u, self.ring_s_long = capstan, ring_u, s_long
         self.state, self.f_top, self.fell, self.fell_ref, self.G_prev = state, f_top, fell, fell_ref, G_prev
         self.lowest_uid_prev, self.t, self.step_index, self.staged = uid_prev, t, step_index, staged
         self.pending = [(float(tp), int(kx), int(ko), bool(o))
@@ -480,11 +556,18 @@ def creation_point(px, gx, po, go, lowest=0.0):
     return C, N
 
 
-def _snapshot(st, bc, f_top, t, machine) -> Snapshot:
+def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT) -> Snapshot:
+    """The zone as a :class:`Snapshot`: per yarn its fell point, its crossings' centerline
+    points, its ring point (guide ring) and its top point; ``external_force_N`` at a crossing's
+    points the jamming and wall forces (``frontal.point_forces``), at a ring point the ring's
+    contact force (normal and friction: the point is held by the ring, so it balances the two
+    tensions there), zero at the fell and spool points (held ends: their supports, the laid yarn
+    and the carrier, are outside the zone)."""
     n = machine.n_per_group
     ny = machine.n_yarns
     ring = machine.has_ring
-    points, offsets, tension, cid, slip = [], [0], [], [], []
+    ext_c = frontal.point_forces(st, bc, settings)
+    points, offsets, tension, cid, slip, ext = [], [0], [], [], [], []
     for k in range(ny):
         side = 0 if k < n else 1
         chain = st.chain(k)
@@ -492,18 +575,29 @@ def _snapshot(st, bc, f_top, t, machine) -> Snapshot:
         ten = [st.tension[c, side] for c in chain] + [f_top[k]]
         ids = [-1] + [int(st.uid[c]) for c in chain] + [-1]
         sl = [0] + [int(st.slip[c, side] != 0) for c in chain] + [0]
+        fx = [np.zeros(3)] + [ext_c[c, side] for c in chain] + [np.zeros(3)]
         if ring:
             pts.append(bc.spool[k])
             ten.append(bc.f_spool)
             ids.append(-1)
             sl.append(0)
+            fx.append(np.zeros(3))
+            below, at, above = pts[-3], pts[-2], pts[-1]
+            fx[-2] = -(f_top[k] * _unit(below - at) + bc.f_spool * _unit(above - at))
         points.extend(pts)
         tension.extend(ten)
         cid.extend(ids)
         slip.extend(sl)
+        ext.extend(fx)
         offsets.append(len(points))
     return Snapshot(time_s=float(t), points=np.array(points, dtype=float).reshape(-1, 3),
                     offsets=np.array(offsets, dtype=np.int64),
                     tension_N=np.array(tension, dtype=float),
                     contact_id=np.array(cid, dtype=np.int64),
-                    slip=np.array(slip, dtype=np.int8), group=machine.group.copy())
+                    slip=np.array(slip, dtype=np.int8), group=machine.group.copy(),
+                    external_force_N=np.array(ext, dtype=float).reshape(-1, 3))
+
+
+def _unit(v):
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.0 else np.zeros(3)

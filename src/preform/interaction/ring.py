@@ -6,11 +6,15 @@ Machine frame: the ring has radius ``r_ring`` about the z axis in the plane ``z 
 ``f_ext`` acts.
 
 * Capstan (eq. 9): ``f_int = f_ext exp(capstan_sign mu_r eta)``, ``eta`` the yarn's deflection at
-  ``R`` (``cos eta = -u_int . u_ext``, unit vectors ``R->A``, ``R->B``). The default
-  ``capstan_sign = -1`` is eq. 9 as the paper writes it, ``f_ext = f_int exp(mu_r eta)``: lower tension on
-  the mandrel side. That is the tension drop of a yarn sliding over the ring towards the supply; a yarn
-  fed from the spool towards the mandrel would carry the higher tension on the mandrel side
-  (``capstan_sign = +1``). The paper's choice is kept as the default; the frontal solver decides.
+  ``R`` (``cos eta = -u_int . u_ext``, unit vectors ``R->A``, ``R->B``), the sign from the direction
+  the yarn's material slides along the ring: ``+1`` towards the mandrel (drawn from the spool: the
+  mandrel side carries the higher tension), ``-1`` towards the spool (eq. 9 as the paper writes
+  it, ``f_ext = f_int exp(mu_r eta)``; the default of :func:`solve_ring`), ``0`` stick along the
+  ring: ``f_int = f_hold`` within the cone ``exp(-mu_r eta) <= f_int / f_ext <= exp(mu_r eta)``.
+  ``interaction/model.py`` takes the sign from the material flow over the ring.
+* While the yarn slides along the ring by ``s_long`` in the step, along and across are one
+  Coulomb cone (``_kernels/ring.py``): no stick across the ring, the transverse friction
+  ``mu_r r |dtheta| / |(s_long, r dtheta)|``.
 * Transverse stick/slip (eqs. 11-13): ``F_r = f_int u_int + f_ext u_ext``, ``F^t = F_r . t_r`` with
   ``t_r = (-sin theta_r, cos theta_r, 0)``, ``|F^n| = |F_r - F^t t_r|``; ``Psi_r = |F^t| - mu_r |F^n|``.
   Stick keeps ``theta_r``; slip moves ``R`` in the direction of ``F^t`` to the nearest ``Psi_r = 0``.
@@ -97,14 +101,17 @@ def _positive(name, value) -> float:
     return v
 
 
-def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1,
-               settings: RingSettings | None = None) -> RingSolution:
+def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1, f_hold=None,
+               s_long=0.0, settings: RingSettings | None = None) -> RingSolution:
     """Solve the yarn-ring contact (paper Fig. A.17: stick predictor, transverse slip corrector).
 
     A, B : (3,) float64, m, machine frame: fixed point and supply point. f_ext : N, spool tension.
     r_ring : m, ring radius; z_ring : m, ring plane. theta_prev : rad, the ring angle carried from the
-    previous step. mu_r : yarn-ring friction >= 0. capstan_sign : -1 (paper eq. 9) or +1 (module
-    docstring). settings: the root solve's tolerances (default ``RingSettings()``). Returns a
+    previous step. mu_r : yarn-ring friction >= 0. capstan_sign : -1 (paper eq. 9), +1 or 0 with
+    f_hold (N, the tension held below the ring while the yarn sticks along it; module docstring);
+    a fraction of +-1 where the slide along the ring is part of one across it. s_long : m, the
+    yarn's slide along the ring in the step (0: Amontons across the ring with mu_r; else one
+    Coulomb cone with that slide, ``_kernels.ring.transverse_friction``). settings: the root solve's tolerances (default ``RingSettings()``). Returns a
     :class:`RingSolution`; check ``.ok``.
     """
     a, b = as_vector("A", A), as_vector("B", B)
@@ -114,13 +121,19 @@ def solve_ring(A, B, f_ext, r_ring, z_ring, theta_prev, mu_r, *, capstan_sign=-1
     th = float(theta_prev)
     if not (np.isfinite(z) and np.isfinite(th)):
         raise ContactInputError(f"z_ring = {z_ring!r}, theta_prev = {theta_prev!r}: expected finite numbers")
-    if capstan_sign not in (-1, 1):
-        raise ContactInputError(f"capstan_sign = {capstan_sign!r}: expected -1 or +1")
+    if not (np.isfinite(capstan_sign) and -1 <= capstan_sign <= 1):
+        raise ContactInputError(f"capstan_sign = {capstan_sign!r}: expected a number in [-1, +1]")
+    if not (np.isfinite(s_long) and s_long >= 0.0):
+        raise ContactInputError(f"s_long = {s_long!r}: expected a finite number >= 0 (m)")
+    if capstan_sign == 0 and f_hold is None:
+        raise ContactInputError("capstan_sign = 0 (stick along the ring) needs f_hold, the tension "
+                                "held below the ring (N)")
+    hold = f if f_hold is None else _positive("f_hold", f_hold)
     out = np.zeros(ring_kernels.RING_OUT_SIZE)
     s = RingSettings() if settings is None else settings
     status = ring_kernels.solve_ring(a[0], a[1], a[2], b[0], b[1], b[2], f, r, z, th,
-                                     as_friction("mu_r", mu_r), float(capstan_sign),
-                                     *ring_arguments(s), out)
+                                     as_friction("mu_r", mu_r), float(capstan_sign), hold,
+                                     float(s_long), *ring_arguments(s), out)
     return RingSolution.from_row(out, status, f)
 
 

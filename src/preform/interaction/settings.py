@@ -161,6 +161,16 @@ class RingSettings:
     root_max_iter: int = 200
     #: root tolerance on Psi_r / (f_int + f_ext): double-precision round-off
     root_rel_tol: float = 1e-15
+    #: the Capstan law over the ring (``interaction/model.py``): "paper" f = f_spool exp(-mu_r eta)
+    #: always (eq. 9 as written; decoupled Amontons across the ring), the validated default;
+    #: "flow" by the yarn's slide over the ring in the last step (towards the mandrel: the
+    #: mandrel side higher; towards the spool: lower; stick in between, one Coulomb cone along
+    #: and across the ring); "drawn" exp(+mu_r eta) always. "flow" locks the ring points at
+    #: mu_r 0.6 and reads no slide once crossings exist (docs/decisions-solver2.md)
+    capstan: str = "paper"
+    #: m of yarn over the ring in a step below which the yarn sticks along the ring (holds its
+    #: tension within the Capstan cone): the friction creep of the crossings (friction_creep)
+    stick_slide: float = 1e-4
 
 
 @dataclass(frozen=True)

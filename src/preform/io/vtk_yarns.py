@@ -72,7 +72,8 @@ def snapshot_polydata(snapshot) -> pv.PolyData:
     """One line cell per segment between consecutive points of a yarn, yarn-major order.
 
     cell data ``tension_N`` (N), ``yarn_id``, ``group``; point data ``contact_id`` (-1: no yarn-yarn
-    contact), ``slip`` (0 stick, 1 slip); field data ``TimeValue`` (s). Machine frame, m.
+    contact), ``slip`` (0 stick, 1 slip), ``external_force_N`` (3, N: every force at the point other
+    than the yarns' tensions, ``result.Snapshot``); field data ``TimeValue`` (s). Machine frame, m.
     """
     points = np.asarray(snapshot.points, dtype=np.float64).reshape(-1, 3)
     m = len(points)
@@ -85,11 +86,14 @@ def snapshot_polydata(snapshot) -> pv.PolyData:
     _check_length("snapshot.tension_N (one per segment)", snapshot.tension_N, len(start))
     _check_length("snapshot.contact_id", snapshot.contact_id, m)
     _check_length("snapshot.slip", snapshot.slip, m)
+    external = snapshot.external_forces()
+    _check_length("snapshot.external_force_N", external, m)
     _check_length("snapshot.group", snapshot.group, len(offsets) - 1)
     lines = np.column_stack([np.full(len(start), 2), start, start + 1]).astype(np.int64).ravel()
     poly = pv.PolyData(points, lines=lines) if len(start) else pv.PolyData(points)
     poly.point_data["contact_id"] = np.asarray(snapshot.contact_id, dtype=np.int64)
     poly.point_data["slip"] = np.asarray(snapshot.slip, dtype=np.int8)
+    poly.point_data["external_force_N"] = external
     if len(start):
         yarn_id = yarn_of_point[start]
         poly.cell_data["tension_N"] = np.asarray(snapshot.tension_N, dtype=np.float64)

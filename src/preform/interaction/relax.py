@@ -1,0 +1,625 @@
+"""Force-density relaxation of one time step of the convergence zone (DESIGN.md §3.3; issue 14).
+
+What is solved
+--------------
+The same equations as the Newton reference (``interaction/frontal.py``, ``_kernels/frontal.
+assemble``): at every crossing the pair balance of both yarns' segment tensions, the jamming
+pushes and the mandrel wall; along every yarn the friction law at every crossing (the smoothed
+Coulomb term ``g |s - s_old|``, written here with ``s`` the material coordinates (the state's
+``material``), ``s_old`` the friction centres and ``g`` the friction bounds (``bound``), with the
+bounds and top tensions ``f_top`` held, or, with
+``RelaxSettings.consistent_bounds``, the bounds of the converged geometry itself); segments are
+stiff tows ``f = EA (l - q) / q`` of material length ``q``; thickness offsets of the yarn points
+(paper eq. 16). Only the wall differs: here it is an exact constraint (no crossing behind its
+tangent plane, a non-negative wall force), where Newton has a penalty of 1e7 N/m (its crossings
+sit up to f / 1e7 m behind the plane: ~1 um).
+
+How (one iteration, O(crossings))
+---------------------------------
+1. *Material sweep* (``_kernels.relax.material_sweep``): for the current positions, every yarn's
+   material coordinates solve its friction law exactly (a convex chain problem in the material
+   alone: tridiagonal Newton, O(crossings of the yarn)); a sticking yarn keeps its material at the
+   crossing within the friction creep, a slipping one sits on its discrete Capstan bound. This
+   gives the tensions.
+2. *Force densities* (Schek 1974): with ``w = f / l`` per segment, node balance ``sum_j w_cj (P_j -
+   P_c) = 0`` is linear in the positions, one scalar weighted Laplacian ``L`` of the crossing
+   lattice shared by x, y and z. The update is ``C <- C + L^-1 F(C)`` with ``F`` the net force: for
+   ``w`` the exact force densities this is the force-density solve itself; where a segment is
+   nearly slack or jammed ``w`` is floored and the jamming stiffness added (``forces``), which
+   keeps ``L`` positive definite and changes the iteration, not its fixed point ``F = 0``. ``L`` is
+   factorised every ``refactor_every`` iterations (LDL^T, QDLDL: Apache-2.0; the symbolic
+   analysis once per solve); in between the last factor serves.
+3. *Wall active set*: a crossing resting on its tangent plane is a Dirichlet row of ``L``; after
+   the free crossings moved it goes where its own balance puts it, projected onto the plane
+   (``wall_update``, a block Gauss-Seidel step), the wall taking the normal force. It leaves the
+   set when that point lies more than ``wall_release`` in front; a free crossing that lands more
+   than that behind its plane is projected onto it and joins.
+4. *Block-Jacobi corrections* (``block_jacobi``, ``smoothing`` of them): each crossing moves by
+   ``H_c^-1 F_c`` with its own 3 x 3 stiffness (the yarns' geometric stiffness ``(f/l)(I - d
+   d^T)`` and the jamming's ``k d d^T``), after a new material sweep: the scalar ``L`` gives a
+   segment the stiffness ``f / l`` along itself too, where a yarn has none, and the corrections
+   take the crossings along the soft directions ``L`` holds back. They vanish where ``F = 0``;
+   they stop for the rest of a solve that makes no progress with them (``stall_iterations``).
+5. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
+   eq. 17 (the minimum-residual combination of two iterates) in its general form. History is
+   cleared when the active set changes (the map changes).
+
+Convergence: the largest relative imbalance over the crossings (``wall_residual``: force over the
+sum of the four tensions; at a wall crossing its tangential part and any pull away from the
+wall) below ``tol``; the material equations hold to ``material_tol`` at every iterate. The
+iteration is not monotone in any merit. A step that does not reach ``tol`` in ``max_iter``
+(some steps where crossings must slide far stall) is solved by the Newton reference
+(``solve_zone``, ``newton_fallback``) or raises :class:`SimulationError`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._kernels import relax as RK
+from ..errors import SimulationError
+from .settings import DEFAULT, InteractionSettings
+
+try:    # permissive sparse LDL^T (Apache-2.0); SciPy's SuperLU otherwise
+    import qdldl
+except ImportError:     # pragma: no cover - qdldl is a dependency
+    qdldl = None
+
+
+#: steps solved by the Newton fallback since import (``solve_zone``), for benchmarks and tests
+FALLBACKS = [0]
+
+
+@dataclass(frozen=True)
+class RelaxSettings:
+    """Numerical settings of :func:`relax`. The model's constants (tow strain, friction creep,
+    jamming, ...) are not here: they come from the same
+    :class:`~preform.interaction.settings.InteractionSettings` the Newton reference uses, so that
+    both solve the same equations."""
+
+    #: largest relative imbalance at convergence: Newton's BALANCE_TOLERANCE (1e4 below the 1e-3
+    #: the snapshots must meet)
+    tol: float = 1e-7
+    #: iterations before the step is declared failed (a case A step takes 15-45; one that has
+    #: not converged by then stalls)
+    max_iter: int = 200
+    #: a step the relaxation does not converge on is solved by the Newton reference
+    #: (``solve_zone``; counted in ``FALLBACKS``) instead of stopping the run
+    newton_fallback: bool = True
+    #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
+    anderson_depth: int = 10
+    #: iterations between factorisations of the Laplacian: in between, the last factor
+    #: preconditions the update C <- C + L^-1 F(C) (same fixed point; ``bench_relax.py``)
+    refactor_every: int = 3
+    #: block-Jacobi corrections per iteration after the force-density solve (0: none)
+    smoothing: int = 2
+    #: their weight (damping) and the isotropic share of f / l added to each 3 x 3 block
+    smoothing_weight: float = 1.0
+    smoothing_reg: float = 0.05
+    #: iterations without a new lowest residual after which the block-Jacobi corrections stop
+    #: for the rest of the solve (a step converges in 15-45 iterations with them)
+    stall_iterations: int = 30
+    #: longest block-Jacobi move, as a fraction of the crossing's shortest segment
+    smoothing_cap: float = 0.1
+    #: relative change of the bounds between outer iterations below which consistent bounds
+    #: have converged (Newton's FRICTION_TOLERANCE)
+    friction_tol: float = 1e-6
+    #: iterate the friction bounds and ring top tensions to the converged geometry (issue 14
+    #: item 3: a step's result independent of its start) instead of holding the given ones
+    consistent_bounds: bool = False
+    #: outer (bound) iterations at most with consistent bounds; Newton's frontal loop needs
+    #: 16 on a 48-carrier case A step with friction 0.25
+    bound_iterations: int = 100
+    #: a crossing within this distance (m) of its tangent plane at the start rests on the wall
+    wall_contact: float = 1e-7
+    #: hysteresis of the wall's active set (m): a resting crossing leaves when its own balance
+    #: lies further than this in front of the plane, a free one joins when it is further behind
+    #: (a resting one may keep a pull below this times its stiffness); 10x below the 1 um the
+    #: wall must meet, and it keeps crossings at the threshold from joining and leaving in turn
+    wall_release: float = 1e-7
+    #: relative residual of the per-yarn material problems: 1e3 below the balance tolerance;
+    #: 1e-12 is below what the round-off of stiff tows (EA / q ~ 5e5 N/m) lets Newton reach
+    material_tol: float = 1e-10
+    #: Newton steps of one material sweep at most
+    material_newton: int = 60
+    #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
+    floor: float = 1e-3
+
+
+@dataclass
+class Lattice:
+    """Connectivity of the crossings (``zone_state.py``'s layout): yarn, low, up (m, 2) int64;
+    over (m,) float64; normal (m, 3) contact normals; lowest, highest (2n,) int64."""
+
+    yarn: np.ndarray
+    low: np.ndarray
+    up: np.ndarray
+    over: np.ndarray
+    normal: np.ndarray
+    lowest: np.ndarray
+    highest: np.ndarray
+
+    @property
+    def m(self):
+        return self.yarn.shape[0]
+
+    @property
+    def n_yarns(self):
+        return self.lowest.shape[0]
+
+
+@dataclass
+class RelaxResult:
+    """pos (m, 3), s (m, 2), tension (m, 2) N, bounds (m, 2) N (the newest: of the converged
+    geometry), psi (m, 2) Psi / (f_int + f_ext), f_top (2n,) N, wall_force (m,) N (>= 0),
+    active (m,) bool (resting on the wall); iterations, residual, history (residual per
+    iteration), bound_change (last relative change of the bounds; consistent bounds only),
+    set_changes (changes of the wall's active set), sweep_stats (Newton steps and energy
+    evaluations of the yarns' material problems, summed over yarns),
+    times (s per part: sweep, forces, factor, solve, wall, mix)."""
+
+    pos: np.ndarray
+    s: np.ndarray
+    tension: np.ndarray
+    bounds: np.ndarray
+    psi: np.ndarray
+    f_top: np.ndarray
+    wall_force: np.ndarray
+    active: np.ndarray
+    iterations: int
+    residual: float
+    history: np.ndarray
+    bound_change: float = 0.0
+    converged: bool = True
+    times: dict = field(default_factory=dict)
+    set_changes: int = 0
+    sweep_stats: tuple = (0, 0)
+
+
+class _Laplacian:
+    """The scalar Laplacian's fixed pattern (upper triangle, CSC) for a lattice, its slots and a
+    factorisation whose symbolic analysis is kept."""
+
+    def __init__(self, lat: Lattice):
+        m = lat.m
+        c = np.repeat(np.arange(m), 2)
+        lo = lat.low.ravel()
+        link = lo >= 0
+        r0 = np.concatenate([np.arange(m), np.minimum(c[link], lo[link])])
+        c0 = np.concatenate([np.arange(m), np.maximum(c[link], lo[link])])
+        key = c0 * m + r0
+        uniq, inv = np.unique(key, return_inverse=True)
+        self.nslots = uniq.size
+        self.slot_diag = inv[:m].astype(np.int64)
+        self.slot_below = np.full(2 * m, -1, dtype=np.int64)
+        self.slot_below[link] = inv[m:]
+        self.slot_below = self.slot_below.reshape(m, 2)
+        rows = (uniq % m).astype(np.int32)
+        cols = (uniq // m).astype(np.int64)
+        indptr = np.zeros(m + 1, dtype=np.int32)
+        np.add.at(indptr, cols + 1, 1)
+        indptr = np.cumsum(indptr).astype(np.int32)
+        self.vals = np.zeros(self.nslots)
+        self.A = sp.csc_matrix((self.vals.copy(), rows, indptr), shape=(m, m))
+        self.solver = None
+
+    def factor(self):
+        self.A.data[:] = self.vals
+        if qdldl is not None:
+            if self.solver is None:
+                self.solver = qdldl.Solver(self.A, upper=True)
+            else:
+                self.solver.update(self.A, upper=True)
+        else:       # pragma: no cover
+            from scipy.sparse.linalg import splu
+            full = self.A + sp.triu(self.A, 1).T
+            self.solver = splu(full.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                               options=dict(SymmetricMode=True), diag_pivot_thresh=0.0)
+
+    def solve(self, rhs, out):
+        for i in range(3):
+            out[:, i] = self.solver.solve(np.ascontiguousarray(rhs[:, i]))
+
+
+class _Anderson:
+    """Type-II Anderson mixing of a fixed-point map x -> G(x) (residual r = G(x) - x) over the
+    last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
+    paper's eq. 17 is the case of one difference). The least-squares problem goes through the
+    Gram matrix dR^T dR, kept up to date one column per iteration: O(N depth) a call."""
+
+    def __init__(self, depth):
+        self.depth = depth
+        self.reset()
+
+    def reset(self):
+        self.k = 0            # differences stored
+        self.head = 0         # next ring slot
+        self.x_prev = self.r_prev = None
+        self.DX = self.DR = None
+        self.G = np.zeros((self.depth, self.depth))
+
+    def __call__(self, x, gx):
+        r = gx - x
+        if self.depth <= 0:
+            return gx
+        if self.DX is None or self.DX.shape[1] != x.size:
+            self.DX = np.empty((self.depth, x.size))
+            self.DR = np.empty((self.depth, x.size))
+        if self.x_prev is not None:
+            j = self.head
+            np.subtract(x, self.x_prev, out=self.DX[j])
+            np.subtract(r, self.r_prev, out=self.DR[j])
+            self.head = (j + 1) % self.depth
+            self.k = min(self.k + 1, self.depth)
+            col = self.DR[: self.k] @ self.DR[j]
+            self.G[j, : self.k] = col
+            self.G[: self.k, j] = col
+        self.x_prev, self.r_prev = x.copy(), r.copy()
+        k = self.k
+        if k == 0:
+            return gx
+        G = self.G[:k, :k]
+        b = self.DR[:k] @ r
+        reg = 1e-12 * np.trace(G) + 1e-300
+        try:
+            gamma = np.linalg.solve(G + reg * np.eye(k), b)
+        except np.linalg.LinAlgError:
+            self.reset()
+            return gx
+        return gx - gamma @ self.DX[:k] - gamma @ self.DR[:k]
+
+
+def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
+          width, plane=None, settings: RelaxSettings = RelaxSettings(),
+          model: InteractionSettings = DEFAULT, top_tensions=None):
+    """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
+    (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
+    centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
+    (held unless ``settings.consistent_bounds``), f_spool N, mu, h m half the yarn thickness,
+    width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
+    normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
+    ``InteractionSettings``). top_tensions: with consistent bounds, a function of
+    the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
+    held. Returns a :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
+
+    Consistent bounds: an outer fixed point, as Newton's frontal loop (``frontal.solve_zone``):
+    the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
+    from its converged geometry and tensions, and the step is solved again from there until they
+    change by less than ``friction_tol`` relative to the tensions."""
+    res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, f_spool=f_spool,
+                      mu=mu, h=h, width=width, plane=plane, settings=settings, model=model)
+    if not settings.consistent_bounds or not res.converged:
+        return res
+    iterations, history, times = res.iterations, [res.history], dict(res.times)
+    m = lat.m
+    change = np.inf
+    for _ in range(settings.bound_iterations):
+        if top_tensions is not None:
+            f_top = np.asarray(top_tensions(res.pos), dtype=float)
+        change = _bound_change(lat, res.bounds, bounds, res.tension, res.f_top) if m else 0.0
+        if top_tensions is not None:
+            change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
+        if change < settings.friction_tol:
+            break
+        bounds = res.bounds
+        res = _relax_held(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+                          f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                          settings=settings, model=model)
+        iterations += res.iterations
+        history.append(res.history)
+        for key, v in res.times.items():
+            times[key] += v
+        if not res.converged:
+            break
+    res.iterations, res.history, res.times = iterations, np.concatenate(history), times
+    res.bound_change = change
+    res.converged = res.converged and change < settings.friction_tol
+    return res
+
+
+def _bound_change(lat, new, old, tension, f_top):
+    """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn."""
+    scale = np.empty_like(tension)
+    for side in range(2):
+        u = lat.up[:, side]
+        scale[:, side] = tension[:, side] + np.where(
+            u >= 0, tension[np.maximum(u, 0), side], f_top[lat.yarn[:, side]])
+    return float(np.max(np.abs(new - old) / np.maximum(scale, 1e-300)))
+
+
+def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
+                h, width, plane, settings, model):
+    """The iteration with the bounds and top tensions held (``relax``)."""
+    st = settings
+    e = model.energy
+    m, ny = lat.m, lat.n_yarns
+    EA = float(f_spool) / e.tow_strain
+    eps_f = model.frontal.friction_creep
+    kappa0 = e.kappa0
+    eps2 = e.length_smoothing
+    eps2_top = e.top_smoothing2
+    compression = e.compression
+    l_jam = float(width)
+    k_jam = e.jam_force * f_spool / max(l_jam, 1e-300)
+    times = dict(sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0, mix=0.0)
+    pos = np.array(pos, dtype=float)
+    s = np.array(s, dtype=float)
+    f_top = np.array(f_top, dtype=float)
+    g = np.array(bounds, dtype=float)
+    fell = np.ascontiguousarray(fell, dtype=float)
+    top = np.ascontiguousarray(top, dtype=float)
+    s_fell = np.ascontiguousarray(s_fell, dtype=float)
+    s_old = np.ascontiguousarray(s_old, dtype=float)
+    if plane is None:
+        plane = np.zeros((m, 6))
+        plane[:, 2] = -1e300
+        plane[:, 5] = 1.0
+        has_wall = False
+    else:
+        plane = np.ascontiguousarray(plane[:m], dtype=float)
+        has_wall = True
+    d_below = np.empty((m, 2, 3))
+    l_below = np.empty((m, 2))
+    d_top = np.empty((ny, 3))
+    l_top = np.empty(ny)
+    tension = np.empty((m, 2))
+    chain = np.empty(max(m, 1), dtype=np.int64)
+    work = np.empty((max(m, 1), 6))
+    force = np.empty((m, 3))
+    w_below = np.empty((m, 2))
+    w_top = np.empty(ny)
+    total = np.empty(m)
+    W = np.empty(m)
+    res_c = np.empty(m)
+    diag = np.empty(m)
+    delta = np.empty((m, 3))
+    H3 = np.empty((m, 3, 3))
+    lmin = np.empty(m)
+    wall_force = np.zeros(m)
+    dist = np.empty(m)
+    g_new = np.empty((m, 2))
+    psi = np.zeros((m, 2))
+    active = np.zeros(m, dtype=np.bool_)
+    if has_wall:
+        RK.wall_distance(m, pos, plane, dist)
+        active[:] = dist < st.wall_contact
+        behind = active & (dist < 0.0)
+        pos[behind] -= dist[behind, None] * plane[behind, 3:]
+    lap = _Laplacian(lat) if m else None
+    mixer = _Anderson(st.anderson_depth)
+    history = []
+    residual = np.inf
+    it = 0
+    converged = False
+    factored_active = None
+    set_changes = 0
+    stats = np.zeros(2, dtype=np.int64)
+    smoothing = st.smoothing
+    best, best_it = np.inf, 0
+    while True:
+        t0 = time.perf_counter()
+        RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
+                           fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
+        RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g, f_top,
+                          EA, compression, eps_f, kappa0, st.material_tol, st.material_newton,
+                          tension, chain, work, stats)
+        t1 = time.perf_counter()
+        RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
+                  f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
+        residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
+                    if m else 0.0)
+        RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
+                           float(mu), g_new, psi)
+        history.append(residual)
+        t2 = time.perf_counter()
+        times["sweep"] += t1 - t0
+        times["forces"] += t2 - t1
+        if residual < st.tol:
+            converged = True
+            break
+        # safeguard: the block-Jacobi corrections can undo the force-density move where the
+        # local model fails (a jammed crossing of the 48-carrier, friction 0.5 step: a fixed
+        # point of the composite map at residual 6e-2); without progress the iteration goes on
+        # without them
+        if residual < best:
+            best, best_it = residual, it
+        elif smoothing and it - best_it > st.stall_iterations:
+            smoothing = 0
+            mixer.reset()
+            best_it = it
+        if it >= st.max_iter:
+            break
+        it += 1
+        if (it - 1) % st.refactor_every == 0 or factored_active is None or not np.array_equal(
+                active, factored_active):
+            RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
+                                lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
+            lap.factor()
+            factored_active = active.copy()
+        t3 = time.perf_counter()
+        rhs = np.where(active[:, None], 0.0, force)
+        lap.solve(rhs, delta)
+        t4 = time.perf_counter()
+        changed = False
+        if has_wall:
+            delta[active] = 0.0
+            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane, active,
+                           st.wall_release, wall_force)
+            new = pos + delta
+            RK.wall_distance(m, new, plane, dist)
+            join = ~active & (dist < -st.wall_release)
+            leave = active & (dist > st.wall_release)
+            if join.any():
+                new[join] -= dist[join, None] * plane[join, 3:]
+            if join.any() or leave.any():
+                active = (active | join) & ~leave
+                changed = True
+                set_changes += 1
+        else:
+            new = pos + delta
+        t5 = time.perf_counter()
+        times["wall"] += t5 - t4
+        for _ in range(smoothing):
+            # block-Jacobi correction with each crossing's own anisotropic stiffness (the
+            # scalar Laplacian cannot tell a crossing's stiff and soft directions apart)
+            RK.segment_vectors(m, ny, lat.yarn, new, lat.normal, lat.over, lat.low,
+                               lat.highest, fell, top, h, eps2, eps2_top, d_below, l_below,
+                               d_top, l_top)
+            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
+                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
+                              st.material_newton, tension, chain, work, stats)
+            RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
+                      tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
+            RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
+                            f_top, l_jam, k_jam, st.floor, st.smoothing_reg, st.smoothing_cap,
+                            force, plane, active, H3, lmin, delta)
+            new += st.smoothing_weight * delta
+        t6 = time.perf_counter()
+        times["smooth"] += t6 - t5
+        t5 = t6
+        if changed:
+            mixer.reset()
+        pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
+        if has_wall:
+            # a combination of iterates on the planes stays on them; one that reaches behind
+            # a plane (Anderson's weights may be negative) is projected onto it and rests there
+            RK.wall_distance(m, pos, plane, dist)
+            behind = (dist < 0.0) & active | (dist < -st.wall_release)
+            if behind.any():
+                pos[behind] -= dist[behind, None] * plane[behind, 3:]
+                if (behind & ~active).any():
+                    active |= behind
+                    mixer.reset()
+                    set_changes += 1
+        times["factor"] += t3 - t2
+        times["solve"] += t4 - t3
+        times["mix"] += time.perf_counter() - t5
+    # the wall's push at the converged state: the normal pull of the yarns at resting crossings
+    fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
+    wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
+    return RelaxResult(pos=pos, s=s, tension=tension, bounds=g_new.copy(), psi=psi.copy(),
+                       f_top=f_top, wall_force=wall_force, active=active.copy(), iterations=it,
+                       residual=float(residual), history=np.array(history),
+                       converged=converged, times=times, set_changes=set_changes,
+                       sweep_stats=(int(stats[0]), int(stats[1])))
+
+
+# -- adapter from the zone's state ------------------------------------------------------------
+
+def lattice_of(state) -> Lattice:
+    """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
+    m = state.m
+    return Lattice(yarn=state.yarn[:m], low=state.low[:m], up=state.up[:m],
+                   over=state.over[:m], normal=state.normal[:m], lowest=state.lowest,
+                   highest=state.highest)
+
+
+def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
+    """(bounds (m, 2), f_top (2n,)) a step starts from, as ``frontal.solve_zone_inplace`` takes
+    them: each crossing's bound of the last step, a new crossing's of the start geometry with its
+    start tensions; the top tensions of the start geometry (guide ring: Capstan)."""
+    from .._kernels import frontal as FK
+    m, ny = state.m, state.n_yarns
+    lat = lattice_of(state)
+    f_top = np.empty(ny)
+    FK.top_tensions(ny, state.highest, state.pos, state.normal, state.over, bc.fell, bc.top,
+                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, *bc.capstan_arguments(),
+                    f_top)
+    d_below = np.empty((m, 2, 3))
+    l_below = np.empty((m, 2))
+    d_top = np.empty((ny, 3))
+    l_top = np.empty(ny)
+    e = model.energy
+    RK.segment_vectors(m, ny, lat.yarn, state.pos[:m], lat.normal, lat.over, lat.low,
+                       lat.highest, np.ascontiguousarray(bc.fell, dtype=float),
+                       np.ascontiguousarray(bc.top, dtype=float), bc.h, e.length_smoothing,
+                       e.top_smoothing2, d_below, l_below, d_top, l_top)
+    g0 = np.empty((m, 2))
+    psi = np.empty((m, 2))
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top,
+                       np.ascontiguousarray(state.tension[:m]), f_top, bc.mu, g0, psi)
+    old = state.bound[:m]
+    return np.where(np.isfinite(old), old, g0), f_top
+
+
+def ring_top_tensions(state, bc):
+    """Function of the positions giving the top tensions (guide ring: Capstan, eq. 9), for
+    consistent bounds; None without a ring (the spool tension)."""
+    if not bc.has_ring:
+        return None
+    from .._kernels import frontal as FK
+    ny = state.n_yarns
+    fell = np.ascontiguousarray(bc.fell, dtype=float)
+    capstan, f_hold = bc.capstan_arguments()
+
+    def f(pos):
+        out = np.empty(ny)
+        FK.top_tensions(ny, state.highest, pos, state.normal, state.over, fell, bc.top,
+                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, capstan, f_hold, out)
+        return out
+    return f
+
+
+def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", centre=None,
+               tol=None, friction_tol=None, max_iter=None,
+               relax_settings: RelaxSettings | None = None):
+    """The zone solver with ``frontal.solve_zone_inplace``'s contract (``InteractionZone``'s
+    ``solve_zone``; ``[model] solver = "relax"``): brings ``state`` to balance in place
+    (positions, material, tensions, friction bounds, slip states, friction offsets) and returns a
+    ``frontal.SolveReport`` (iterations: relaxation iterations; ``f_top``: the top tensions).
+
+    A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
+    held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
+    into ``state.bound`` for the next step. A call that asks for the frontal iteration of the
+    bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
+    to 1e-3) is Newton's (``frontal.solve_zone_inplace``), as is a step the relaxation does not
+    converge on within ``relax_settings.max_iter`` (``newton_fallback``, counted in
+    ``FALLBACKS``). ``tol``: the balance tolerance (default ``relax_settings.tol``).
+    :class:`SimulationError` if it does not converge and the fallback is off."""
+    from . import frontal
+    rs = RelaxSettings() if relax_settings is None else relax_settings
+    if max_iter is not None or friction_tol is not None:
+        return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
+                                          friction_tol=friction_tol, max_iter=max_iter,
+                                          where=where, centre=centre)
+    if tol is not None:
+        rs = dataclasses.replace(rs, tol=float(tol))
+    m = state.m
+    centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
+                       dtype=float)
+    bounds, ft = start_bounds(state, bc, settings)
+    if m == 0:
+        return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
+    res = relax(lattice_of(state), state.pos[:m], state.material[:m], state.material_fell,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
+                width=bc.width, plane=bc.plane, settings=rs, model=settings,
+                top_tensions=ring_top_tensions(state, bc))
+    if not res.converged:
+        if rs.newton_fallback:
+            # the relaxation stalls on some steps where new crossings slide far (16 carriers,
+            # friction 0.25: 1 step in 80): the Newton reference solves that step instead
+            report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
+                                                centre=centres)
+            FALLBACKS[0] += 1
+            return report
+        raise SimulationError(
+            f"the force-density solver of the yarn-interaction model did not converge {where}: "
+            f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
+            f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
+    fr = settings.frontal
+    state.pos[:m] = res.pos
+    state.material[:m] = res.s
+    state.tension[:m] = res.tension
+    state.bound[:m] = res.bounds
+    slide = res.s - centres
+    state.slip[:m] = np.where(np.abs(slide) > fr.slip_report, np.sign(slide), 0)
+    cap = fr.memory_cap
+    state.offset[:m] = np.clip(slide, -cap, cap)
+    return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
+                               res.history, res.f_top.copy(),
+                               lagged=not rs.consistent_bounds)
