@@ -124,7 +124,8 @@ def full(carriers, mu, length, step_factor=None):
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
                               machine=dataclasses.replace(cfg.machine, carriers=carriers),
                               yarn=dataclasses.replace(cfg.yarn, friction=mu),
-                              process=dataclasses.replace(cfg.process, braid_length=length),
+                              process=dataclasses.replace(cfg.process, braid_length=length,
+                                                          initial_position=0.4),
                               output=dataclasses.replace(cfg.output, snapshots=0))
     if step_factor is not None:
         kin = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="kinematic"))

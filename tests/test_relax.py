@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +43,6 @@ def _config(carriers, mu, solver="newton"):
         output=dataclasses.replace(cfg.output, snapshots=0))
 
 
-@functools.lru_cache(maxsize=None)
 def _stepper(carriers, mu, steps):
     cfg = _config(carriers, mu)
     mandrel, cl = load_geometry(cfg)
@@ -56,10 +54,23 @@ def _stepper(carriers, mu, steps):
     return s, speed
 
 
-def captured(carriers, mu, steps):
-    """(state, boundary with wall planes, f_top, friction centres) of the next step of a case A
-    run after ``steps`` steps, on copies."""
-    s, speed = _stepper(carriers, mu, steps)
+@pytest.fixture(scope="module")
+def captured():
+    """``captured(carriers, mu, steps)``: (state, boundary with wall planes, f_top, friction
+    centres) of the next step of a case A run after ``steps`` steps, on copies; the runs are
+    shared by the module's tests."""
+    runs = {}
+
+    def capture(carriers, mu, steps):
+        key = (carriers, mu, steps)
+        if key not in runs:
+            runs[key] = _stepper(carriers, mu, steps)
+        return _capture(*runs[key])
+
+    return capture
+
+
+def _capture(s, speed):
     t0, dt = s.clock.t, s.dt
     pose_end = s.pose(s.clock.travel + speed() * dt)
     z = copy.deepcopy(s.zone)
@@ -94,7 +105,7 @@ def _model_args(bc):
     return EA, k_jam
 
 
-def test_kernels_match_numpy_twins_and_the_newton_gradient():
+def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     """Segment lengths, the material sweep, net forces, the Laplacian and the friction bounds
     against the twins on a perturbed 16-carrier step (positions shaken by 2 mm, a jamming length
     that makes a third of the segments jam); the net force also against -dE/dC of the Newton energy
@@ -183,7 +194,7 @@ TIGHT = 1e-10
 @pytest.mark.parametrize("carriers, mu, steps", [(16, 0.0, 80), (16, 0.25, 80), (16, 0.5, 80),
                                                  (48, 0.0, 250), (48, 0.25, 250),
                                                  (48, 0.5, 250)])
-def test_step_lands_on_the_newton_solution(carriers, mu, steps):
+def test_step_lands_on_the_newton_solution(carriers, mu, steps, captured):
     """Same friction bounds held, same equations: the same state (positions within 1e-6 m,
     measured 1e-9 m), every crossing in balance to the tolerance."""
     st, bc, f_top, s_old = captured(carriers, mu, steps)
@@ -198,7 +209,7 @@ def test_step_lands_on_the_newton_solution(carriers, mu, steps):
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.25])
-def test_wall_is_exact_and_pushes(mu):
+def test_wall_is_exact_and_pushes(mu, captured):
     """Tangent planes moved out so that the lowest 15 % of the crossings would lie behind them:
     no crossing behind its plane by more than 1 um (here: round-off), the wall force
     non-negative and in balance with the yarns, and the state that of the Newton reference
@@ -225,7 +236,7 @@ def test_wall_is_exact_and_pushes(mu):
     assert np.abs(res.pos - ref.pos[:m]).max() < 2e-6
 
 
-def test_block_jacobi_matches_its_definition():
+def test_block_jacobi_matches_its_definition(captured):
     """``block_jacobi``: each move solves the crossing's own 3 x 3 system, built here from the
     twin's segments (geometric stiffness (f/l)(I - d d^T), jamming k d d^T, reg f/l I), and a
     crossing on the wall moves in its tangent plane, solving the system projected onto it."""
@@ -278,7 +289,7 @@ def test_block_jacobi_matches_its_definition():
 
 
 @pytest.mark.parametrize("smoothing, refactor_every", [(0, 1), (2, 3)])
-def test_settings_change_the_iteration_not_its_solution(smoothing, refactor_every):
+def test_settings_change_the_iteration_not_its_solution(smoothing, refactor_every, captured):
     """Without the block-Jacobi corrections and with a factorisation every iteration the
     relaxation lands on the same state (it changes the map, not its fixed point)."""
     st, bc, f_top, s_old = captured(48, 0.25, 250)

@@ -58,7 +58,7 @@ def test_case_a_runs_agree_with_newton(carriers, mu, tmp_path):
     cfg = dataclasses.replace(
         cfg, machine=dataclasses.replace(cfg.machine, carriers=carriers),
         yarn=dataclasses.replace(cfg.yarn, friction=mu),
-        process=dataclasses.replace(cfg.process, braid_length=0.4),
+        process=dataclasses.replace(cfg.process, braid_length=0.4, initial_position=0.4),
         output=dataclasses.replace(cfg.output, snapshots=3))
     newton, relax = _both(cfg)
     dH, dA = _compare(newton, relax)

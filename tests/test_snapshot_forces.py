@@ -40,7 +40,7 @@ def _case_a(carriers, width=4e-3, length=0.3, snapshots=4, mu=0.25):
         cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
         machine=dataclasses.replace(cfg.machine, carriers=carriers),
         yarn=dataclasses.replace(cfg.yarn, width=width, friction=mu),
-        process=dataclasses.replace(cfg.process, braid_length=length),
+        process=dataclasses.replace(cfg.process, braid_length=length, initial_position=0.4),
         output=dataclasses.replace(cfg.output, snapshots=snapshots))
 
 
