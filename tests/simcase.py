@@ -41,3 +41,57 @@ def make_config(stl, centerline="auto", *, stl_unit="m", carriers=16, spool_radi
         model=ModelConfig(kind="kinematic", time_step=time_step),
         output=OutputConfig(dir=Path(out) if out else Path("results"), snapshots=snapshots),
     )
+
+
+#: a small kinematic case on a 150 mm cylinder: 16 carriers on a 0.12 m spool circle, Ko's 60 deg
+CYLINDER_CASE = """
+[mandrel]
+stl = "{stl}"
+centerline = "{csv}"
+
+[machine]
+carriers = {carriers}
+spool_radius = 0.12
+angular_speed = 13.232
+
+[yarn]
+width = 4e-3
+thickness = 2.5e-4
+friction = {friction}
+{yarn_extra}
+
+[process]
+take_up_speed = 0.01
+initial_position = 0.08
+braid_length = {braid}
+
+[model]
+kind = "{kind}"
+{model_extra}
+
+[output]
+{out_line}
+snapshots = {snapshots}
+{output_extra}
+{extra}
+"""
+
+
+def write_cylinder_case(folder, *, name="case", length=0.3, kind="kinematic", friction=0.2,
+                        braid=0.06, carriers=16, snapshots=2, out=None, yarn_extra="",
+                        model_extra="", output_extra="", extra="", n_around=64) -> Path:
+    """A case file ``folder/<name>.toml`` on its own cylinder (radius 75 mm, ``length`` m) and
+    centerline; results in ``out`` (default: the config's default folder)."""
+    from preform.geometry import shapes
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    v, f = shapes.cylinder(0.075, length, n_around=n_around)
+    stl = write_stl(folder / "c.stl", v, f)
+    csv = write_centerline(folder / "c.csv", [[0, 0, 0], [0, 0, length]])
+    path = folder / f"{name}.toml"
+    path.write_text(CYLINDER_CASE.format(
+        stl=stl, csv=csv, carriers=carriers, friction=friction, yarn_extra=yarn_extra, braid=braid,
+        kind=kind, model_extra=model_extra, out_line="" if out is None else f'dir = "{out}"',
+        snapshots=snapshots, output_extra=output_extra, extra=extra))
+    return path

@@ -20,50 +20,11 @@ from preform.config import load_config
 from preform.geometry import shapes
 from preform.interaction.zone_state import ZoneState
 from preform.simulation import load_geometry, make_stepper
-from simcase import write_centerline, write_stl
-
-CASE = """
-[mandrel]
-stl = "{stl}"
-centerline = "{csv}"
-
-[machine]
-carriers = 16
-spool_radius = 0.12
-angular_speed = 13.232
-
-[yarn]
-width = 4e-3
-thickness = 2.5e-4
-friction = {friction}
-
-[process]
-take_up_speed = 0.01
-initial_position = 0.08
-braid_length = 0.06
-
-[model]
-kind = "{kind}"
-
-[output]
-dir = "{out}"
-snapshots = 2
-"""
-
-
-def _cylinder(folder, n_around=64):
-    v, f = shapes.cylinder(0.075, 0.3, n_around=n_around)
-    return (write_stl(folder / "c.stl", v, f),
-            write_centerline(folder / "c.csv", [[0, 0, 0], [0, 0, 0.3]]))
-
+from simcase import write_cylinder_case, write_stl
 
 def write_case(folder, kind="kinematic", friction=0.2, name="case"):
     """A case file in ``folder`` on its own copy of a cylinder; results in ``folder/<name>``."""
-    folder.mkdir(parents=True, exist_ok=True)
-    stl, csv = _cylinder(folder)
-    path = folder / f"{name}.toml"
-    path.write_text(CASE.format(stl=stl, csv=csv, friction=friction, kind=kind, out=folder / name))
-    return path
+    return write_cylinder_case(folder, name=name, kind=kind, friction=friction, out=Path(folder) / name)
 
 
 def make_checkpoint(folder, kind):

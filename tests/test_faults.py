@@ -16,44 +16,11 @@ import pytest
 
 import preform.io
 from preform.cli import CHECKPOINT, main
-from preform.geometry import shapes
-from simcase import write_centerline, write_stl
-
-CASE = """
-[mandrel]
-stl = "{stl}"
-centerline = "{csv}"
-[machine]
-carriers = 16
-spool_radius = 0.12
-angular_speed = 13.232
-[yarn]
-width = 4e-3
-thickness = 2.5e-4
-[process]
-take_up_speed = 0.01
-initial_position = 0.08
-braid_length = {braid}
-[model]
-kind = "kinematic"
-{model_extra}
-[output]
-snapshots = 2
-{output_extra}
-"""
-
+from simcase import write_cylinder_case
 
 def case(folder, braid=0.06, model_extra="", output_extra="", carriers=None):
-    folder.mkdir(parents=True, exist_ok=True)
-    v, f = shapes.cylinder(0.075, 0.6, n_around=64)
-    stl = write_stl(folder / "c.stl", v, f)
-    csv = write_centerline(folder / "c.csv", [[0, 0, 0], [0, 0, 0.6]])
-    text = CASE.format(stl=stl, csv=csv, braid=braid, model_extra=model_extra, output_extra=output_extra)
-    if carriers is not None:
-        text = text.replace("carriers = 16", f"carriers = {carriers}")
-    path = folder / "case.toml"
-    path.write_text(text)
-    return path
+    return write_cylinder_case(folder, length=0.6, braid=braid, carriers=carriers or 16, friction=0.0,
+                               model_extra=model_extra, output_extra=output_extra)
 
 
 def run(capsys, *args):

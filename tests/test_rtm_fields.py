@@ -77,37 +77,11 @@ def test_faces_without_yarn_are_no_preform(braided):
 
 
 def _case(folder, material):
-    from preform.geometry import shapes
-    from simcase import write_centerline, write_stl
+    from simcase import write_cylinder_case
 
-    folder.mkdir(parents=True, exist_ok=True)
-    v, f = shapes.cylinder(0.075, 0.4, n_around=64)
-    stl = write_stl(folder / "c.stl", v, f)
-    csv = write_centerline(folder / "c.csv", [[0, 0, 0], [0, 0, 0.4]])
-    extra = "linear_density_tex = 800.0\nfibre_density = 1780.0\nfibre_radius = 3.5e-6\n" if material else ""
-    path = folder / "case.toml"
-    path.write_text(f"""
-[mandrel]
-stl = "{stl}"
-centerline = "{csv}"
-[machine]
-carriers = 16
-spool_radius = 0.12
-angular_speed = 13.232
-[yarn]
-width = 4e-3
-thickness = 2.5e-4
-{extra}
-[process]
-take_up_speed = 0.01
-initial_position = 0.08
-braid_length = 0.08
-[rtm]
-cavity_thickness = 1e-4
-[output]
-snapshots = 0
-""")
-    return path
+    tow = "linear_density_tex = 800.0\nfibre_density = 1780.0\nfibre_radius = 3.5e-6" if material else ""
+    return write_cylinder_case(folder, length=0.4, braid=0.08, snapshots=0, friction=0.0,
+                               yarn_extra=tow, extra="[rtm]\ncavity_thickness = 1e-4")
 
 
 def test_preform_run_writes_the_rtm_files_with_tow_data_and_says_why_not_without(tmp_path, capsys):
