@@ -14,7 +14,7 @@ import pytest
 
 from preform.cli import main
 from preform.errors import ConfigError, PreformError
-from preform.sweep import ClusterSettings, load_sweep, read_sweep_csv, sweep
+from preform.sweeps import ClusterSettings, load_sweep, read_sweep_csv, sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = f"""
@@ -79,6 +79,13 @@ def test_a_point_equals_a_separate_preform_run(local_sweep, tmp_path):
         assert main(["run", str(point / "config.toml"), "--out", str(tmp_path / point.name),
                      "--no-progress"]) == 0
         assert (tmp_path / point.name / "history.csv").read_bytes() == (point / "history.csv").read_bytes()
+
+
+def test_pf_sweep_is_the_function_and_stays_so():
+    import preform as pf
+    import preform.sweeps  # noqa: F401 - importing the module must not replace pf.sweep
+
+    assert pf.sweep is sweep and callable(pf.sweep)
 
 
 def test_resume_runs_only_what_is_missing(local_sweep):

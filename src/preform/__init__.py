@@ -16,7 +16,7 @@ from .tolerances import Tolerances, tol
 
 #: the public names imported on first use (``__getattr__``)
 _LAZY = ("simulate", "map_to_surface", "SurfaceFields", "write_results", "load_mandrel", "Mandrel",
-         "Centerline", "CheckpointError")
+         "Centerline", "CheckpointError", "sweep", "design_speed")
 
 
 def __getattr__(name):
@@ -33,6 +33,10 @@ def __getattr__(name):
         value = getattr(geometry, name)
     elif name == "CheckpointError":
         from .checkpoint import CheckpointError as value
+    elif name == "sweep":   # the module is preform.sweeps, so this name stays the function
+        from .sweeps import sweep as value
+    elif name == "design_speed":
+        from .design import design_speed as value
     else:
         raise AttributeError(f"module 'preform' has no attribute {name!r}")
     globals()[name] = value
@@ -49,6 +53,8 @@ __all__ = [
     "simulate",
     "map_to_surface",
     "write_results",
+    "sweep",
+    "design_speed",
     "load_mandrel",
     "Config",
     "Result",

@@ -178,7 +178,7 @@ def cmd_mandrel_info(args) -> int:
 # ---------------------------------------------------------------- preform sweep
 
 def cmd_sweep(args) -> int:
-    from .sweep import SWEEP_CSV, load_sweep, sweep
+    from .sweeps import SWEEP_CSV, load_sweep, sweep
 
     spec = load_sweep(args.sweep)   # bad input fails here, before a cluster starts
     rows = sweep(args.sweep, scheduler=args.scheduler, workers=args.workers, resume=args.resume,

@@ -211,7 +211,7 @@ def write_design_config(config, design: Design, out) -> Path:
     Paths become absolute, so the file runs from wherever it is written."""
     from .config import dump_config
     from .io.atomic import atomic_write_text
-    from .sweep import toml_text
+    from .sweeps import toml_text
 
     data = dump_config(config)
     data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
