@@ -35,7 +35,11 @@ def reference(tmp_path_factory):
     folder = tmp_path_factory.mktemp("reference")
     config = case(folder)
     out = folder / "out"
-    assert main(["run", str(config), "--out", str(out), "--no-progress"]) == 0
+    old = os.umask(0o022)   # a usual user's: the files must come out 0644
+    try:
+        assert main(["run", str(config), "--out", str(out), "--no-progress"]) == 0
+    finally:
+        os.umask(old)
     names = sorted(p.relative_to(out).as_posix() for p in out.rglob("*"))
     return config, out, names
 
@@ -178,3 +182,21 @@ def test_the_summary_wall_time_is_the_commands_with_its_stages(reference):
     assert set(stages) == {"load_and_check", "simulate", "map", "write"}
     assert summary["wall_time_s"] == pytest.approx(sum(stages.values()))
     assert summary["wall_time_s"] > summary["simulation_wall_time_s"]
+
+
+def test_every_picture_of_a_run_is_drawn_and_readable_by_others(reference):
+    """Issue 16: every PNG non-blank and, under umask 022, readable by colleagues (0644)."""
+    import stat
+
+    import numpy as np
+    from PIL import Image
+
+    _, out, _ = reference
+    pngs = sorted((out / "plots").glob("*.png"))
+    assert {p.name for p in pngs} >= {"braid_angle.png", "convergence_length.png", "braided_mandrel.png",
+                                      "surface_map.png", "surface_braid_angle.png",
+                                      "surface_cover_factor.png", "surface_thickness.png"}
+    for p in pngs:
+        assert stat.S_IMODE(p.stat().st_mode) & 0o044 == 0o044, p.name
+        img = np.asarray(Image.open(p).convert("RGB")).reshape(-1, 3)
+        assert len(np.unique(img[:: max(1, len(img) // 20000)], axis=0)) > 20, p.name   # not blank
