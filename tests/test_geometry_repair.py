@@ -234,14 +234,14 @@ def test_two_bodies_are_refused_unless_one_is_chosen(sphere):
     v = np.vstack([sphere.vertices, sphere.vertices * 0.5 + [1.0, 0.0, 0.0]])
     f = np.vstack([sphere.faces + len(sphere.vertices), sphere.faces])   # the small one first
     with pytest.raises(MandrelError, match=r'two\.stl: 2 disjoint bodies \(0: 200 x 200 x 200 mm.*'
-                                           r'1: 100 x 100 x 100 mm.*body="largest"'):
+                                           r'1: 100 x 100 x 100 mm.*\[mandrel\] body = "largest"'):
         repair_mesh(v, f, source="two.stl")
     v2, f2, report = repair_mesh(v, f, body="largest")
     assert report.bodies == 2 and "largest of 2 bodies" in report.messages[-1]
     _assert_closed_outward(v2, f2, sphere.volume)
     v3, f3, _ = repair_mesh(v, f, body=1)
     _assert_closed_outward(v3, f3, sphere.volume / 8)
-    with pytest.raises(MandrelError, match="body=2 does not choose"):
+    with pytest.raises(MandrelError, match=r"\[mandrel\] body = 2 does not choose"):
         repair_mesh(v, f, body=2)
 
 

@@ -87,11 +87,35 @@ def test_open_surface_is_refused(cone):
 def test_two_bodies_refused_unless_largest_is_asked_for(cone):
     v = np.vstack([cone.vertices, cone.vertices * 0.5 + [1, 0, 0]])
     f = np.vstack([cone.faces, cone.faces + len(cone.vertices)])
-    with pytest.raises(MandrelError, match='2 disjoint bodies.*body="largest"'):
+    with pytest.raises(MandrelError, match=r'2 disjoint bodies.*\[mandrel\] body = "largest"'):
         repair_mesh(v, f, source="two.stl")
     v2, f2, report = repair_mesh(v, f, body="largest")
     assert "largest of 2 bodies" in report.messages[-1]
     _check_closed(v2, f2, cone.volume)
+
+
+def test_config_body_chooses_a_body_through_load_geometry(tmp_path, cone):
+    import dataclasses
+
+    from simcase import make_config, write_stl
+
+    from preform.simulation import load_geometry
+
+    v = np.vstack([cone.vertices, cone.vertices * 0.5 + [1, 0, 0]])
+    f = np.vstack([cone.faces + len(cone.vertices), cone.faces])     # the small body first
+    stl = write_stl(tmp_path / "two.stl", v, f)
+    cfg = make_config(stl)
+    with pytest.raises(MandrelError, match=r'2 disjoint bodies.*\[mandrel\] body = "largest" '
+                                           r'\(or body = <index>'):
+        load_geometry(cfg)
+    for body, volume in (("largest", cone.volume), (0, cone.volume), (1, cone.volume / 8)):
+        mc = dataclasses.replace(cfg.mandrel, body=body)
+        mandrel, centerline = load_geometry(dataclasses.replace(cfg, mandrel=mc))
+        assert mandrel.mesh.volume == pytest.approx(volume, rel=1e-6)   # the chosen body, exactly
+        assert mandrel.mesh.bounds[0, 0] > 0.5 if body == 1 else mandrel.mesh.bounds[1, 0] < 0.5
+    mc = dataclasses.replace(cfg.mandrel, body=2)
+    with pytest.raises(MandrelError, match=r"\[mandrel\] body = 2 does not choose.*from 0 to 1"):
+        load_geometry(dataclasses.replace(cfg, mandrel=mc))
 
 
 def test_non_manifold_is_refused(cone):

@@ -35,7 +35,7 @@ ZONES = {"kinematic": KinematicZone, "interaction": InteractionZone}
 def load_geometry(config):
     """(Mandrel, Centerline) of a config, in metres, mandrel frame."""
     mc = config.mandrel
-    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit)
+    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
     if isinstance(mc.centerline, str) and mc.centerline == "auto":
         centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
     else:

@@ -290,13 +290,18 @@ def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
-def load_mandrel(path, unit: str = "m") -> Mandrel:
-    """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres)."""
+def load_mandrel(path, unit: str = "m", body=None) -> Mandrel:
+    """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres).
+
+    body : which body of a multi-body STL is the mandrel (``[mandrel] body``): None (the STL must
+    be one body), "largest", or an index into the bodies by decreasing size (``repair_mesh``).
+    """
     if unit not in UNITS:
         raise MandrelError(f'[mandrel] stl_unit = "{unit}": expected "m" or "mm"')
     vertices, faces = read_stl(path)
     vertices = vertices * UNITS[unit]
     from .repair import repair_mesh   # repair imports this module: imported here, not at the top
 
-    vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit])
+    vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit],
+                                           body=body)
     return mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))

@@ -389,12 +389,12 @@ def _choose_body(V, F, component, body, say):
         for i, c in enumerate(ranking[:5])) + ("; ..." if n > 5 else "")
     if body is None:
         say.refuse(f'{n} disjoint bodies ({listing}), but a mandrel is one body',
-                   'remove the others in your CAD tool, or choose one with body="largest" '
-                   "(or body=<index> in this list)")
+                   'remove the others in your CAD tool, or choose one in the config with '
+                   '[mandrel] body = "largest" (or body = <index> in this list)')
     index = 0 if body == "largest" else body
     if not isinstance(index, (int, np.integer)) or isinstance(index, bool) or not 0 <= index < n:
-        say.refuse(f"body={body!r} does not choose one of the {n} disjoint bodies ({listing})",
-                   f'use body="largest" or an index from 0 to {n - 1}')
+        say.refuse(f"[mandrel] body = {body!r} does not choose one of the {n} disjoint bodies ({listing})",
+                   f'use body = "largest" or an index from 0 to {n - 1}')
     chosen = ranking[index]
     what = f"the largest of {n} bodies" if index == 0 else f"body {index} of {n}"
     say.change(f"kept {what} ({n_faces[chosen]:,} triangles; bodies by size: {listing})")
