@@ -165,7 +165,7 @@ def test_zero_area_cap_is_dropped_and_its_neighbour_split(sphere):
 
 def test_a_small_hole_is_filled(mesh):
     # two neighbouring faces; on the box one triangle of its smallest side (a triangle of a larger
-    # side covers more than SMALL_PATCH of the surface)
+    # side covers more than MAX_FILL_SHARE of the surface)
     gone = mesh.face_adjacency[0] if len(mesh.faces) > 12 else [np.argmin(mesh.area_faces)]
     f = np.delete(mesh.faces, gone, axis=0)
     v2, f2, report = repair_mesh(mesh.vertices, f)
@@ -214,7 +214,7 @@ def test_a_large_hole_is_refused_with_its_size(mesh):
     m = mesh
     top = m.face_normals[:, 2] > 0.5
     f = m.faces[~top]
-    with pytest.raises(MandrelError, match=r"^part\.stl: .*open surface: 1 boundary loop.*mm across") as exc:
+    with pytest.raises(MandrelError, match=r"^part\.stl: .*open surface: .*mm across") as exc:
         repair_mesh(m.vertices, f, source="part.stl")
     assert "CAD" in str(exc.value)
     assert len(mesh.faces[top]) > 0

@@ -9,8 +9,6 @@ the world axis least aligned with the tip tangent.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -174,7 +172,15 @@ def read_centerline_csv(path, unit: str = "m", roll_reference=None) -> Centerlin
     rows = []
     columns = [0, 1, 2]
     first = True
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    raw = path.read_bytes()
+    try:
+        text_all = raw.decode("utf-8-sig")      # a byte-order mark (Excel's "CSV UTF-8") is accepted
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise MandrelError(f"{path}: not a UTF-8 text CSV: byte 0x{raw[exc.start]:02x} at offset "
+                           f"{exc.start} (line {line}) is not UTF-8; expected a text file of x,y,z "
+                           "numbers (save it as CSV UTF-8 or plain text)") from None
+    for lineno, line in enumerate(text_all.splitlines(), start=1):
         text = line.strip()
         if not text or text.startswith("#"):
             continue
@@ -211,8 +217,8 @@ def _header_columns(names, default):
 def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
     """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv.
 
-    The file is written to a temporary name beside ``path`` and renamed over it, so an interrupted
-    write never leaves a half file. ``write_centerline_csv(centerline, path)`` (the older argument
+    The file is written atomically with the user's umask (``preform.io.atomic``): an interrupted
+    write never leaves a half file, and a symlink planted at ``path`` is replaced, never followed. ``write_centerline_csv(centerline, path)`` (the older argument
     order) is accepted too. perimeter is ``nan`` when the centerline has none.
     """
     if isinstance(path, Centerline):
@@ -224,15 +230,9 @@ def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
     lines = ["x,y,z,s,perimeter"]
     for p, s, q in zip(centerline.points * scale, centerline.s * scale, per * scale):
         lines.append(f"{p[0]:.9g},{p[1]:.9g},{p[2]:.9g},{s:.9g},{q:.9g}")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    from ..io.atomic import atomic_write_text   # imported here: preform.io loads matplotlib
+
+    return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 def _slab_index(mesh):

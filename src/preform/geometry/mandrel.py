@@ -272,6 +272,34 @@ def _check_closed(name, vertices, faces, neighbors, cross):
             "positive): the normals point into the mandrel; flip the normals of the STL")
 
 
+#: a binary STL: an 80-byte header, a uint32 triangle count, then 50 bytes per triangle
+STL_HEADER, STL_RECORD = 84, 50
+
+
+def _check_binary_size(path: Path) -> None:
+    """Refuse a binary STL whose size disagrees with its triangle count (cut short in a copy or a
+    download, or not an STL at all), with the expected and actual sizes; ASCII STLs pass."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(1024)
+    if head.lstrip().startswith(b"solid") and b"facet" in head:
+        if not (size >= STL_HEADER and STL_HEADER + STL_RECORD * int.from_bytes(head[80:84], "little") == size):
+            return                  # ASCII (a binary header may also start with "solid")
+    if size < STL_HEADER:
+        raise MandrelError(f"{path}: not a complete STL file: {size} bytes, shorter than the "
+                           f"{STL_HEADER}-byte header of a binary STL, and not ASCII STL text")
+    n = int.from_bytes(head[80:84], "little")
+    expected = STL_HEADER + STL_RECORD * n
+    if size < expected:
+        raise MandrelError(
+            f"{path}: truncated or corrupt binary STL: its header announces {n:,} triangles, which "
+            f"take {expected:,} bytes, but the file has {size:,} bytes "
+            f"({(size - STL_HEADER) // STL_RECORD:,} whole triangles); export or copy it again")
+    if n == 0:
+        raise MandrelError(f"{path}: binary STL with no triangles (its header announces 0, the file "
+                           f"has {size:,} bytes)")
+
+
 def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (merged duplicates) and faces of an STL, in the file's unit."""
     import trimesh
@@ -279,6 +307,7 @@ def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise MandrelError(f"mandrel STL not found: {path}")
+    _check_binary_size(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

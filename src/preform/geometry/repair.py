@@ -16,7 +16,9 @@
 7. fills small holes by ear clipping the loop in its mean plane, and refuses large ones (an open
    surface). Small: the loop spans at most ``SMALL_HOLE`` of the bounding-box diagonal, or it has
    at most ``FEW_EDGES`` edges (one or two missing triangles, which on a coarse CAD mesh may run the
-   whole length of the part) and its patch covers at most ``SMALL_PATCH`` of the surface area;
+   whole length of the part). No patch may cover more than ``MAX_FILL_SHARE`` of the surface,
+   whatever its span. The report names the largest fill: its triangles, its span and its share
+   of the surface;
 8. turns the winding outwards (signed volume > 0) and refuses a surface that encloses no volume;
 9. refuses self-intersections: an edge that pierces a triangle it does not belong to (one batched
    ray query, embree when installed). Coplanar overlaps are not detected.
@@ -40,10 +42,12 @@ from ..tolerances import tol
 
 #: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
 SMALL_HOLE = 0.05
-#: so are one or two missing triangles (a loop of at most this many edges) whose patch covers at
-#: most SMALL_PATCH of the surface area: on a coarse CAD mesh one triangle can span the whole part
+#: so are one or two missing triangles (a loop of at most this many edges): on a coarse CAD mesh one
+#: triangle can span the whole part
 FEW_EDGES = 4
-SMALL_PATCH = 0.05
+#: no fill may cover more than this share of the surface (the open mesh's area), whatever its span:
+#: 5 % is the end cap of a cylinder 4.5 diameters long (r / (2 L + 2 r)); more would invent the shape
+MAX_FILL_SHARE = 0.05
 #: a closed surface enclosing less than this times diagonal**3 encloses no volume (flat, folded)
 MIN_VOLUME = 1e-9
 
@@ -461,9 +465,20 @@ def _fill_small_holes(V, F, say):
     limit = SMALL_HOLE * _diagonal(V[np.unique(F)])
     patches = [None if loop is None else _triangulate_loop(V, loop[::-1]) for loop in loops]  # fills run against the loop
     surface = _area(V, F).sum()
-    small = [patch is not None and (span <= limit or (len(patch) <= FEW_EDGES - 2
-                                                      and _area(V, patch).sum() <= SMALL_PATCH * surface))
+    patch_area = np.array([np.inf if patch is None else _area(V, patch).sum() for patch in patches])
+    share = patch_area / surface
+    small = [patch is not None and (span <= limit or len(patch) <= FEW_EDGES - 2)
              for patch, span in zip(patches, spans)]
+    too_much = [ok and sh > MAX_FILL_SHARE for ok, sh in zip(small, share)]
+    if any(too_much):
+        worst = int(np.argmax(np.where(too_much, share, -1.0)))
+        k = len(patches[worst])
+        say.refuse(
+            f"the mesh is an open surface: a hole {_mm(spans[worst])} across, "
+            f"{say.where(V[loops[worst]].mean(axis=0))}, would need a patch of {k} triangle"
+            f"{'s' if k > 1 else ''} covering {100 * share[worst]:.1f} % of the surface (holes are "
+            f"filled up to {MAX_FILL_SHARE:.0%} of the surface)",
+            "a mandrel must be one closed solid: close (cap) it in your CAD tool and export it again")
     if not all(small):
         worst = int(np.argmax(np.where(small, -1.0, spans)))
         size = "an unclosed chain" if loops[worst] is None else _mm(spans[worst]) + " across"
@@ -473,8 +488,13 @@ def _fill_small_holes(V, F, say):
             f"large to fill, the largest {size}{place} (holes up to {SMALL_HOLE:.0%} of the mandrel's "
             f"size, {_mm(limit)}, and single missing triangles are filled automatically)",
             "a mandrel must be one closed solid: close (cap) it in your CAD tool and export it again")
-    say.change(f"filled {len(loops)} small hole{'s' if len(loops) > 1 else ''} "
-               f"(largest {_mm(spans.max())} across)")
+    big = int(np.argmax(patch_area))
+    k = len(patches[big])
+    what = "the hole" if len(loops) == 1 else "the largest"
+    wider = f"; the widest {_mm(spans.max())} across" if spans.max() > spans[big] else ""
+    say.change(f"filled {len(loops)} small hole{'s' if len(loops) > 1 else ''}: {what} with a patch of "
+               f"{k} triangle{'s' if k > 1 else ''} {_mm(spans[big])} across, covering "
+               f"{100 * share[big]:.2g} % of the surface{wider}")
     return np.vstack([F, *patches]), len(loops), float(spans.max())
 
 
