@@ -276,15 +276,20 @@ def _check_closed(name, vertices, faces, neighbors, cross):
 STL_HEADER, STL_RECORD = 84, 50
 
 
-def _check_binary_size(path: Path) -> None:
+#: one triangle record of a binary STL: normal, three corners (float32), attribute bytes
+_STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+
+
+def _check_binary_size(path: Path):
     """Refuse a binary STL whose size disagrees with its triangle count (cut short in a copy or a
-    download, or not an STL at all), with the expected and actual sizes; ASCII STLs pass."""
+    download, or not an STL at all), with the expected and actual sizes. Returns the triangle
+    count of a binary STL of exactly the announced size, None for ASCII STL (or longer files)."""
     size = path.stat().st_size
     with path.open("rb") as fh:
         head = fh.read(1024)
     if head.lstrip().startswith(b"solid") and b"facet" in head:
         if not (size >= STL_HEADER and STL_HEADER + STL_RECORD * int.from_bytes(head[80:84], "little") == size):
-            return                  # ASCII (a binary header may also start with "solid")
+            return None             # ASCII (a binary header may also start with "solid")
     if size < STL_HEADER:
         raise MandrelError(f"{path}: not a complete STL file: {size} bytes, shorter than the "
                            f"{STL_HEADER}-byte header of a binary STL, and not ASCII STL text")
@@ -298,16 +303,23 @@ def _check_binary_size(path: Path) -> None:
     if n == 0:
         raise MandrelError(f"{path}: binary STL with no triangles (its header announces 0, the file "
                            f"has {size:,} bytes)")
+    return n if size == expected else None
 
 
 def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (merged duplicates) and faces of an STL, in the file's unit."""
+    """Vertices and faces of an STL in the file's unit: the soup as stored, three corners per
+    triangle (``repair_mesh`` welds them). A binary STL is read directly, an ASCII one by trimesh."""
     import trimesh
 
     path = Path(path)
     if not path.is_file():
         raise MandrelError(f"mandrel STL not found: {path}")
-    _check_binary_size(path)
+    n = _check_binary_size(path)
+    if n is not None:   # binary: the records read directly (as trimesh reads them, 3x faster)
+        with path.open("rb") as fh:
+            fh.seek(STL_HEADER)
+            corners = np.fromfile(fh, dtype=_STL_RECORD, count=n)["corners"]
+        return corners.reshape(-1, 3).astype(np.float64), np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -129,10 +129,11 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     F, flipped = F[keep], flipped[keep]
 
     F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say)
-    if _signed_volume(V, F) < 0:
+    volume = _signed_volume(V, F)
+    if volume < 0:
         F = F[:, ::-1]
         flipped = ~flipped
-    _refuse_flat(V, F, say)
+    _refuse_flat(V, F, say, abs(volume))
     n_flipped = int(flipped.sum())
     counts["flipped_faces"] = n_flipped
     if n_flipped == len(flipped):
@@ -549,12 +550,13 @@ def _cross2(a, b):
 
 def _signed_volume(V, F):
     """Enclosed volume (m^3) of a closed mesh, positive when wound outwards (about its centre)."""
-    p = V[F] - V[F].reshape(-1, 3).mean(axis=0)
+    p = V[F]
+    p -= p.reshape(-1, 3).mean(axis=0)
     return float(np.einsum("ij,ij->", p[:, 0], np.cross(p[:, 1], p[:, 2]))) / 6.0
 
 
-def _refuse_flat(V, F, say):
-    volume = _signed_volume(V, F)
+def _refuse_flat(V, F, say, volume):
+    """volume: the outward-wound mesh's enclosed volume (m^3, ``_signed_volume``)."""
     diag = _diagonal(V[np.unique(F)])
     if volume <= MIN_VOLUME * diag**3:
         say.refuse(f"the closed surface encloses no volume ({volume:.3g} m^3 for a {_mm(diag)} wide mesh: "
