@@ -190,7 +190,7 @@ def _validated(vertices, faces, say):
     if F.min() < 0 or F.max() >= len(V):
         say.refuse(f"face indices run from {F.min()} to {F.max()} but there are {len(V)} vertices",
                    "check the mesh export")
-    if not np.all(np.isfinite(V)) and not np.all(np.isfinite(V[np.unique(F)])):
+    if not np.all(np.isfinite(V)) and not np.all(np.isfinite(V[_unique(F)])):
         say.refuse("some vertex coordinates are not finite (NaN or infinite)", "export the STL again")
     V, F = _compact(V, F)
     return V, F
@@ -463,7 +463,7 @@ def _fill_small_holes(V, F, say):
     if not loops:
         return F, 0, 0.0
     spans = np.array([np.inf if loop is None else _diagonal(V[loop]) for loop in loops])
-    limit = SMALL_HOLE * _diagonal(V[np.unique(F)])
+    limit = SMALL_HOLE * _diagonal(V[_unique(F)])
     patches = [None if loop is None else _triangulate_loop(V, loop[::-1]) for loop in loops]  # fills run against the loop
     surface = _area(V, F).sum()
     patch_area = np.array([np.inf if patch is None else _area(V, patch).sum() for patch in patches])
@@ -497,6 +497,18 @@ def _fill_small_holes(V, F, say):
                f"{k} triangle{'s' if k > 1 else ''} {_mm(spans[big])} across, covering "
                f"{100 * share[big]:.2g} % of the surface{wider}")
     return np.vstack([F, *patches]), len(loops), float(spans.max())
+
+
+def _unique(a):
+    """``np.unique(a)`` (sorted distinct values, flattened) of an integer array by one sort:
+    NumPy 2's hash-based unique takes 5.9 s on 6 M int64 keys where sorting takes 0.04 s."""
+    s = np.sort(np.asarray(a).reshape(-1))
+    if len(s) == 0:
+        return s
+    keep = np.empty(len(s), dtype=bool)
+    keep[0] = True
+    np.not_equal(s[1:], s[:-1], out=keep[1:])
+    return s[keep]
 
 
 def _area(V, F):
@@ -557,7 +569,7 @@ def _signed_volume(V, F):
 
 def _refuse_flat(V, F, say, volume):
     """volume: the outward-wound mesh's enclosed volume (m^3, ``_signed_volume``)."""
-    diag = _diagonal(V[np.unique(F)])
+    diag = _diagonal(V[_unique(F)])
     if volume <= MIN_VOLUME * diag**3:
         say.refuse(f"the closed surface encloses no volume ({volume:.3g} m^3 for a {_mm(diag)} wide mesh: "
                    "flat or folded onto itself)", "export the mandrel as a solid body")
@@ -587,7 +599,7 @@ def self_intersections(vertices, faces):
     centred = vertices - (vertices.max(axis=0) + vertices.min(axis=0)) / 2
     mesh = trimesh.Trimesh(centred, faces, process=False)
     n = np.int64(len(vertices))
-    key = np.unique(_edge_keys(faces, n))
+    key = _unique(_edge_keys(faces, n))
     e = np.stack([key // n, key % n], axis=1)
     a = centred[e[:, 0]]
     d = centred[e[:, 1]] - a
@@ -603,7 +615,7 @@ def self_intersections(vertices, faces):
         t = np.einsum("ij,ij->i", loc - a[ray], u[ray])
         inside = t < length[ray] - 2 * eps[ray]
         own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
-        return e[np.unique(ray[inside & ~own])]
+        return e[_unique(ray[inside & ~own])]
     base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(centred, axis=0))))
     plane_origins = centred[faces[:, 0]]
     plane_normals = mesh.face_normals
@@ -639,7 +651,7 @@ def self_intersections(vertices, faces):
         offset[dup_rays] *= 2.0
         origin[dup_rays] += u[dup_rays] * offset[dup_rays, None]
         live = np.concatenate([fresh[~pierce], dup_rays])
-    bad = np.unique(np.concatenate(bad)) if bad else np.zeros(0, dtype=np.int64)
+    bad = _unique(np.concatenate(bad)) if bad else np.zeros(0, dtype=np.int64)
     return e[bad]
 
 
