@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import preform
-from preform.cli import default_centerline_csv, main, summary_lines
+from preform.cli import main, summary_lines
 
 
 def test_version(capsys):
@@ -74,11 +74,6 @@ def test_mandrel_info_missing_stl(tmp_path, capsys):
 def test_mandrel_info_bad_unit_is_usage_error(tmp_path, capsys):
     assert main(["mandrel", "info", str(tmp_path / "x.stl"), "--unit", "inch"]) == 2
     assert "invalid choice: 'inch'" in capsys.readouterr().err
-
-
-def test_default_centerline_csv_never_the_shipped_one(tmp_path):
-    stl = tmp_path / "case_b.stl"
-    assert default_centerline_csv(stl) == tmp_path / "case_b_centerline_auto.csv"
 
 
 def test_interrupt_exit_code(monkeypatch, tmp_path, capsys):
@@ -283,14 +278,26 @@ def stubbed_geometry(tmp_path, monkeypatch):
     return stl, shipped, calls
 
 
-def test_mandrel_info_auto_writes_beside_not_over_shipped(stubbed_geometry, tmp_path, capsys):
+def test_mandrel_info_writes_no_csv_unless_asked(stubbed_geometry, tmp_path, capsys):
     stl, shipped, calls = stubbed_geometry
+    before = sorted(tmp_path.iterdir())
     assert main(["mandrel", "info", str(stl), "--unit", "mm"]) == 0
-    out = capsys.readouterr().out
-    assert "watertight: yes" in out and "case_b_centerline_auto.csv" in out
-    assert calls["info"] == (stl, "mm", "auto")
-    assert calls["csv"] == ("the centerline", tmp_path / "case_b_centerline_auto.csv", "mm")
+    assert "watertight: yes" in capsys.readouterr().out
+    assert calls["info"] == (stl, "mm", "auto") and "csv" not in calls
+    assert sorted(tmp_path.iterdir()) == before                 # nothing beside the STL
+    out = tmp_path / "sub" / "cl.csv"
+    (tmp_path / "sub").mkdir()
+    assert main(["mandrel", "info", str(stl), "--unit", "mm", "--csv", str(out)]) == 0
+    assert calls["csv"] == ("the centerline", out, "mm") and out.is_file()
     assert shipped.read_text() == "shipped\n"
+
+
+def test_mandrel_info_csv_into_a_missing_folder_is_an_error_line(stubbed_geometry, tmp_path, capsys):
+    stl, _, calls = stubbed_geometry
+    assert main(["mandrel", "info", str(stl), "--csv", str(tmp_path / "nowhere" / "cl.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --csv") and "nowhere" in err and "does not exist" in err
+    assert "info" not in calls                                  # refused before the work
 
 
 def test_mandrel_info_given_centerline_writes_no_csv(stubbed_geometry, capsys):

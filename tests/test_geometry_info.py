@@ -45,8 +45,9 @@ def test_mandrel_info_is_a_plain_dict_with_the_measures(cone_stl):
     assert poly * (0.08 - 2 * 0.0025 * 0.08) - 1e-9 <= d["perimeter_max"] <= poly * 0.08 + 1e-9
     assert d["perimeter_min_at"] < 0.01 and d["perimeter_max_at"] > 0.49
     text = format_mandrel_info(info)
-    assert "watertight" in text and "cone_mm.stl" in text and 'stl_unit = "mm"' in text
-    assert f"{d['perimeter_min'] * 1e3:.2f} mm" in text
+    assert "watertight" in text and "cone_mm.stl" in text and 'stl_unit = "mm"; lengths below in m' in text
+    assert f"min {d['perimeter_min']:.5f} m" in text and " mm" not in text    # one unit system
+    assert info.warnings == ()
 
 
 def test_mandrel_info_with_a_centerline_csv(cone_stl, tmp_path):

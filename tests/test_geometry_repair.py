@@ -165,7 +165,7 @@ def test_zero_area_cap_is_dropped_and_its_neighbour_split(sphere):
 
 def test_a_small_hole_is_filled(mesh):
     # two neighbouring faces; on the box one triangle of its smallest side (a triangle of a larger
-    # side covers more than SMALL_PATCH of the surface)
+    # side covers more than MAX_FILL_SHARE of the surface)
     gone = mesh.face_adjacency[0] if len(mesh.faces) > 12 else [np.argmin(mesh.area_faces)]
     f = np.delete(mesh.faces, gone, axis=0)
     v2, f2, report = repair_mesh(mesh.vertices, f)
@@ -214,7 +214,7 @@ def test_a_large_hole_is_refused_with_its_size(mesh):
     m = mesh
     top = m.face_normals[:, 2] > 0.5
     f = m.faces[~top]
-    with pytest.raises(MandrelError, match=r"^part\.stl: .*open surface: 1 boundary loop.*mm across") as exc:
+    with pytest.raises(MandrelError, match=r"^part\.stl: .*open surface: .*mm across") as exc:
         repair_mesh(m.vertices, f, source="part.stl")
     assert "CAD" in str(exc.value)
     assert len(mesh.faces[top]) > 0
@@ -234,14 +234,14 @@ def test_two_bodies_are_refused_unless_one_is_chosen(sphere):
     v = np.vstack([sphere.vertices, sphere.vertices * 0.5 + [1.0, 0.0, 0.0]])
     f = np.vstack([sphere.faces + len(sphere.vertices), sphere.faces])   # the small one first
     with pytest.raises(MandrelError, match=r'two\.stl: 2 disjoint bodies \(0: 200 x 200 x 200 mm.*'
-                                           r'1: 100 x 100 x 100 mm.*body="largest"'):
+                                           r'1: 100 x 100 x 100 mm.*\[mandrel\] body = "largest"'):
         repair_mesh(v, f, source="two.stl")
     v2, f2, report = repair_mesh(v, f, body="largest")
     assert report.bodies == 2 and "largest of 2 bodies" in report.messages[-1]
     _assert_closed_outward(v2, f2, sphere.volume)
     v3, f3, _ = repair_mesh(v, f, body=1)
     _assert_closed_outward(v3, f3, sphere.volume / 8)
-    with pytest.raises(MandrelError, match="body=2 does not choose"):
+    with pytest.raises(MandrelError, match=r"\[mandrel\] body = 2 does not choose"):
         repair_mesh(v, f, body=2)
 
 

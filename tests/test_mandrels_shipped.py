@@ -90,9 +90,9 @@ def test_mandrel_info_on_case_b(tmp_path, capsys):
     code = main(["mandrel", "info", str(MANDRELS / "case_b.stl"), "--csv", str(out)])
     printed = capsys.readouterr().out
     assert code == 0
-    match = re.search(r"perimeter\s+min ([\d.]+) mm, max ([\d.]+) mm", printed)
+    match = re.search(r"perimeter\s+min ([\d.]+) m, max ([\d.]+) m", printed)
     assert match, printed
-    low, high = float(match.group(1)), float(match.group(2))
+    low, high = float(match.group(1)) * 1e3, float(match.group(2)) * 1e3     # mm
     # the ends are the rounded square and the circle of the same perimeter (0.3342 m, sampled by
     # 128-gons); the linear blend of their points between 0.9 and 1.1 m dips about 1.3 % below
     exact = shapes.rounded_square_perimeter(0.09, 0.015) * 1e3

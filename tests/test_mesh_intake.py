@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -87,11 +90,35 @@ def test_open_surface_is_refused(cone):
 def test_two_bodies_refused_unless_largest_is_asked_for(cone):
     v = np.vstack([cone.vertices, cone.vertices * 0.5 + [1, 0, 0]])
     f = np.vstack([cone.faces, cone.faces + len(cone.vertices)])
-    with pytest.raises(MandrelError, match='2 disjoint bodies.*body="largest"'):
+    with pytest.raises(MandrelError, match=r'2 disjoint bodies.*\[mandrel\] body = "largest"'):
         repair_mesh(v, f, source="two.stl")
     v2, f2, report = repair_mesh(v, f, body="largest")
     assert "largest of 2 bodies" in report.messages[-1]
     _check_closed(v2, f2, cone.volume)
+
+
+def test_config_body_chooses_a_body_through_load_geometry(tmp_path, cone):
+    import dataclasses
+
+    from simcase import make_config, write_stl
+
+    from preform.simulation import load_geometry
+
+    v = np.vstack([cone.vertices, cone.vertices * 0.5 + [1, 0, 0]])
+    f = np.vstack([cone.faces + len(cone.vertices), cone.faces])     # the small body first
+    stl = write_stl(tmp_path / "two.stl", v, f)
+    cfg = make_config(stl)
+    with pytest.raises(MandrelError, match=r'2 disjoint bodies.*\[mandrel\] body = "largest" '
+                                           r'\(or body = <index>'):
+        load_geometry(cfg)
+    for body, volume in (("largest", cone.volume), (0, cone.volume), (1, cone.volume / 8)):
+        mc = dataclasses.replace(cfg.mandrel, body=body)
+        mandrel, centerline = load_geometry(dataclasses.replace(cfg, mandrel=mc))
+        assert mandrel.mesh.volume == pytest.approx(volume, rel=1e-6)   # the chosen body, exactly
+        assert mandrel.mesh.bounds[0, 0] > 0.5 if body == 1 else mandrel.mesh.bounds[1, 0] < 0.5
+    mc = dataclasses.replace(cfg.mandrel, body=2)
+    with pytest.raises(MandrelError, match=r"\[mandrel\] body = 2 does not choose.*from 0 to 1"):
+        load_geometry(dataclasses.replace(cfg, mandrel=mc))
 
 
 def test_non_manifold_is_refused(cone):
@@ -155,3 +182,97 @@ def test_shipped_mandrels_do_not_self_intersect():
     for stl in sorted((Path(__file__).resolve().parents[1] / "mandrels").glob("*.stl")):
         m = trimesh.load(stl)
         assert len(self_intersections(np.asarray(m.vertices), np.asarray(m.faces))) == 0, stl.name
+
+
+# ---------------------------------------------------------------- messages through `preform mandrel info`
+
+def test_truncated_binary_stl_is_said_with_both_sizes(tmp_path, cone, capsys):
+    stl = tmp_path / "cut.stl"
+    cone.export(stl)
+    data = stl.read_bytes()
+    n = len(cone.faces)
+    assert len(data) == 84 + 50 * n                            # binary STL as trimesh writes it
+    stl.write_bytes(data[:84 + 50 * (n // 2) + 17])             # cut inside a triangle record
+    assert main(["mandrel", "info", str(stl)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "Traceback" not in err
+    assert "truncated or corrupt binary STL" in err
+    assert f"{n:,} triangles" in err and f"{84 + 50 * n:,} bytes" in err
+    assert f"has {84 + 50 * (n // 2) + 17:,} bytes" in err and f"({n // 2:,} whole triangles)" in err
+    stl.write_bytes(data[:40])                                  # shorter than the header
+    assert main(["mandrel", "info", str(stl)]) == 2
+    assert "40 bytes, shorter than the 84-byte header" in capsys.readouterr().err
+
+
+def test_hole_fill_is_reported_with_its_triangles_and_share(tmp_path, cone, capsys):
+    f = np.delete(cone.faces, [10], axis=0)
+    stl = tmp_path / "holed.stl"
+    trimesh.Trimesh(cone.vertices, f, process=False).export(stl)
+    share = 100 * cone.area_faces[10] / (cone.area - cone.area_faces[10])
+    assert main(["mandrel", "info", str(stl)]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"repaired +filled 1 small hole: the hole with a patch of 1 triangle [\d.]+ mm "
+                     rf"across, covering {share:.2g} % of the surface", out), out
+
+
+def test_hole_fill_above_the_share_is_refused(tmp_path, capsys):
+    from preform.geometry.repair import MAX_FILL_SHARE
+
+    box = trimesh.creation.box(extents=(0.1, 0.2, 0.4))        # largest triangle: 14 % of the surface
+    big = int(np.argmax(box.area_faces))
+    stl = tmp_path / "open_box.stl"
+    trimesh.Trimesh(box.vertices, np.delete(box.faces, big, axis=0), process=False).export(stl)
+    share = 100 * box.area_faces[big] / (box.area - box.area_faces[big])
+    assert share > 100 * MAX_FILL_SHARE
+    assert main(["mandrel", "info", str(stl)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "open surface" in err
+    assert f"a patch of 1 triangle covering {share:.1f} % of the surface" in err
+    assert f"filled up to {MAX_FILL_SHARE:.0%} of the surface" in err
+
+
+def test_non_utf8_centerline_csv_is_an_error_line(tmp_path, cone, capsys):
+    stl = tmp_path / "cone.stl"
+    cone.export(stl)
+    csv = tmp_path / "cl.csv"
+    csv.write_bytes("x,y,z\n0,0,0\n0,0,0.5\n# m\xb2\n".encode("latin-1"))   # latin-1 superscript two
+    assert main(["mandrel", "info", str(stl), "--centerline", str(csv)]) == 2
+    err = capsys.readouterr().err
+    offset = len(b"x,y,z\n0,0,0\n0,0,0.5\n# m")
+    assert err.startswith(f"error: {csv}: not a UTF-8 text CSV: byte 0xb2 at offset {offset} (line 4)")
+    assert "Traceback" not in err
+    csv.write_bytes(b"\xef\xbb\xbfx,y,z\n0,0,0\n0,0,0.5\n")     # a byte-order mark is accepted
+    assert main(["mandrel", "info", str(stl), "--centerline", str(csv)]) == 0
+
+
+@pytest.mark.parametrize("scale, unit, hint", [(1e3, "m", "--unit mm"), (1.0, "mm", "--unit m")])
+def test_mandrel_info_warns_on_an_implausible_unit(tmp_path, cone, capsys, scale, unit, hint):
+    stl = tmp_path / "cone.stl"
+    trimesh.Trimesh(cone.vertices * scale, cone.faces, process=False).export(stl)
+    assert main(["mandrel", "info", str(stl), "--unit", unit]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"warning: read with unit '{unit}', the mandrel is ")
+    assert hint in captured.err
+    assert main(["mandrel", "info", str(stl), "--unit", {"m": "mm", "mm": "m"}[unit]]) == 0
+    assert "warning" not in capsys.readouterr().err             # the right unit: no warning
+
+
+def test_mandrel_info_writes_nothing_beside_a_read_only_stl(tmp_path, cone, capsys):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    stl = folder / "cone.stl"
+    cone.export(stl)
+    folder.chmod(0o555)
+    try:
+        assert main(["mandrel", "info", str(stl)]) == 0
+        assert sorted(p.name for p in folder.iterdir()) == ["cone.stl"]
+        # a CSV that cannot be written (here: a folder of that name; or a read-only folder for
+        # users who are not root) is an error line
+        code = main(["mandrel", "info", str(stl), "--csv", str(tmp_path)])
+        err = capsys.readouterr().err
+        assert code == 2 and err.startswith(f"error: --csv {tmp_path}: cannot write the centerline there")
+        if os.geteuid() != 0:                                   # root writes into read-only folders
+            assert main(["mandrel", "info", str(stl), "--csv", str(folder / "cl.csv")]) == 2
+            assert "cannot write the centerline there" in capsys.readouterr().err
+    finally:
+        folder.chmod(0o755)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .kinematic import smooth_normals
+from ._kernels import kinematic as K
 from .tolerances import tol
 
 
@@ -66,52 +66,48 @@ def braid_angle(direction, tangent, normal):
     return np.arccos(np.clip(c, 0.0, 1.0))
 
 
+def _c(a, dtype=np.float64):
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+def braid_angles_at(surface, centerline, points, faces, s, directions):
+    """Braid angle (rad) of directions (m, 3) at points (m, 3) on faces (m,) with centerline arc
+    lengths s (m,): ``braid_angle`` with the centerline tangent at s (``Centerline.frames_at``)
+    and the smooth normal, in one kernel pass (``_kernels.kinematic.braid_angles_batch``)."""
+    c = np.empty(len(points))
+    K.braid_cosines_batch(surface.V, surface.T, surface.CN, _c(centerline.s), _c(centerline.tangents),
+                          _c(points).reshape(-1, 3), _c(faces, np.int64), _c(s),
+                          _c(directions).reshape(-1, 3), c)
+    return np.arccos(np.clip(c, 0.0, 1.0))
+
+
 def laid_braid_angles(surface, project, centerline, points, face, offsets, mu,
-                      curvature_tol=tol.slip_curvature):
+                      curvature_tol=tol.slip_curvature, s=None):
     """Braid angle (deg) of the laid yarn at every point, and its slip tendency (bool).
 
     surface : kinematic.SurfaceArrays of the mandrel; project : CenterlineProjector
     points (m, 3) float64, m, mandrel frame; face (m,) int64; offsets (n_yarns + 1,) int64: yarn
-    ``k`` is ``points[offsets[k]:offsets[k + 1]]``; mu : yarn-mandrel friction coefficient.
+    ``k`` is ``points[offsets[k]:offsets[k + 1]]``; mu : yarn-mandrel friction coefficient;
+    s : the points' arc lengths when already known (else ``project(points)``).
 
     The laid direction at a point is the chord between its neighbours along the yarn (one-sided at
     the ends). Slip tendency (DESIGN.md §3.2): ``|kappa_g| > mu |kappa_n| + curvature_tol``, with
     the curvature vector from a three-point stencil and the normal curvature from the smooth
-    normal field.
+    normal field (kernel ``_kernels.kinematic.laid_yarn_angles``).
     """
     m = len(points)
-    angles = np.zeros(m)
     slip = np.zeros(m, dtype=bool)
     if m == 0:
-        return angles, slip
+        return np.zeros(m), slip
     prev_i = np.arange(m) - 1
     next_i = np.arange(m) + 1
     starts = offsets[:-1]
     ends = offsets[1:] - 1
     prev_i[starts] = starts
     next_i[ends] = ends
-    d = points[next_i] - points[prev_i]
-    s = project(points)
-    T = centerline.frames_at(s)[1]
-    n = smooth_normals(surface, face, points)
-    single = np.linalg.norm(d, axis=1) == 0
-    angles = np.degrees(braid_angle(np.where(single[:, None], T, d), T, n))
-    # curvatures (interior points with both neighbours distinct)
-    a = points[prev_i]
-    b = points[next_i]
-    l1 = np.linalg.norm(points - a, axis=1)
-    l2 = np.linalg.norm(b - points, axis=1)
-    ok = (l1 > 0) & (l2 > 0)
-    if np.any(ok):
-        t1 = (points[ok] - a[ok]) / l1[ok, None]
-        t2 = (b[ok] - points[ok]) / l2[ok, None]
-        tm = t1 + t2
-        tm /= np.maximum(np.linalg.norm(tm, axis=1), 1e-300)[:, None]
-        kvec = (t2 - t1) / (0.5 * (l1[ok] + l2[ok]))[:, None]
-        nn = n[ok]
-        kappa_g = np.einsum("ij,ij->i", kvec, np.cross(nn, tm))
-        na = smooth_normals(surface, face[prev_i][ok], a[ok])
-        nb = smooth_normals(surface, face[next_i][ok], b[ok])
-        kappa_n = np.einsum("ij,ij->i", nb - na, tm) / (l1[ok] + l2[ok])
-        slip[np.nonzero(ok)[0]] = np.abs(kappa_g) > mu * np.abs(kappa_n) + curvature_tol
-    return angles, slip
+    s = project(points) if s is None else s
+    c = np.empty(m)
+    K.laid_yarn_angles(surface.V, surface.T, surface.CN, _c(centerline.s), _c(centerline.tangents),
+                       _c(points), _c(face, np.int64), _c(s), prev_i, next_i, float(mu),
+                       float(curvature_tol), c, slip)
+    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0))), slip

@@ -154,24 +154,28 @@ def _existing_file(path, what) -> Path:
     return path
 
 
-def default_centerline_csv(stl: Path) -> Path:
-    """``<stem>_centerline_auto.csv`` next to the STL (never the shipped ``<stem>_centerline.csv``)."""
-    return stl.with_name(f"{stl.stem}_centerline_auto.csv")
-
-
 def cmd_mandrel_info(args) -> int:
+    """Measure an STL; print in metres (``format_mandrel_info``), warnings on stderr; write the
+    centerline CSV (in the STL's unit, as ``[mandrel] centerline`` reads it) only to ``--csv``."""
     stl = _existing_file(args.file, "mandrel STL")
-    auto = args.centerline == "auto"
-    centerline = "auto" if auto else _existing_file(args.centerline, "centerline CSV")
+    centerline = "auto" if args.centerline == "auto" else _existing_file(args.centerline, "centerline CSV")
+    csv = Path(args.csv).expanduser().absolute() if args.csv else None
+    if csv is not None and not csv.parent.is_dir():
+        raise MandrelError(f"--csv {args.csv}: the folder {csv.parent} does not exist")
     from .geometry import write_centerline_csv
     from .geometry.info import format_mandrel_info, mandrel_info
 
     info = mandrel_info(stl, unit=args.unit, centerline=centerline)
     print(format_mandrel_info(info))
-    csv = Path(args.csv).expanduser().resolve() if args.csv else (default_centerline_csv(stl) if auto else None)
+    for text in getattr(info, "warnings", ()):
+        print(f"warning: {text}", file=sys.stderr)
     if csv is not None:
-        write_centerline_csv(info.centerline, csv, unit=args.unit)
-        print(f"centerline written to {csv}")
+        try:
+            write_centerline_csv(info.centerline, csv, unit=args.unit)
+        except OSError as err:
+            raise MandrelError(f"--csv {csv}: cannot write the centerline there "
+                               f"({err.strerror or err})") from None
+        print(f"centerline written to {csv} (in {args.unit}, the STL's unit)")
     return EXIT_DONE
 
 
@@ -285,8 +289,8 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--centerline", default="auto", metavar="auto|CSV",
                       help="derive the centerline (auto, default) or read it from a CSV")
     info.add_argument("--csv", metavar="OUT",
-                      help="write the centerline here (default with auto: <stem>_centerline_auto.csv "
-                           "next to the STL)")
+                      help="also write the centerline (x,y,z,s,perimeter in the STL's unit, readable "
+                           "as [mandrel] centerline) to this file; nothing is written without it")
     info.set_defaults(func=cmd_mandrel_info)
     return parser
 

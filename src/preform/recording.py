@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import plain
-from .analysis import braid_angle, laid_braid_angles
-from .kinematic import smooth_normals
+from .analysis import braid_angles_at, laid_braid_angles
 from .result import FLAG_SLIP, HISTORY_COLUMNS, Snapshot, YarnPaths
 
 #: columns of Recording.rows: time, H mean, H min, H max, contacts, iterations, residual
@@ -110,12 +109,13 @@ class Recording:
                 self.laid[name].append(value)
 
     # -- packing ------------------------------------------------------------------------------
-    def yarn_paths(self, surface, project, centerline, group, mu, curvature_tol) -> YarnPaths:
+    def yarn_paths(self, surface, project, centerline, group, mu, curvature_tol, fell_s=None) -> YarnPaths:
         """Deposited yarn per yarn: its tie point, then per step the points laid inside the step
         in order and its end point, with the braid angle and slip tendency of the laid yarn
         (``analysis.laid_braid_angles``; surface: kinematic.SurfaceArrays, project:
         analysis.CenterlineProjector, group (ny,) 0 warp 1 weft, mu: yarn-mandrel friction,
-        curvature_tol: ``Tolerances.slip_curvature``)."""
+        curvature_tol: ``Tolerances.slip_curvature``; fell_s: the fell points' arc lengths
+        (steps, ny) from ``history``, so that only the points laid inside steps are projected)."""
         ny = self.n_yarns
         fell, face = self.fell.array, self.face.array
         step_i, k = np.nonzero(self.moved.array)        # step-major, yarns ascending
@@ -131,8 +131,12 @@ class Recording:
         flags = np.concatenate([np.zeros(ny, dtype=np.uint8), self.end_flag.array[step_i, k],
                                 laid["flag"]])[sort].astype(np.uint8)
         offsets = np.searchsorted(yarn[sort], np.arange(ny + 1)).astype(np.int64)
+        if fell_s is None:
+            fell_s = project(fell.reshape(-1, 3)).reshape(fell.shape[:2])
+        laid_s = project(laid["point"]) if len(laid["point"]) else np.zeros(0)
+        s = np.concatenate([fell_s[0], fell_s[step_i + 1, k], laid_s])[sort]
         angles, slip = laid_braid_angles(surface, project, centerline, points, faces, offsets, mu,
-                                         curvature_tol)
+                                         curvature_tol, s=s)
         flags = flags | np.where(slip, FLAG_SLIP, 0).astype(np.uint8)
         return YarnPaths(points=points, offsets=offsets, time_s=times, braid_angle_deg=angles,
                          face=faces, flags=flags, group=np.asarray(group).astype(np.int8))
@@ -144,10 +148,8 @@ class Recording:
         steps, ny, _ = fell.shape
         flat_fell = fell.reshape(-1, 3)
         s = project(flat_fell)
-        T = centerline.frames_at(s)[1]
-        faces = self.face.array.reshape(-1)
-        n = smooth_normals(surface, faces, flat_fell)
-        alpha = braid_angle(self.lay_dir.array.reshape(-1, 3), T, n).reshape(steps, ny)
+        alpha = braid_angles_at(surface, centerline, flat_fell, self.face.array.reshape(-1), s,
+                                self.lay_dir.array.reshape(-1, 3)).reshape(steps, ny)
         rows = self.rows.array.copy()
         history = {
             "time_s": rows[:, 0],

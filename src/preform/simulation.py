@@ -39,7 +39,7 @@ SOLVERS = {"newton": None, "relax": relax.solve_zone}
 def load_geometry(config):
     """(Mandrel, Centerline) of a config, in metres, mandrel frame."""
     mc = config.mandrel
-    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit)
+    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
     if isinstance(mc.centerline, str) and mc.centerline == "auto":
         centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
     else:

@@ -262,9 +262,9 @@ class Stepper:
         rec = self.recording
         surface = self.depositor.surface
         group = self.machine.group
-        yarns = rec.yarn_paths(surface, self.project, self.centerline, group,
-                               mandrel_friction(self.config), self.tolerances.slip_curvature)
         history, fell_s = rec.history(surface, self.project, self.centerline, group)
+        yarns = rec.yarn_paths(surface, self.project, self.centerline, group,
+                               mandrel_friction(self.config), self.tolerances.slip_curvature, fell_s=fell_s)
         return Result(config=self.config, mandrel=self.mandrel, centerline=self.centerline,
                       yarns=yarns, history=history, snapshots=list(rec.snapshots), fell_s=fell_s,
                       convergence_length=rec.H.array.copy(), status=status, message=message,

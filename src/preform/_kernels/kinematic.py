@@ -277,3 +277,128 @@ def smooth_normals_batch(V, T, CN, faces, points, out):
         out[i, 0] = nx
         out[i, 1] = ny
         out[i, 2] = nz
+
+
+# ---------------------------------------------------------------- braid angles of laid yarn
+# Post-processing of a run (``preform.analysis``): per point, the centerline tangent at its arc
+# length s (linear blend of the polyline's vertex tangents, as ``Centerline.frames_at``), the
+# smooth normal n, and the braid angle between a direction d and t, both projected on the tangent
+# plane: alpha = arccos(|d_p . t_p| / (|d_p| |t_p|)); the kernels give the cosine, NumPy takes the
+# arccos (its vectorised arccos and libm's differ in the last bit). The operations follow the NumPy
+# reference (``tests/naive_analysis.py``) in order, so the results agree to the last bit.
+
+
+@njit(cache=True)
+def centerline_tangent(S, CT, s):
+    """Unit tangent at arc length s of a polyline with arc lengths S (n,), vertex tangents CT (n, 3)."""
+    n = S.shape[0]
+    lo = 0
+    hi = n
+    while lo < hi:                      # searchsorted(S, s, side="right")
+        mid = (lo + hi) // 2
+        if S[mid] <= s:
+            lo = mid + 1
+        else:
+            hi = mid
+    i = min(max(lo - 1, 0), n - 2)
+    u = (s - S[i]) / (S[i + 1] - S[i])
+    w = min(max(u, 0.0), 1.0)
+    tx = (1 - w) * CT[i, 0] + w * CT[i + 1, 0]
+    ty = (1 - w) * CT[i, 1] + w * CT[i + 1, 1]
+    tz = (1 - w) * CT[i, 2] + w * CT[i + 1, 2]
+    tn = np.sqrt(tx * tx + ty * ty + tz * tz)
+    return tx / tn, ty / tn, tz / tn
+
+
+@njit(cache=True)
+def braid_angle_cos(dx, dy, dz, tx, ty, tz, nx, ny, nz):
+    """cos of the braid angle, |d_p . t_p| / (|d_p| |t_p|) (1 where either projection vanishes
+    gives 0), of direction d against tangent t, both projected normal to n."""
+    dn = dx * nx + dy * ny + dz * nz
+    px = dx - dn * nx
+    py = dy - dn * ny
+    pz = dz - dn * nz
+    tdn = tx * nx + ty * ny + tz * nz
+    qx = tx - tdn * nx
+    qy = ty - tdn * ny
+    qz = tz - tdn * nz
+    pl = np.sqrt(px * px + py * py + pz * pz)
+    ql = np.sqrt(qx * qx + qy * qy + qz * qz)
+    den = pl * ql
+    if not den > 0:
+        den = 1.0
+    return abs(px * qx + py * qy + pz * qz) / den
+
+
+@njit(cache=True)
+def braid_cosines_batch(V, T, CN, S, CT, points, faces, s, directions, out):
+    """cos of the braid angle (``braid_angle_cos``) at points (m, 3) on faces (m,) with arc
+    lengths s (m,) of directions (m, 3) against the centerline tangent, into out (m,)."""
+    for i in range(points.shape[0]):
+        tx, ty, tz = centerline_tangent(S, CT, s[i])
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
+        out[i] = braid_angle_cos(directions[i, 0], directions[i, 1], directions[i, 2],
+                                 tx, ty, tz, nx, ny, nz)
+
+
+@njit(cache=True)
+def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curvature_tol,
+                     cosines, slip):
+    """cos of the braid angle and slip tendency of laid yarn (``analysis.laid_braid_angles``).
+
+    points (m, 3), faces (m,), s (m,) arc lengths; prev_i / next_i (m,) the neighbours along the
+    yarn (the point itself at the ends). Direction: the chord points[next] - points[prev], or the
+    centerline tangent where it is zero. Slip: |kappa_g| > mu |kappa_n| + curvature_tol with
+    kvec = (t2 - t1) / ((l1 + l2) / 2), kappa_g = kvec . (n x tm), kappa_n = (n_b - n_a) . tm /
+    (l1 + l2), tm the unit mean of the chord directions t1, t2 (points with l1, l2 > 0 only).
+    """
+    for i in range(points.shape[0]):
+        a = prev_i[i]
+        b = next_i[i]
+        px = points[i, 0]
+        py = points[i, 1]
+        pz = points[i, 2]
+        dx = points[b, 0] - points[a, 0]
+        dy = points[b, 1] - points[a, 1]
+        dz = points[b, 2] - points[a, 2]
+        tx, ty, tz = centerline_tangent(S, CT, s[i])
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], px, py, pz)
+        if np.sqrt(dx * dx + dy * dy + dz * dz) == 0:
+            dx, dy, dz = tx, ty, tz
+        cosines[i] = braid_angle_cos(dx, dy, dz, tx, ty, tz, nx, ny, nz)
+        e1x = px - points[a, 0]
+        e1y = py - points[a, 1]
+        e1z = pz - points[a, 2]
+        e2x = points[b, 0] - px
+        e2y = points[b, 1] - py
+        e2z = points[b, 2] - pz
+        l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+        l2 = np.sqrt(e2x * e2x + e2y * e2y + e2z * e2z)
+        slip[i] = False
+        if not (l1 > 0 and l2 > 0):
+            continue
+        t1x = e1x / l1
+        t1y = e1y / l1
+        t1z = e1z / l1
+        t2x = e2x / l2
+        t2y = e2y / l2
+        t2z = e2z / l2
+        mx = t1x + t2x
+        my = t1y + t2y
+        mz = t1z + t2z
+        ml = max(np.sqrt(mx * mx + my * my + mz * mz), 1e-300)
+        mx /= ml
+        my /= ml
+        mz /= ml
+        half = 0.5 * (l1 + l2)
+        kx = (t2x - t1x) / half
+        ky = (t2y - t1y) / half
+        kz = (t2z - t1z) / half
+        cx = ny * mz - nz * my
+        cy = nz * mx - nx * mz
+        cz = nx * my - ny * mx
+        kappa_g = kx * cx + ky * cy + kz * cz
+        nax, nay, naz = smooth_normal(V, T, CN, faces[a], points[a, 0], points[a, 1], points[a, 2])
+        nbx, nby, nbz = smooth_normal(V, T, CN, faces[b], points[b, 0], points[b, 1], points[b, 2])
+        kappa_n = ((nbx - nax) * mx + (nby - nay) * my + (nbz - naz) * mz) / (l1 + l2)
+        slip[i] = abs(kappa_g) > mu * abs(kappa_n) + curvature_tol

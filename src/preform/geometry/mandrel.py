@@ -333,13 +333,54 @@ def _check_closed(name, vertices, faces, neighbors, cross):
             "positive): the normals point into the mandrel; flip the normals of the STL")
 
 
+#: a binary STL: an 80-byte header, a uint32 triangle count, then 50 bytes per triangle
+STL_HEADER, STL_RECORD = 84, 50
+
+
+#: one triangle record of a binary STL: normal, three corners (float32), attribute bytes
+_STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+
+
+def _check_binary_size(path: Path):
+    """Refuse a binary STL whose size disagrees with its triangle count (cut short in a copy or a
+    download, or not an STL at all), with the expected and actual sizes. Returns the triangle
+    count of a binary STL of exactly the announced size, None for ASCII STL (or longer files)."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(1024)
+    if head.lstrip().startswith(b"solid") and b"facet" in head:
+        if not (size >= STL_HEADER and STL_HEADER + STL_RECORD * int.from_bytes(head[80:84], "little") == size):
+            return None             # ASCII (a binary header may also start with "solid")
+    if size < STL_HEADER:
+        raise MandrelError(f"{path}: not a complete STL file: {size} bytes, shorter than the "
+                           f"{STL_HEADER}-byte header of a binary STL, and not ASCII STL text")
+    n = int.from_bytes(head[80:84], "little")
+    expected = STL_HEADER + STL_RECORD * n
+    if size < expected:
+        raise MandrelError(
+            f"{path}: truncated or corrupt binary STL: its header announces {n:,} triangles, which "
+            f"take {expected:,} bytes, but the file has {size:,} bytes "
+            f"({(size - STL_HEADER) // STL_RECORD:,} whole triangles); export or copy it again")
+    if n == 0:
+        raise MandrelError(f"{path}: binary STL with no triangles (its header announces 0, the file "
+                           f"has {size:,} bytes)")
+    return n if size == expected else None
+
+
 def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (merged duplicates) and faces of an STL, in the file's unit."""
+    """Vertices and faces of an STL in the file's unit: the soup as stored, three corners per
+    triangle (``repair_mesh`` welds them). A binary STL is read directly, an ASCII one by trimesh."""
     import trimesh
 
     path = Path(path)
     if not path.is_file():
         raise MandrelError(f"mandrel STL not found: {path}")
+    n = _check_binary_size(path)
+    if n is not None:   # binary: the records read directly (as trimesh reads them, 3x faster)
+        with path.open("rb") as fh:
+            fh.seek(STL_HEADER)
+            corners = np.fromfile(fh, dtype=_STL_RECORD, count=n)["corners"]
+        return corners.reshape(-1, 3).astype(np.float64), np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -351,13 +392,18 @@ def read_stl(path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
-def load_mandrel(path, unit: str = "m") -> Mandrel:
-    """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres)."""
+def load_mandrel(path, unit: str = "m", body=None) -> Mandrel:
+    """Read an STL mandrel; unit "m" or "mm" is the STL's length unit (converted to metres).
+
+    body : which body of a multi-body STL is the mandrel (``[mandrel] body``): None (the STL must
+    be one body), "largest", or an index into the bodies by decreasing size (``repair_mesh``).
+    """
     if unit not in UNITS:
         raise MandrelError(f'[mandrel] stl_unit = "{unit}": expected "m" or "mm"')
     vertices, faces = read_stl(path)
     vertices = vertices * UNITS[unit]
     from .repair import repair_mesh   # repair imports this module: imported here, not at the top
 
-    vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit])
+    vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit],
+                                           body=body)
     return mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
