@@ -36,7 +36,8 @@ def cylinder(radius=0.05, length=1.6, flange_at=None, flange_radius=None, n_thet
 
     diagonal = float(np.linalg.norm(pts.max(0) - pts.min(0)))
     mandrel = SimpleNamespace(vertices=pts, diagonal=diagonal)
-    centerline = SimpleNamespace(length=length, project=project)
+    # a straight centerline: the automatic pose lead is 0 (preform.reference.is_straight)
+    centerline = SimpleNamespace(length=length, project=project, points=np.array([[0, 0, 0], [0, 0, length]]))
     return mandrel, centerline
 
 
@@ -48,7 +49,8 @@ def scaled(geometry, factor):
         return s * factor, d * factor
 
     return (SimpleNamespace(vertices=mandrel.vertices * factor, diagonal=mandrel.diagonal * factor),
-            SimpleNamespace(length=centerline.length * factor, project=project))
+            SimpleNamespace(length=centerline.length * factor, project=project,
+                            points=centerline.points * factor))
 
 
 def config(**changes) -> Config:
@@ -67,7 +69,8 @@ def config(**changes) -> Config:
 
 
 def test_good_setup_has_no_warnings():
-    assert preflight(config(), *cylinder()) == []
+    # 0.6 m of braid: the mandrel lasts (0.6 + the convergence zone's ~0.9 m <= 1.6 m)
+    assert preflight(config(process={"braid_length": 0.6}), *cylinder()) == []
 
 
 def test_mandrel_in_mm_read_as_m_suggests_mm():
@@ -185,7 +188,8 @@ def test_take_up_table_is_used_along_the_mandrel():
     ({"model": {"time_step": 0.35}}, "[model] time_step = 0.35"),   # 6.3 deg: coarse, not refused
 ])
 def test_value_warnings(changes, word):
-    warnings = preflight(config(**changes), *cylinder())
+    # 0.6 m of braid, so that the mandrel lasts and the value's warning is the only one
+    warnings = preflight(config(process={"braid_length": 0.6}, **changes), *cylinder())
     assert len(warnings) == 1 and word in warnings[0]
 
 
@@ -230,3 +234,18 @@ def test_a_time_step_that_skips_carrier_passes_is_refused_naming_time_step():
                                           r"at most 0.417 s"):
         preflight(config(model={"time_step": 10.0}), *cylinder())
     preflight(config(model={"time_step": 0.4}), *cylinder())
+
+
+def test_a_guide_ring_offset_is_named_when_the_mandrel_is_too_short():
+    ring = {"guide_ring": GuideRingConfig(radius=0.17, offset=1.0)}
+    with pytest.raises(ConfigError, match=r"plus \[machine\] guide_ring offset = 1 is 2.5 m"):
+        preflight(config(machine=ring), *cylinder())
+
+
+def test_a_braid_the_mandrel_cannot_last_for_is_said_before_running():
+    # case-B-like: H_inf = 0.0263 sqrt(0.17^2 - 0.05^2) / (0.314 x 0.05) = 0.27 m; on the 1.6 m
+    # cylinder, braid_length 1.4 m needs about 1.4 + 0.27 m of centerline (1.3 m: 1.57 m fits)
+    ring = {"guide_ring": GuideRingConfig(radius=0.17, offset=0.0)}
+    warnings = preflight(config(machine=ring, process={"braid_length": 1.4}), *cylinder())
+    assert any("will likely pass the machine" in w for w in warnings)
+    assert not any("will likely pass" in w for w in preflight(config(machine=ring), *cylinder()))

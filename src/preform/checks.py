@@ -58,6 +58,11 @@ def preflight(config, mandrel, centerline) -> list[str]:
     warnings = _check_fit(config, reach)
     warnings += _braid_angle_warnings(config, s[passing], distance[passing])
     _check_time_step(config)
+    from .reference import resolve_pose_lead
+
+    lead = float(resolve_pose_lead(config, mandrel, centerline).process.pose_lead)
+    radius = float(np.median(distance[passing])) if np.any(passing) else 0.0
+    warnings += _length_warnings(config, float(centerline.length), radius, lead)
     warnings += _value_warnings(config)
     return warnings
 
@@ -109,13 +114,43 @@ def _check_centerline_inside(config, mandrel, centerline) -> None:
 
 
 def _check_length(config, length: float) -> None:
+    """The mandrel must reach past the supply plane by initial_position + braid_length; a guide
+    ring offset from the spool plane takes its offset of mandrel too (initial_position counts
+    from the ring)."""
     p = config.process
-    need = p.initial_position + p.braid_length
+    ring = config.machine.guide_ring
+    offset = ring.offset if ring is not None else 0.0
+    need = p.initial_position + p.braid_length + offset
     if need > length:
-        raise ConfigError(
-            f"[process] braid_length = {p.braid_length:g} plus [process] initial_position = "
-            f"{p.initial_position:g} is {need:.4g} m: expected at most the centerline length "
-            f"{length:.4g} m of the mandrel")
+        terms = (f"[process] braid_length = {p.braid_length:g} plus [process] initial_position = "
+                 f"{p.initial_position:g}")
+        if offset:
+            terms += f" plus [machine] guide_ring offset = {offset:g}"
+        raise ConfigError(f"{terms} is {need:.4g} m: expected at most the centerline length "
+                          f"{length:.4g} m of the mandrel")
+
+
+def _length_warnings(config, length: float, radius: float, lead: float = 0.0) -> list[str]:
+    """The mandrel must last until the fell points reach braid_length: the tip is then about
+    braid_length + H ahead of the supply plane (H, the convergence length at the end, from the
+    kinematic Du & Popper transient H_inf + (H_0 - H_inf) exp(-L / H_inf) with H_0 the initial
+    position), plus the ring's offset from the spool plane; the pose runs out of centerline
+    ``lead`` later."""
+    p, ma = config.process, config.machine
+    ring = ma.guide_ring
+    offset = ring.offset if ring is not None else 0.0
+    R = ring.radius if ring is not None else ma.spool_radius
+    if not 0 < radius < R:
+        return []
+    v = max(s for _, s in p.take_up_speed)
+    h_inf = analytic.steady_convergence_length(ma.angular_speed, radius, v, R)
+    h_end = h_inf + (p.initial_position - h_inf) * math.exp(-p.braid_length / h_inf)
+    need = p.braid_length + h_end + offset
+    if need <= length + lead:
+        return []
+    return [f"the mandrel's end will likely pass the machine before braid_length = {p.braid_length:g} m "
+            f"is braided: with the convergence zone (about {h_end:.3g} m by then) the run needs "
+            f"{need:.3g} m of the {length:.3g} m centerline; shorten braid_length or lengthen the mandrel"]
 
 
 def _check_fit(config, reach: float) -> list[str]:

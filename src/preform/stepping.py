@@ -121,7 +121,9 @@ class Stepper:
                                    h_max=s.walk_piece_widths * config.yarn.width)
         self.ecc = np.asarray(config.process.eccentricity, dtype=float)
         self.lead = config.process.pose_lead
-        self.clock = Clock(0.0, config.process.initial_position)
+        # travel counts from the spool plane; initial_position from the supply plane (the guide
+        # ring's, offset from the spool plane, when there is one)
+        self.clock = Clock(0.0, config.process.initial_position + machine.supply_z)
         pose = self.pose(self.clock.travel)
         rng = np.random.default_rng(config.model.seed)
         self.F, self.face = tie_points(config, machine, mandrel, centerline, pose, rng, s)
