@@ -7,7 +7,7 @@ Grows the synthetic zone of ``bench_interaction.py`` (144 carriers, case A speed
 and times, in the nested-dissection order the solver uses, factorisation + one solve of every
 backend of ``interaction/linalg.py`` (CHOLMOD when cvxopt is installed, SciPy's SuperLU) and, when
 installed, ``qdldl`` (Apache-2, its own AMD order) for comparison. Prints the median time and
-the relative residual of each; ``docs/decisions-interaction.md`` has the figures.
+the relative residual of each; ``docs/decisions.md`` has the figures.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ the friction cone, read back from the files.
 
 Friction 0.5 is not claimed: on the 16-carrier case A the two runs part at a step where a crossing
 takes another equilibrium (H up to 2.1 % apart, the angle being laid up to 3.9 deg at one step;
-``docs/decisions-solver2.md``), the start-sensitivity of issue 14 item 3."""
+``docs/decisions.md``), the start-sensitivity of issue 14 item 3."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ centre): for inextensible yarns with fixed neighbours this is the paper's "Euler
 while sticking", and it holds the crossing where it was on its yarns. A yarn *slips* when material
 passes; the friction force then is on the Amontons bound, opposing the sliding. The paper's
 force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
-iteration diverges on realistic machines (``docs/decisions-interaction.md``).
+iteration diverges on realistic machines (``docs/decisions.md``).
 
 One time step is the minimum of an energy over the crossing positions ``C`` and the material
 coordinates ``u`` (``_kernels.frontal.assemble`` writes it out; convex but for the geometric part

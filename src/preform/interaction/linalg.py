@@ -12,7 +12,7 @@ as its lower triangle in an elimination order (METIS nested dissection of the cr
 
 Both solve H x = b to round-off; ``frontal`` refines the direction against the assembled H, so
 the two give the same Newton steps to the solver's round-off. CHOLMOD is about 3x faster on a
-case A Hessian (figures: ``docs/decisions-interaction.md``). Where CHOLMOD finds H not positive
+case A Hessian (figures: ``docs/decisions.md``). Where CHOLMOD finds H not positive
 definite in floating point (a nearly slack network), the LU solves that system.
 """
 

@@ -6,7 +6,7 @@ settings=...)`` passes them down to the frontal solver (``interaction/frontal.py
 contact (``interaction/ring.py``) and the numba kernels, which receive them as scalar arguments.
 The defaults are the model's; a test or a study varies one by passing another object, e.g.
 ``dataclasses.replace(s, frontal=dataclasses.replace(s.frontal, friction_memory=0.0))``.
-The measurements behind the values are in ``docs/decisions-interaction.md``.
+The measurements behind the values are in ``docs/decisions.md``.
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ class RingSettings:
     #: "flow" by the yarn's slide over the ring in the last step (towards the mandrel: the
     #: mandrel side higher; towards the spool: lower; stick in between, one Coulomb cone along
     #: and across the ring); "drawn" exp(+mu_r eta) always. "flow" locks the ring points at
-    #: mu_r 0.6 and reads no slide once crossings exist (docs/decisions-solver2.md)
+    #: mu_r 0.6 and reads no slide once crossings exist (docs/decisions.md)
     capstan: str = "paper"
     #: m of yarn over the ring in a step below which the yarn sticks along the ring (holds its
     #: tension within the Capstan cone): the friction creep of the crossings (friction_creep)
