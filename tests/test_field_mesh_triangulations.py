@@ -16,8 +16,7 @@ import pytest
 from preform.fields import face_geometry, fields_on_input, map_to_surface
 from preform.geometry import shapes
 from preform.geometry.remesh import feature_edges
-from preform.result import YarnPaths
-from test_helpers_fields import THICKNESS, WIDTH, ZCenterline, make_result
+from test_helpers_fields import THICKNESS, WIDTH, ZCenterline, make_result, pack_yarns
 
 LENGTH = 0.2
 H = 0.012                     # field edge length, m (3 yarn widths, the default)
@@ -84,11 +83,7 @@ def helices(shape, dz=1e-3):
                 points.append(np.column_stack([r * np.cos(p), r * np.sin(p), z]))
                 offsets.append(offsets[-1] + len(z))
                 group.append(g)
-    P = np.vstack(points)
-    m = len(P)
-    return YarnPaths(points=P, offsets=np.array(offsets, np.int64), time_s=np.zeros(m),
-                     braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
-                     flags=np.zeros(m, np.uint8), group=np.array(group, np.int8))
+    return pack_yarns(points, offsets, group)
 
 
 def quality(V, F):

@@ -51,6 +51,11 @@ def helices(alpha, n_per_group, z0=0.0, z1=HEIGHT, dz=1e-3, r=R, phase=0.1):
             points.append(np.column_stack([r * np.cos(phi), r * np.sin(phi), z]))
             offsets.append(offsets[-1] + len(z))
             group.append(g)
+    return pack_yarns(points, offsets, group)
+
+
+def pack_yarns(points, offsets, group) -> YarnPaths:
+    """YarnPaths of polylines ``points`` (list of (n_i, 3)) with their ``offsets`` and groups."""
     P = np.vstack(points)
     m = len(P)
     return YarnPaths(points=P, offsets=np.array(offsets, np.int64), time_s=np.zeros(m),
