@@ -59,14 +59,23 @@ def braiding_time(config) -> float:
     return float(np.sum(0.5 * (pace[1:] + pace[:-1]) * np.diff(grid)))
 
 
-def estimate_work(config, mandrel_area: float, time_step: float) -> WorkEstimate:
-    """The work of ``config`` on a mandrel of ``mandrel_area`` (m^2) with ``time_step`` (s)."""
+def estimate_work(config, mandrel_area: float, time_step: float, convergence_length=None) -> WorkEstimate:
+    """The work of ``config`` on a mandrel of ``mandrel_area`` (m^2) with ``time_step`` (s).
+
+    convergence_length : float, m, the convergence length expected at the end of the run; the
+    mandrel then travels ``braid_length + H_end - initial_position`` (the fell points start at the
+    tip, ``initial_position`` from the supply plane), not just ``braid_length``.
+    """
     from .fields import DEFAULT_EDGE_WIDTHS
 
     edge = config.output.field_edge_length if config.output is not None else None
     edge = edge or DEFAULT_EDGE_WIDTHS * config.yarn.width
     faces = mandrel_area / (math.sqrt(3.0) / 4.0 * edge * edge)
     steps = braiding_time(config) / time_step
+    if convergence_length is not None:
+        length = float(config.process.braid_length)
+        travel = max(length + convergence_length - config.process.initial_position, 0.1 * length)
+        steps *= travel / length
     points = config.machine.carriers * min(steps, 1e12)
     size = BYTES_PER_FACE * min(faces, 1e15) + BYTES_PER_YARN_STEP * points
     return WorkEstimate(field_faces=_count(faces), steps=_count(steps), result_bytes=_count(size))

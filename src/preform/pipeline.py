@@ -94,8 +94,9 @@ def estimate(config, mandrel, centerline, *, force=False):
                                                      mandrel, centerline)
     tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
     area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-    work = estimate_work(config, area, dt)
-    max_radius = float(np.max(centerline.project(mandrel.vertices)[1]))
+    distance = centerline.project(mandrel.vertices)[1]
+    work = estimate_work(config, area, dt, _end_convergence_length(config, float(np.median(distance))))
+    max_radius = float(np.max(distance))
     check_work(config, work, max_radius, force=force)
     return work
 
@@ -111,6 +112,23 @@ def with_rtm_fields(result, fields):
     tangents = result.centerline.frames_at(s)[1]
     fields.cell_data.update(rtm_fields(fields, result.config, tangents))
     return fields
+
+
+def _end_convergence_length(config, radius):
+    """The kinematic convergence length at the end of the run (Du & Popper from initial_position
+    towards H_inf), for the work estimate; None where it cannot be said."""
+    import math
+
+    from .analytic import steady_convergence_length
+    from .reference import supply_radius
+
+    R = supply_radius(config.machine)
+    if not 0 < radius < R:
+        return None
+    v = max(s for _, s in config.process.take_up_speed)
+    h_inf = float(steady_convergence_length(config.machine.angular_speed, radius, v, R))
+    p = config.process
+    return h_inf + (p.initial_position - h_inf) * math.exp(-p.braid_length / h_inf)
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,

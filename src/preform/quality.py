@@ -89,7 +89,7 @@ def yarn_reasons(flags, settings: QualitySettings = QUALITY) -> list[str]:
 
 
 def field_reasons(face_s, covered, braided_end, braided_start=0.0, smoothing=0.0,
-                  settings: QualitySettings = QUALITY) -> list[str]:
+                  settings: QualitySettings = QUALITY, front_start=None) -> list[str]:
     """Reasons to doubt the surface fields.
 
     face_s : (f,) float64, m, centerline arc length of each field face's centroid
@@ -97,6 +97,8 @@ def field_reasons(face_s, covered, braided_end, braided_start=0.0, smoothing=0.0
     braided_end : float, m, arc length of the furthest fell point at the end of the run
     braided_start : float, m, arc length where the braid starts (the tie points)
     smoothing : float, m, how far the fields' pooling spreads coverage (added to the margins)
+    front_start : float, m, arc length of the least advanced fell point (default braided_end):
+        between it and braided_end the fell front is ragged, so faces there may carry no yarn yet
     """
     face_s = np.asarray(face_s, dtype=float)
     covered = np.asarray(covered, dtype=bool)
@@ -106,11 +108,12 @@ def field_reasons(face_s, covered, braided_end, braided_start=0.0, smoothing=0.0
     if np.any(beyond):
         reasons.append(f"{np.count_nonzero(beyond)} faces are covered up to {face_s[beyond].max():.4g} m "
                        f"of centerline, beyond the braided length {braided_end:.4g} m")
-    inside = (face_s > braided_start + margin) & (face_s < braided_end - margin)
+    hole_end = braided_end if front_start is None else front_start
+    inside = (face_s > braided_start + margin) & (face_s < hole_end - margin)
     holes = inside & ~covered
     if np.any(inside) and np.count_nonzero(holes) > settings.max_hole_share * np.count_nonzero(inside):
         reasons.append(f"{np.count_nonzero(holes)} faces inside the braided region "
-                       f"({braided_start:.3g}-{braided_end:.3g} m) carry no yarn")
+                       f"({braided_start:.3g}-{hole_end:.3g} m) carry no yarn")
     return reasons
 
 
@@ -130,7 +133,7 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
     covered = (np.asarray(cd["reached_warp"]) > 0) | (np.asarray(cd["reached_weft"]) > 0)
     fell = np.asarray(result.fell_s)
     return field_reasons(s, covered, float(fell[-1].max()), float(fell[0].min()),
-                         2.0 * float(fields.pool_radius_m), settings)
+                         2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
 def assess(result, settings: QualitySettings = QUALITY) -> dict:
