@@ -65,7 +65,7 @@ def pack_yarns(points, offsets, group) -> YarnPaths:
 
 def make_result(mandrel, yarns, width=WIDTH, thickness=THICKNESS, edge=None):
     config = NS(yarn=NS(width=width, thickness=thickness, least_width=0.5 * width),
-                output=NS(field_edge_length=edge))
+                output=NS(field_edge_length=edge), axial=lambda: (0, width, thickness, None))
     return NS(config=config, mandrel=mandrel, centerline=ZCenterline(), yarns=yarns)
 
 

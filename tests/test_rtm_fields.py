@@ -107,3 +107,21 @@ def test_preform_run_writes_the_rtm_files_with_tow_data_and_says_why_not_without
     summary = json.loads((plain / "summary.json").read_text())
     assert not summary["rtm"]["written"] and "linear_density_tex" in summary["rtm"]["reason"]
     assert not (plain / "rtm").exists()
+
+
+def test_triaxial_areal_weight_adds_the_axial_yarns():
+    from test_helpers_fields import coverage_closed_form  # noqa: F401 - same stand-ins
+
+    alpha, n_axial = math.radians(30.0), 16
+    result = make_result(cylinder(), helices(alpha, N_GROUP))
+    result.config.axial = lambda: (n_axial, 3e-3, 3e-4, None)
+    fields = map_to_surface(result, edge_length=0.012)
+    config = NS(yarn=NS(linear_density_tex=TEX, fibre_density=RHO, fibre_radius=FIBRE_R, has_material=True),
+                rtm=NS(cavity_thickness=CAVITY, permeability="gebart", packing="hexagonal"),
+                axial=lambda: (n_axial, 3e-3, 3e-4, None))
+    out = rtm.rtm_fields(fields, config, np.tile([0.0, 0.0, 1.0], (len(fields.faces), 1)))
+    inner, _ = side_faces(fields, margin=2 * fields.pool_radius_m)
+    aw = (2 * N_GROUP / math.cos(alpha) + n_axial) * TEX * 1e-6 / (2 * math.pi * R)
+    assert np.allclose(out["areal_weight_kg_m2"][inner], aw, rtol=0.03)   # as the biaxial one
+    K = out["permeability_m2"][inner].reshape(-1, 3, 3)
+    assert np.all(np.linalg.eigvalsh(K) > 0)

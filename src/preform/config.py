@@ -46,6 +46,7 @@ class MachineConfig:
     angular_speed: float            # rad/s (config file: deg/s)
     pattern: str = "regular"        # "diamond" | "regular" | "hercules"
     guide_ring: GuideRingConfig | None = None
+    axial_yarns: int = 0            # triaxial braiding: yarns laid along the mandrel ([axial_yarn])
 
     @property
     def pattern_m(self) -> int:
@@ -113,6 +114,15 @@ class OutputConfig:
 
 
 @dataclass(frozen=True)
+class AxialYarnConfig:
+    """The axial yarns of a triaxial braid; None fields take the [yarn] values."""
+
+    width: float | None = None            # m
+    thickness: float | None = None        # m
+    linear_density_tex: float | None = None   # g/km
+
+
+@dataclass(frozen=True)
 class RtmConfig:
     """The RTM hand-off (preform.rtm): how fibre content and permeability are read."""
 
@@ -137,6 +147,13 @@ class Config:
     output: OutputConfig | None = None
     source: Path | None = None      # the TOML file this came from
     rtm: RtmConfig = field(default_factory=RtmConfig)
+    axial_yarn: AxialYarnConfig = field(default_factory=AxialYarnConfig)
+
+    def axial(self) -> tuple[int, float, float, float | None]:
+        """(count, width m, thickness m, tex or None) of the axial yarns."""
+        a, y = self.axial_yarn, self.yarn
+        return (self.machine.axial_yarns, a.width or y.width, a.thickness or y.thickness,
+                a.linear_density_tex or y.linear_density_tex)
 
 
 # --------------------------------------------------------------------------------------------
@@ -146,13 +163,14 @@ class Config:
 #: known keys per section, in the order of DESIGN.md §1
 KEYS = {
     "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
-    "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring"),
+    "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring", "axial_yarns"),
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed", "solver"),
     "output": ("dir", "field_edge_length", "snapshots"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
+    "axial_yarn": ("width", "thickness", "linear_density_tex"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
 REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
@@ -219,6 +237,7 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         output=_output(_Section("output", data), base_dir, name),
         source=None if source is None else Path(source),
         rtm=_rtm(_Section("rtm", data), base_dir),
+        axial_yarn=_axial_yarn(_Section("axial_yarn", data)),
     )
 
 
@@ -426,8 +445,9 @@ def _machine(sec: _Section) -> MachineConfig:
                  "10 revolutions per second; the carrier speed about the machine axis is in deg/s, "
                  "1 rpm = 6 deg/s")
     ring = _guide_ring(sec, spool)
+    axial = sec.integer("axial_yarns", "a non-negative integer number of axial yarns", default=0, minimum=0)
     return MachineConfig(carriers=carriers, spool_radius=spool, angular_speed=math.radians(speed_deg),
-                         pattern=pattern, guide_ring=ring)
+                         pattern=pattern, guide_ring=ring, axial_yarns=axial)
 
 
 def _guide_ring(machine: _Section, spool_radius: float) -> GuideRingConfig | None:
@@ -490,6 +510,13 @@ def _material(sec: _Section) -> dict:
             raise sec.error(key, value, f"expected {lo:g} to {hi:g} {unit} ({hint})")
         out[key] = value
     return out
+
+
+def _axial_yarn(sec: _Section) -> AxialYarnConfig:
+    return AxialYarnConfig(width=sec.number("width", "m", default=None, positive=True),
+                           thickness=sec.number("thickness", "m", default=None, positive=True),
+                           linear_density_tex=sec.number("linear_density_tex", "g/km (tex)", default=None,
+                                                         positive=True))
 
 
 RTM_MODELS = ("gebart", "kozeny_carman", "table")
@@ -614,7 +641,8 @@ def dump_config(config: Config) -> dict:
                     "body": mc.body},
         "machine": {"carriers": ma.carriers, "spool_radius": ma.spool_radius,
                     "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
-                    "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset}},
+                    "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset},
+                    "axial_yarns": ma.axial_yarns},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
                  "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width,
                  "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
@@ -627,6 +655,8 @@ def dump_config(config: Config) -> dict:
                   "solver": mo.solver},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots},
+        "axial_yarn": {"width": config.axial_yarn.width, "thickness": config.axial_yarn.thickness,
+                       "linear_density_tex": config.axial_yarn.linear_density_tex},
         "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,
                 "packing": config.rtm.packing,
                 "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),

@@ -450,11 +450,12 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     data["braid_angle_deg"] = np.divide(
         data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
         n_present, out=np.zeros(len(F)), where=n_present > 0)
-    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft)
     # a narrowed yarn keeps its cross-section w t, so it gets thicker: the thickness is the yarn
     # volume per area, t w L / A per group (= t k where the yarns leave gaps, t k w / w_eff where
     # they narrowed side by side)
     data["thickness_m"] = thickness * width * np.divide(L[:, 0] + L[:, 1], A, out=np.zeros(len(F)), where=A > 0)
+    k_axial = _add_axial_yarns(data, result, V[F], centroids, areas, normals, tangent, hit_warp | hit_weft, h)
+    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft) * (1.0 - k_axial)
     data["jammed"] = jammed.astype(np.uint8)
     for g, name in enumerate(GROUPS):
         data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
@@ -464,6 +465,57 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
             raise AssertionError(f"non-finite values in surface field {name}")
     return SurfaceFields(vertices=V, faces=F, source_faces=source, cell_data=data, jammed=jammed,
                          unmapped_length_m=unmapped, edge_length_m=h, pool_radius_m=rho)
+
+
+def section_perimeter(face_s, areas, side, window, face_range=None):
+    """Perimeter (m) of the section at each face's arc length ``face_s`` (nf,), read off the mesh:
+    P = dA/ds, the side faces' (``side``, not end caps) area between the two ends of a window
+    ``2 window`` long round s, over its length. Each face's area is spread evenly over its extent
+    in s (``face_range`` (nf, 2): the least and greatest s of its corners; default its centroid's)
+    before it is binned, so a ring of faces that share a centroid's s does not make a step; the
+    window is shifted inside the side at its ends."""
+    if face_range is None:
+        face_range = np.column_stack([face_s, face_s])
+    k = (np.arange(SPREAD_SAMPLES) + 0.5) / SPREAD_SAMPLES
+    lo_f, hi_f = face_range[side, 0], face_range[side, 1]
+    samples = (lo_f[:, None] + (hi_f - lo_f)[:, None] * k[None, :]).ravel()
+    weights = np.repeat(areas[side] / SPREAD_SAMPLES, SPREAD_SAMPLES)
+    lo_s, hi_s = float(samples.min()), float(samples.max())
+    n = max(int(np.ceil(8.0 * (hi_s - lo_s) / window)), 1)
+    edges = np.linspace(lo_s, hi_s, n + 1)
+    binned, _ = np.histogram(samples, bins=edges, weights=weights)
+    cumulative = np.concatenate([[0.0], np.cumsum(binned)])
+    width = min(2.0 * window, hi_s - lo_s)
+    lo = np.clip(face_s - 0.5 * width, lo_s, hi_s - width)
+    area = np.interp(lo + width, edges, cumulative) - np.interp(lo, edges, cumulative)
+    return area / max(width, 1e-12)
+
+
+#: points along a face's extent in s its area is spread over (section_perimeter)
+SPREAD_SAMPLES = 8
+
+
+def _add_axial_yarns(data, result, vertices, centroids, areas, normals, tangent, braided, h):
+    """Triaxial braiding: the ``[machine] axial_yarns`` lie along the mandrel (the surface
+    projection of the centerline tangent), evenly round each section of perimeter P, wherever
+    the braid is. Adds ``coverage_axial`` = min(1, n w_a / P), ``yarn_length_axial_m_per_m2`` =
+    n / P and ``axial_direction`` (3), adds the axial yarns' volume per area t_a w_a n / P to
+    ``thickness_m``, and returns k_axial for the cover factor 1 - (1 - k)^2 (1 - k_a)."""
+    count, width, thick, _ = result.config.axial()
+    if count == 0:
+        return np.zeros(len(centroids))
+    s, _ = result.centerline.project(centroids)
+    s = np.asarray(s, dtype=float)
+    corners = np.asarray(result.centerline.project(vertices.reshape(-1, 3))[0]).reshape(-1, 3)
+    side = np.linalg.norm(tangent, axis=1) > 0
+    perimeter = section_perimeter(s, areas, side, 3.0 * h, np.column_stack([corners.min(1), corners.max(1)]))
+    per_area = np.where(braided & side, count / perimeter, 0.0)
+    k = np.minimum(1.0, width * per_area)
+    data["coverage_axial"] = k
+    data["yarn_length_axial_m_per_m2"] = per_area
+    data["axial_direction"] = tangent * (per_area > 0)[:, None]
+    data["thickness_m"] = data["thickness_m"] + thick * width * per_area
+    return k
 
 
 def _group_fields(A, L, M, e1, e2, has_tangent, width, least_width=0.0):

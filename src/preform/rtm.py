@@ -216,8 +216,14 @@ def rtm_fields(fields, config, tangents) -> dict:
     cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     normals = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
     per_area = np.column_stack([cd["yarn_length_warp_m_per_m2"], cd["yarn_length_weft_m_per_m2"]])
+    aw = areal_weight(per_area.sum(axis=1), config.yarn.linear_density_tex)
+    families = ["warp_direction", "weft_direction"]
+    if "yarn_length_axial_m_per_m2" in cd:   # triaxial: the axial yarns are a third family
+        axial = cd["yarn_length_axial_m_per_m2"]
+        aw = aw + areal_weight(axial, config.axial()[3] or config.yarn.linear_density_tex)
+        per_area = np.column_stack([per_area, axial])
+        families.append("axial_direction")
     total = per_area.sum(axis=1)
-    aw = areal_weight(total, config.yarn.linear_density_tex)
     thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
         np.full(len(F), config.rtm.cavity_thickness)
     vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
@@ -230,7 +236,7 @@ def rtm_fields(fields, config, tangents) -> dict:
     direction = np.zeros((len(F), 3))
     if np.any(valid):
         shares = per_area[valid] / total[valid, None]
-        d = np.stack([cd["warp_direction"][valid], cd["weft_direction"][valid]], axis=1)
+        d = np.stack([cd[name][valid] for name in families], axis=1)
         a, b = _principal_values(config, vf[valid], angle[valid])
         if config.rtm.permeability == "table":
             # the braid's own principal values: K1 along the axis below 45 deg, around it above
