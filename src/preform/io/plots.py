@@ -93,19 +93,26 @@ def braid_angle_figure(result, refs=None, steady=None) -> Figure:
     warp, weft = _column(result, "braid_angle_warp_deg"), _column(result, "braid_angle_weft_deg")
     ax.plot(length, warp, color=GROUP_COLOURS[0], label="warp")
     ax.plot(length, weft, color=GROUP_COLOURS[1], label="weft", linestyle="--")
-    columns = [warp, weft]
-    if refs is not None and len(length):
-        ko = np.interp(length, refs.s, refs.ko_deg)
-        ax.plot(length, ko, color="0.45", linewidth=1.0, label="Ko (quasi-static)")
-        columns.append(ko)
+    _finish(ax, result, length, [warp, weft], None if refs is None else (refs.ko_deg, refs.s, "Ko (quasi-static)"),
+            steady, "braid angle α (deg)", "Braid angle at the fell points")
+    return fig
+
+
+def _finish(ax, result, length, columns, reference, steady, ylabel, title):
+    """The shared part of the history figures: the quasi-static reference curve (``reference`` =
+    (values, s, label) or None), the steady-state mark, the range without the wind-up, labels."""
+    if reference and len(length):
+        values, s, label = reference
+        ref = np.interp(length, s, values)
+        ax.plot(length, ref, color="0.45", linewidth=1.0, label=label)
+        columns = [*columns, ref]
     _steady_mark(ax, steady)
     _range(ax, start_rows(length), *columns)
     ax.set_xlabel("braided length L (m)")
-    ax.set_ylabel("braid angle α (deg)")
-    ax.set_title(run_title(result, "Braid angle at the fell points"))
+    ax.set_ylabel(ylabel)
+    ax.set_title(run_title(result, title))
     ax.grid(True, alpha=0.3)
     ax.legend()
-    return fig
 
 
 def convergence_length_figure(result, refs=None, steady=None) -> Figure:
@@ -117,18 +124,8 @@ def convergence_length_figure(result, refs=None, steady=None) -> Figure:
     lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")
     ax.fill_between(length, lo, hi, color="tab:green", alpha=0.25, label="min – max over yarns")
     ax.plot(length, _column(result, "convergence_length_mean_m"), color="tab:green", label="mean")
-    columns = [lo, hi]
-    if refs is not None and len(length):
-        h_inf = np.interp(length, refs.s, refs.h_inf)
-        ax.plot(length, h_inf, color="0.45", linewidth=1.0, label="H∞ (kinematic, quasi-static)")
-        columns.append(h_inf)
-    _steady_mark(ax, steady)
-    _range(ax, start_rows(length), *columns)
-    ax.set_xlabel("braided length L (m)")
-    ax.set_ylabel("convergence length H (m)")
-    ax.set_title(run_title(result, "Convergence zone length"))
-    ax.grid(True, alpha=0.3)
-    ax.legend()
+    _finish(ax, result, length, [lo, hi], None if refs is None else (refs.h_inf, refs.s, "H∞ (kinematic, quasi-static)"),
+            steady, "convergence length H (m)", "Convergence zone length")
     return fig
 
 
