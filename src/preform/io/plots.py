@@ -93,8 +93,9 @@ def braid_angle_figure(result, refs=None, steady=None) -> Figure:
     warp, weft = _column(result, "braid_angle_warp_deg"), _column(result, "braid_angle_weft_deg")
     ax.plot(length, warp, color=GROUP_COLOURS[0], label="warp")
     ax.plot(length, weft, color=GROUP_COLOURS[1], label="weft", linestyle="--")
-    _finish(ax, result, length, [warp, weft], None if refs is None else (refs.ko_deg, refs.s, "Ko (quasi-static)"),
-            steady, "braid angle α (deg)", "Braid angle at the fell points")
+    ko = None if refs is None else (refs.ko_deg, refs.s, "Ko (quasi-static)")
+    _finish(ax, result, length, [warp, weft], ko, steady, "braid angle α (deg)",
+            "Braid angle at the fell points")
     return fig
 
 
@@ -124,8 +125,9 @@ def convergence_length_figure(result, refs=None, steady=None) -> Figure:
     lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")
     ax.fill_between(length, lo, hi, color="tab:green", alpha=0.25, label="min – max over yarns")
     ax.plot(length, _column(result, "convergence_length_mean_m"), color="tab:green", label="mean")
-    _finish(ax, result, length, [lo, hi], None if refs is None else (refs.h_inf, refs.s, "H∞ (kinematic, quasi-static)"),
-            steady, "convergence length H (m)", "Convergence zone length")
+    h_inf = None if refs is None else (refs.h_inf, refs.s, "H∞ (kinematic, quasi-static)")
+    _finish(ax, result, length, [lo, hi], h_inf, steady, "convergence length H (m)",
+            "Convergence zone length")
     return fig
 
 
