@@ -136,15 +136,13 @@ def _length_warnings(config, length: float, radius: float, lead: float = 0.0) ->
     kinematic Du & Popper transient H_inf + (H_0 - H_inf) exp(-L / H_inf) with H_0 the initial
     position), plus the ring's offset from the spool plane; the pose runs out of centerline
     ``lead`` later."""
-    p, ma = config.process, config.machine
-    ring = ma.guide_ring
+    from .reference import end_convergence_length
+
+    p, ring = config.process, config.machine.guide_ring
     offset = ring.offset if ring is not None else 0.0
-    R = ring.radius if ring is not None else ma.spool_radius
-    if not 0 < radius < R:
+    h_end = end_convergence_length(config, radius)
+    if h_end is None:
         return []
-    v = max(s for _, s in p.take_up_speed)
-    h_inf = analytic.steady_convergence_length(ma.angular_speed, radius, v, R)
-    h_end = h_inf + (p.initial_position - h_inf) * math.exp(-p.braid_length / h_inf)
     need = p.braid_length + h_end + offset
     if need <= length + lead:
         return []

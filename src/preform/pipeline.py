@@ -86,7 +86,7 @@ def estimate(config, mandrel, centerline, *, force=False):
     """The work estimate of a run (``preform.budget``), refused beyond its limits unless ``force``."""
     from .budget import check_work, estimate_work
     from .machine import Machine
-    from .reference import resolve_pose_lead
+    from .reference import end_convergence_length, resolve_pose_lead
     from .stepping import default_time_step
 
     config = resolve_pose_lead(config, mandrel, centerline)
@@ -95,7 +95,7 @@ def estimate(config, mandrel, centerline, *, force=False):
     tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
     area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
     distance = centerline.project(mandrel.vertices)[1]
-    work = estimate_work(config, area, dt, _end_convergence_length(config, float(np.median(distance))))
+    work = estimate_work(config, area, dt, end_convergence_length(config, float(np.median(distance))))
     max_radius = float(np.max(distance))
     check_work(config, work, max_radius, force=force)
     return work
@@ -112,23 +112,6 @@ def with_rtm_fields(result, fields):
     tangents = result.centerline.frames_at(s)[1]
     fields.cell_data.update(rtm_fields(fields, result.config, tangents))
     return fields
-
-
-def _end_convergence_length(config, radius):
-    """The kinematic convergence length at the end of the run (Du & Popper from initial_position
-    towards H_inf), for the work estimate; None where it cannot be said."""
-    import math
-
-    from .analytic import steady_convergence_length
-    from .reference import supply_radius
-
-    R = supply_radius(config.machine)
-    if not 0 < radius < R:
-        return None
-    v = max(s for _, s in config.process.take_up_speed)
-    h_inf = float(steady_convergence_length(config.machine.angular_speed, radius, v, R))
-    p = config.process
-    return h_inf + (p.initial_position - h_inf) * math.exp(-p.braid_length / h_inf)
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,

@@ -66,6 +66,21 @@ def references(config, s, perimeter) -> References:
     return References(s=s, radius=r, ko_deg=ko, h_inf=h_inf, settle_length=np.maximum(settle, 0.0))
 
 
+def end_convergence_length(config, radius: float) -> float | None:
+    """The kinematic convergence length (m) when ``braid_length`` is braided on a section of
+    ``radius`` (m): Du & Popper from ``initial_position`` towards H_inf, at the fastest take-up
+    speed; None where no tangent yarn exists (radius not inside the supply radius)."""
+    from . import analytic
+
+    R = supply_radius(config.machine)
+    if not 0 < radius < R:
+        return None
+    p, omega = config.process, float(config.machine.angular_speed)
+    v = max(speed for _, speed in p.take_up_speed)
+    return float(analytic.du_popper_convergence_length(p.braid_length / v, p.initial_position,
+                                                       omega, radius, v, R))
+
+
 def check_lines(config, refs: References) -> list[str]:
     """What ``preform check`` says of the references over the part to braid."""
     end = min(config.process.braid_length, refs.s[-1])
