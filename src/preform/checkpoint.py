@@ -84,6 +84,11 @@ def input_record(config) -> dict:
     return json.loads(json.dumps(flat, sort_keys=True, default=str))
 
 
+def inputs_sha256(config) -> str:
+    """Hex SHA-256 of :func:`input_record` (what a checkpoint's ``inputs_sha256`` holds)."""
+    return hashlib.sha256(_canonical(input_record(config))).hexdigest()
+
+
 def _canonical(value) -> bytes:
     return json.dumps(value, sort_keys=True, separators=(",", ":")).encode("utf-8")
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import csv
-import hashlib
 import io
 import itertools
 import json
@@ -212,18 +211,11 @@ def toml_text(data: dict) -> str:
 
 
 def inputs_hash(config) -> str:
-    """sha256 of the config (less [output]) and of the contents of its STL and centerline."""
-    from .config import dump_config
+    """The checkpoint's inputs hash: the config (less [output]) and the contents of its STL and
+    centerline (``preform.checkpoint.input_record``)."""
+    from .checkpoint import inputs_sha256
 
-    d = dump_config(config)
-    d.pop("output", None)
-    h = hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode())
-    files = [config.mandrel.stl]
-    if not (isinstance(config.mandrel.centerline, str) and config.mandrel.centerline == "auto"):
-        files.append(config.mandrel.centerline)
-    for f in files:
-        h.update(hashlib.sha256(Path(f).read_bytes()).digest())
-    return h.hexdigest()
+    return inputs_sha256(config)
 
 
 # ------------------------------------------------------------------------------ one point
