@@ -33,19 +33,23 @@ def _fmt(value, spec=".3f"):
     return "n/a" if value is None else f"{value:{spec}}"
 
 
-def summary_lines(result, out_dir, n_files) -> list[str]:
-    """The three lines ``preform run`` prints at the end (the wall time and its stages from the
-    written summary.json, when there is one: the command's, not only the simulation's)."""
+def written_summary(out_dir) -> dict | None:
+    """The summary.json a run wrote in ``out_dir``, or None where there is none to read."""
     import json
 
+    try:
+        return json.loads((Path(out_dir) / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
+    """The three lines ``preform run`` prints at the end, from the written ``summary`` (whose wall
+    time is the command's, with its stages), else from the result."""
     from .io.tables import summary_dict
 
-    s = summary_dict(result)
-    try:
-        written = json.loads((Path(out_dir) / "summary.json").read_text(encoding="utf-8"))
-        s["wall_time_s"], stages = written["wall_time_s"], written.get("stages_s") or {}
-    except (OSError, ValueError, KeyError):
-        stages = {}
+    s = summary if summary is not None else summary_dict(result)
+    stages = s.get("stages_s") or {}
     stage_text = (" (" + ", ".join(f"{k.replace('_', ' ')} {v:.1f}" for k, v in stages.items()) + ")"
                   if stages else "")
     angle = s["braid_angle_deg"]["final"]
@@ -93,9 +97,10 @@ def cmd_run(args) -> int:
                        force=args.force, geometry=(mandrel, centerline, []), started=started)
     _print_notes(outcome.notes)
     result = outcome.result
-    for line in summary_lines(result, out_dir, len(outcome.written)):
+    summary = written_summary(out_dir)
+    for line in summary_lines(result, out_dir, len(outcome.written), summary):
         print(line)
-    quality = _quality_line(out_dir)
+    quality = _quality_line(summary)
     if quality:
         print(quality)
     if result.status == "interrupted":
@@ -116,13 +121,10 @@ def _print_notes(notes):
         print(note, file=sys.stderr)
 
 
-def _quality_line(out_dir) -> str:
+def _quality_line(summary) -> str:
     """``quality: ok`` or ``quality: suspect: reason; reason`` from the written summary."""
-    import json
-
-    try:
-        quality = json.loads((Path(out_dir) / "summary.json").read_text(encoding="utf-8"))["quality"]
-    except (OSError, ValueError, KeyError):
+    quality = (summary or {}).get("quality")
+    if not quality:
         return ""
     if quality["verdict"] == "ok":
         return "quality: ok"
