@@ -75,10 +75,6 @@ class Design:
     h_inf: float
     result: object = None
 
-    @property
-    def judged(self) -> np.ndarray:
-        return self.length >= DESIGN.judged_after * self.h_inf
-
     def max_error_deg(self, judged_after=None) -> float:
         after = DESIGN.judged_after if judged_after is None else judged_after
         sel = self.length >= after * self.h_inf
