@@ -10,6 +10,7 @@ The dataclasses below are the contract between the config and the rest of the pa
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import math
@@ -138,6 +139,21 @@ class RtmConfig:
 
 
 @dataclass(frozen=True)
+class LayerConfig:
+    """One braided layer of ``[[layer]]`` (DESIGN.md §1): the top-level sections with the
+    layer's own keys laid over them, validated like them, and its direction of travel."""
+
+    machine: MachineConfig
+    yarn: YarnConfig
+    process: ProcessConfig
+    model: ModelConfig
+    axial_yarn: AxialYarnConfig
+    #: "forward": braided from the centerline's tip, like a single layer; "backward": from its
+    #: other end (the machine reverses), ``braid_length`` counted from there
+    direction: str = "forward"
+
+
+@dataclass(frozen=True)
 class Config:
     mandrel: MandrelConfig
     machine: MachineConfig
@@ -148,6 +164,17 @@ class Config:
     source: Path | None = None      # the TOML file this came from
     rtm: RtmConfig = field(default_factory=RtmConfig)
     axial_yarn: AxialYarnConfig = field(default_factory=AxialYarnConfig)
+    #: ``[[layer]]`` tables, from the mandrel outwards; empty: one layer of the top-level sections
+    layers: tuple[LayerConfig, ...] = ()
+
+    def layer_config(self, k: int) -> "Config":
+        """The config that braids layer ``k`` (0-based): its sections in place of the top-level
+        ones; ``layers`` keeps the layers up to and including ``k``, so the echo (and a
+        checkpoint's inputs hash) of a layer covers the layers it is braided on."""
+        layer = self.layers[k]
+        return dataclasses.replace(self, machine=layer.machine, yarn=layer.yarn, process=layer.process,
+                                   model=layer.model, axial_yarn=layer.axial_yarn,
+                                   layers=self.layers[:k + 1])
 
     def axial(self) -> tuple[int, float, float, float | None]:
         """(count, width m, thickness m, tex or None) of the axial yarns."""
@@ -173,6 +200,10 @@ KEYS = {
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
+#: the sections a ``[[layer]]`` table may override, and its own keys
+LAYER_SECTIONS = ("machine", "yarn", "process", "model", "axial_yarn")
+LAYER_KEYS = ("direction",)
+DIRECTIONS = ("forward", "backward")
 REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
 
 STL_UNITS = ("m", "mm")
@@ -226,9 +257,11 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
     base_dir : folder that relative paths resolve against. name : stem of the default output dir.
     """
     base_dir = Path(base_dir).expanduser().resolve()
+    layers_raw = data.get("layer", None)
+    data = {k: v for k, v in data.items() if k != "layer"}
     _check_layout(data)
     machine = _machine(_Section("machine", data))
-    return Config(
+    config = Config(
         mandrel=_mandrel(_Section("mandrel", data), base_dir),
         machine=machine,
         yarn=_yarn(_Section("yarn", data)),
@@ -239,6 +272,9 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         rtm=_rtm(_Section("rtm", data), base_dir),
         axial_yarn=_axial_yarn(_Section("axial_yarn", data)),
     )
+    if layers_raw is None:
+        return config
+    return dataclasses.replace(config, layers=_layers(layers_raw, data))
 
 
 # ----- messages ------------------------------------------------------------------------------
@@ -307,12 +343,13 @@ def _unknown_key(sec, key, value) -> None:
 class _Section:
     """One table of the document with its name, for reading keys with error messages."""
 
-    def __init__(self, name: str, data: dict, table: dict | None = None):
+    def __init__(self, name: str, data: dict, table: dict | None = None, prefix: str = ""):
         self.name = name
         self.table = data.get(name, {}) if table is None else table
+        self.prefix = prefix   # "[[layer]] 2 " for a layer's sections
 
     def where(self, key: str) -> str:
-        return f"[{self.name}] {key}"
+        return f"{self.prefix}[{self.name}] {key}"
 
     def error(self, key: str, value, expected: str) -> ConfigError:
         return ConfigError(f"{self.where(key)} = {_fmt(value)}: {expected}")
@@ -456,7 +493,8 @@ def _guide_ring(machine: _Section, spool_radius: float) -> GuideRingConfig | Non
         return None
     if not isinstance(table, dict):
         raise machine.error("guide_ring", table, "expected a table { radius = ..., offset = ... } (m)")
-    sec = _Section("machine", {}, table={f"guide_ring.{k}": v for k, v in table.items()})
+    sec = _Section("machine", {}, table={f"guide_ring.{k}": v for k, v in table.items()},
+                   prefix=machine.prefix)
     for key in table:
         if key not in GUIDE_RING_KEYS:
             hint = _suggest(key, GUIDE_RING_KEYS)
@@ -517,6 +555,56 @@ def _axial_yarn(sec: _Section) -> AxialYarnConfig:
                            thickness=sec.number("thickness", "m", default=None, positive=True),
                            linear_density_tex=sec.number("linear_density_tex", "g/km (tex)", default=None,
                                                          positive=True))
+
+
+def _layers(raw, data: dict) -> tuple[LayerConfig, ...]:
+    """``[[layer]]`` tables -> LayerConfigs: each layer's sections are the top-level ones with the
+    layer's keys laid over them (a layer's ``guide_ring`` replaces the top-level one), read by
+    the same readers, so a bad value names its layer (``[[layer]] 2 [yarn] thickness = ...``)."""
+    if isinstance(raw, dict):
+        raise ConfigError("[layer] must be an array of tables: write [[layer]] (two brackets) once "
+                          "per braided layer, from the mandrel outwards")
+    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
+        raise ConfigError(f"layer = {_fmt(raw)}: expected [[layer]] tables, one per braided layer")
+    layers = [_layer(k, table, data) for k, table in enumerate(raw, start=1)]
+    with_tow = [layer.yarn.has_material for layer in layers]
+    if any(with_tow) and not all(with_tow):
+        k = with_tow.index(False) + 1
+        raise ConfigError(f"[[layer]] {k} [yarn] has no tow material data (linear_density_tex, "
+                          "fibre_density, fibre_radius) while other layers have: give them for "
+                          "every layer (or at the top level in [yarn]) for the stacked RTM fields")
+    return tuple(layers)
+
+
+def _layer(k: int, table: dict, data: dict) -> LayerConfig:
+    prefix = f"[[layer]] {k} "
+    expected = ", ".join([*LAYER_KEYS, *(f"[layer.{s}]" for s in LAYER_SECTIONS)])
+    for key, value in table.items():
+        if key in LAYER_KEYS:
+            continue
+        if key not in LAYER_SECTIONS:
+            whole = " (it is set once for all layers, at the top level)" if key in KEYS else ""
+            hint = _suggest(key, [*LAYER_KEYS, *LAYER_SECTIONS])
+            raise ConfigError(f"{prefix}{key} = {_fmt(value)}: unknown key{whole}; {hint}expected "
+                              f"one of {expected}")
+        if not isinstance(value, dict):
+            raise ConfigError(f"{prefix}{key} = {_fmt(value)}: expected a table [layer.{key}] of "
+                              f"[{key}] keys for this layer")
+        for sub in value:
+            if sub not in KEYS[key]:
+                hint = _suggest(sub, KEYS[key])
+                raise ConfigError(f"{prefix}[{key}] {sub} = {_fmt(value[sub])}: unknown key; "
+                                  f"{hint}expected one of {', '.join(KEYS[key])}")
+    merged = {sec: {**data.get(sec, {}), **table.get(sec, {})} for sec in LAYER_SECTIONS}
+    own = _Section("layer", {}, table=table, prefix=f"[[layer]] {k} ")
+    own.where = lambda key: f"{prefix}{key}"
+    direction = own.choice("direction", DIRECTIONS, default="forward")
+    return LayerConfig(machine=_machine(_Section("machine", merged, prefix=prefix)),
+                       yarn=_yarn(_Section("yarn", merged, prefix=prefix)),
+                       process=_process(_Section("process", merged, prefix=prefix)),
+                       model=_model(_Section("model", merged, prefix=prefix)),
+                       axial_yarn=_axial_yarn(_Section("axial_yarn", merged, prefix=prefix)),
+                       direction=direction)
 
 
 RTM_MODELS = ("gebart", "kozeny_carman", "table")
@@ -625,6 +713,20 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
 
 
 def dump_config(config: Config) -> dict:
+    """See :func:`_dump_sections`; with ``[[layer]]`` tables also ``"layers"``: layer number
+    (from "1") -> its direction and sections (file units), a table like the sections."""
+    out = _dump_sections(config)
+    if config.layers:
+        out["layers"] = {str(k): {"direction": layer.direction,
+                          **{sec: v for sec, v in _dump_sections(dataclasses.replace(
+                              config, machine=layer.machine, yarn=layer.yarn, process=layer.process,
+                              model=layer.model, axial_yarn=layer.axial_yarn)).items()
+                             if sec in LAYER_SECTIONS}}
+                         for k, layer in enumerate(config.layers, start=1)}
+    return out
+
+
+def _dump_sections(config: Config) -> dict:
     """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
 
     Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a
