@@ -4,12 +4,14 @@ Offset law (docs/theory.md, "Several layers"): every vertex of the base surface 
 smooth normal by the stacked thickness ``T`` there,
 
     x' = x + T(x) c(x) n(x),    n = angle-weighted mean of the face normals round the vertex,
-    c = 1 / min_f (n . n_f), clamped to [1, OffsetSettings.max_crease_scale],
+    c = 1 / min_f (n . n_f) at a crease (some face round the vertex turned from n by more than
+        OffsetSettings.crease_deg), clamped to OffsetSettings.max_crease_scale; else c = 1,
 
-so that on a smooth surface (c = 1) a vertex moves by ``T`` along the normal (a cylinder of
-radius r becomes one of r + T exactly at the vertices), and at a crease every face next to the
-vertex moves out by ``T`` along its own normal (the sharp offset) instead of ``T cos`` of half
-the crease angle.
+so that on a smooth surface a vertex moves by ``T`` along the normal (its facets are chords of
+the surface: a cylinder of radius r becomes one of r + T exactly at the vertices), and at a
+crease the vertex moves so that every face round it is pushed out along its own normal by at
+least ``T``, the least pushed by exactly ``T`` (the sharp offset; ``T`` along ``n`` alone would
+push the faces of a right-angled crease by ``T cos 45``).
 
 ``T`` comes from the mapped thickness fields, which flicker from face to face by a few percent
 (discrete yarns, pooled), and steps down to 0 where the layer ends. Before it moves anything the
@@ -55,6 +57,10 @@ class OffsetSettings:
     #: cap of the crease scale 1 / min(n . n_f): a right-angled crease needs sqrt 2; sharper than
     #: about 120 deg the sharp offset runs off and the vertex keeps at most twice the thickness
     max_crease_scale: float = 2.0
+    #: a vertex whose smooth normal is turned from a face round it by more than this sits on a
+    #: crease: half the mandrel's crease angle (tolerances.crease_angle_deg, 60 deg), as the
+    #: normal bisects a crease; the chords of a smooth surface turn by pi / n_around (3 deg at 64)
+    crease_deg: float = 30.0
     #: a face turned by more than this from its base face counts as folded (the offset of a smooth
     #: surface by a thickness far below its radii turns faces by hundredths of a degree)
     max_turn_deg: float = 45.0
@@ -120,13 +126,15 @@ def vertex_normals(vertices, faces):
     return np.divide(out, norm[:, None], out=np.zeros_like(out), where=norm[:, None] > 0)
 
 
-def crease_scale(vertices, faces, normals, cap):
-    """c = 1 / min_f (n . n_f) over the faces round each vertex, clamped to [1, cap]: (nv,)."""
+def crease_scale(vertices, faces, normals, cap, crease_deg):
+    """c = 1 / min_f (n . n_f) over the faces round each vertex where that minimum is below
+    cos(crease_deg) (a crease), clamped to [1, cap]; 1 elsewhere: (nv,)."""
     fn, _ = face_normals_areas(vertices, faces)
     least = np.ones(len(vertices))
     for k in range(3):
         np.minimum.at(least, faces[:, k], np.einsum("ij,ij->i", normals[faces[:, k]], fn))
-    return np.clip(np.divide(1.0, least, out=np.full_like(least, cap), where=least > 0), 1.0, cap)
+    sharp = np.clip(np.divide(1.0, least, out=np.full_like(least, cap), where=least > 0), 1.0, cap)
+    return np.where(least < np.cos(np.radians(crease_deg)), sharp, 1.0)
 
 
 def umbrella(faces, n_vertices):
@@ -162,7 +170,7 @@ def offset_surface(vertices, faces, thickness, settings: OffsetSettings = Offset
     F = np.asarray(faces, dtype=np.int64)
     t = np.maximum(taubin(np.maximum(np.asarray(thickness, dtype=np.float64), 0.0), F, settings), 0.0)
     n = vertex_normals(V, F)
-    D = (t * crease_scale(V, F, n, settings.max_crease_scale))[:, None] * n
+    D = (t * crease_scale(V, F, n, settings.max_crease_scale, settings.crease_deg))[:, None] * n
     base_normals, base_areas = face_normals_areas(V, F)
     cos_turn = np.cos(np.radians(settings.max_turn_deg))
     L = umbrella(F, len(V))
