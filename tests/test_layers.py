@@ -333,3 +333,23 @@ def test_a_backward_layer_runs_along_the_reversed_centerline():
     np.testing.assert_allclose(back.s, [0.0, 0.2, 0.3])
     np.testing.assert_allclose(back.tangents, -cl.tangents)
     assert layer_centerline(cl, "forward") is cl
+
+
+def test_the_two_layers_example_runs_forward_then_backward(tmp_path):
+    """examples/two_layers.toml loads and braids both layers (a short stretch of each)."""
+    from preform.pipeline import run_case
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "examples" / "two_layers.toml")
+    assert [layer.direction for layer in cfg.layers] == ["forward", "backward"]
+    short = dataclasses.replace(cfg, layers=tuple(
+        dataclasses.replace(layer, process=dataclasses.replace(layer.process, braid_length=0.04))
+        for layer in cfg.layers))
+    outcome = run_case(short, tmp_path / "out")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert outcome.status == "done" and [e["status"] for e in summary["layers"]] == ["done", "done"]
+    # the backward layer starts at the wide end: its yarns lie at the far end of the cone
+    import pyvista as pv
+
+    z1 = np.asarray(pv.read(tmp_path / "out" / "yarns.vtp").points)[:, 2]
+    z2 = np.asarray(pv.read(tmp_path / "out" / "layer2" / "yarns.vtp").points)[:, 2]
+    assert z1.max() < 0.2 and z2.min() > 0.8

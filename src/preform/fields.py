@@ -634,10 +634,10 @@ def stack_layers(layer_fields) -> SurfaceFields:
     - every array of layer ``k`` (from 1) as ``layer{k}_<name>``;
     - the stack's totals under the single-layer names: ``thickness_m = sum_k t_k``,
       ``cover_factor = 1 - prod_k (1 - CF_k)`` (the share of the surface that some layer covers,
-      the layers' yarns lying independently of each other), ``reached_warp``/``reached_weft``
-      where any layer reached, ``jammed`` where any layer jammed;
-    - the first layer's braid angles, directions, coverages and yarn lengths under their
-      single-layer names (the layer on the mandrel; each layer's own are prefixed).
+      the layers' yarns lying independently of each other), ``jammed`` where any layer jammed;
+    - the first layer's braid angles, directions, coverages, yarn lengths and ``reached_*``
+      under their single-layer names (the layer on the mandrel, which the top-level history and
+      quality checks describe; each layer's own are prefixed).
     """
     base = layer_fields[0]
     data = dict(base.cell_data)
@@ -648,8 +648,7 @@ def stack_layers(layer_fields) -> SurfaceFields:
     cd = [f.cell_data for f in layer_fields]
     data["thickness_m"] = np.sum([c["thickness_m"] for c in cd], axis=0)
     data["cover_factor"] = 1.0 - np.prod([1.0 - c["cover_factor"] for c in cd], axis=0)
-    for name in ("reached_warp", "reached_weft", "jammed"):
-        data[name] = np.max([c[name] for c in cd], axis=0).astype(np.uint8)
+    data["jammed"] = np.max([c["jammed"] for c in cd], axis=0).astype(np.uint8)
     jammed = data["jammed"].astype(bool)
     return SurfaceFields(vertices=base.vertices, faces=base.faces, source_faces=base.source_faces,
                          cell_data=data, jammed=jammed,

@@ -353,11 +353,13 @@ def _top_result(config, configs, results):
 
 
 def layer_summary(k, layer, result, fields, offset) -> dict:
-    """summary.json's entry for layer k (from 1): its process figures, its fields' means over
-    the faces it reached, and for k >= 2 the offset surface it was braided on."""
+    """summary.json's entry for layer k (from 1): its process figures and quality verdict (its
+    history, yarns and fields, located on its own centerline), its fields' means over the faces
+    it reached, and for k >= 2 the offset surface it was braided on."""
     from .io.tables import summary_dict
+    from .quality import surface_reasons
 
-    s = summary_dict(result)
+    s = summary_dict(result, {"quality_reasons": surface_reasons(result, fields)})
     entry = {"layer": k, "direction": layer.direction, "model": s["model"], "status": s["status"],
              "message": s["message"], "steps": s["steps"], "wall_time_s": s["wall_time_s"],
              "braided_length_m": s["braided_length_m"], "braid_angle_deg": s["braid_angle_deg"],

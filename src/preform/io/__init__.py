@@ -82,8 +82,10 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     from ..quality import surface_reasons
 
     extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields)}
-    if layers is not None:
+    if layers is not None:   # the run is suspect when a layer above the first is
         extra["layers"] = layers
+        extra["quality_reasons"] += [f"layer {e['layer']}: {reason}" for e in layers[1:]
+                                     for reason in e["quality"]["reasons"]]
     if stages is not None:
         stages = {**stages, "write": time.perf_counter() - t_write}
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
