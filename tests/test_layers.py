@@ -353,3 +353,37 @@ def test_the_two_layers_example_runs_forward_then_backward(tmp_path):
     z1 = np.asarray(pv.read(tmp_path / "out" / "yarns.vtp").points)[:, 2]
     z2 = np.asarray(pv.read(tmp_path / "out" / "layer2" / "yarns.vtp").points)[:, 2]
     assert z1.max() < 0.2 and z2.min() > 0.8
+
+
+def test_resume_continues_at_the_first_unfinished_layer(two_layers, tmp_path):
+    """A run stopped after its first layer (layer 1's finished checkpoint kept) resumes with the
+    second and gives the same files as the run that was never stopped."""
+    import meshio
+
+    from preform.pipeline import LAYER_CHECKPOINT, run_case
+    from preform.simulation import simulate
+
+    config = load_config(write_case(tmp_path / "case"))
+    out = tmp_path / "out"
+    out.mkdir()
+    first = config.layer_config(0)
+    done = simulate(first, progress=False, checkpoint=out / LAYER_CHECKPOINT.format(k=1),
+                    keep_checkpoint=True)
+    assert done.status == "done" and (out / LAYER_CHECKPOINT.format(k=1)).is_file()
+    outcome = run_case(config, out, resume=True)
+    assert outcome.status == "done" and not list(out.glob("checkpoint*"))
+    for name in ("history.csv", "layer2/history.csv"):
+        assert (out / name).read_bytes() == (two_layers["out"] / name).read_bytes(), name
+    resumed = meshio.read(out / "surface.vtu").cell_data
+    for name, values in two_layers["cd"].items():
+        assert np.array_equal(resumed[name][0], values), name
+    # the layers' checkpoints are read: one made for other inputs is refused, naming the layer's key
+    from preform.checkpoint import CheckpointError
+
+    other = dataclasses.replace(config, layers=(dataclasses.replace(
+        config.layers[0], process=dataclasses.replace(config.layers[0].process, braid_length=0.1)),
+        *config.layers[1:]))
+    simulate(other.layer_config(0), progress=False, checkpoint=out / LAYER_CHECKPOINT.format(k=1),
+             keep_checkpoint=True)
+    with pytest.raises(CheckpointError, match="braid_length"):
+        run_case(config, out, resume=True)
