@@ -270,8 +270,12 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     lines = [layer_centerline(centerline, layer.direction, roll) for layer in config.layers]
     result_bytes = 0
     for k, (cfg, cl) in enumerate(zip(configs, lines), start=1):
-        if k > 1:
-            notes += [f"warning: layer {k}: {w}" for w in preflight(cfg, mandrel, cl)]
+        # every layer's set-up against the mandrel (impossible ones raise before anything runs);
+        # warnings the geometry check already gave are not repeated
+        notes += [line for w in preflight(cfg, mandrel, cl)
+                  if (line := f"warning: layer {k}: {w}") not in notes and f"warning: {w}" not in notes]
+        if k > 1:   # on the mandrel; the layer lies further out by the layers below it
+            notes += [f"note: layer {k}: {line}" for line in reference_lines(cfg, mandrel, cl)]
         work = estimate(cfg, mandrel, cl, force=force)
         notes += [f"note: layer {k}: {line}" for line in work.lines()]
         result_bytes += work.result_bytes
