@@ -200,6 +200,7 @@ def test_stacked_totals_add_up(two_layers):
     ('[[layer]]\n[[layer]]\n[layer.machine]\nguide_ring = { radius = 5.0 }\n',
      "[[layer]] 2 [machine] guide_ring.radius = 5.0"),
     ('[[layer]]\n[[layer]]\nyarn = 3\n', "[[layer]] 2 yarn = 3: expected a table"),
+    ('[[layers]]\ndirection = "forward"\n', "[[layers]]: did you mean [[layer]]?"),
 ])
 def test_bad_layer_input_names_the_layer_key_and_value(tmp_path, layers, named):
     with pytest.raises(ConfigError) as err:

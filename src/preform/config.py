@@ -320,6 +320,10 @@ def _check_layout(data: dict) -> None:
 
 def _unknown_top_level(name, value) -> None:
     sections = ", ".join(f"[{s}]" for s in KEYS)
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        hint = "did you mean [[layer]]? " if _suggest(name, ["layer"]) else ""
+        raise ConfigError(f"unknown array of tables [[{name}]]: {hint}[[layer]] is the only one "
+                          "(one table per braided layer)")
     if not isinstance(value, dict):
         home = _home_of(name)
         where = f"it belongs in [{home}]" if home else f"expected the sections {sections}"
@@ -349,7 +353,8 @@ class _Section:
         self.prefix = prefix   # "[[layer]] 2 " for a layer's sections
 
     def where(self, key: str) -> str:
-        return f"{self.prefix}[{self.name}] {key}"
+        """How messages name the key: ``[name] key`` (a [[layer]] table's own keys: no name)."""
+        return f"{self.prefix}[{self.name}] {key}" if self.name else f"{self.prefix}{key}"
 
     def error(self, key: str, value, expected: str) -> ConfigError:
         return ConfigError(f"{self.where(key)} = {_fmt(value)}: {expected}")
@@ -596,9 +601,8 @@ def _layer(k: int, table: dict, data: dict) -> LayerConfig:
                 raise ConfigError(f"{prefix}[{key}] {sub} = {_fmt(value[sub])}: unknown key; "
                                   f"{hint}expected one of {', '.join(KEYS[key])}")
     merged = {sec: {**data.get(sec, {}), **table.get(sec, {})} for sec in LAYER_SECTIONS}
-    own = _Section("layer", {}, table=table, prefix=f"[[layer]] {k} ")
-    own.where = lambda key: f"{prefix}{key}"
-    direction = own.choice("direction", DIRECTIONS, default="forward")
+    direction = _Section("", {}, table=table, prefix=prefix).choice("direction", DIRECTIONS,
+                                                                     default="forward")
     return LayerConfig(machine=_machine(_Section("machine", merged, prefix=prefix)),
                        yarn=_yarn(_Section("yarn", merged, prefix=prefix)),
                        process=_process(_Section("process", merged, prefix=prefix)),
