@@ -388,3 +388,18 @@ def test_resume_continues_at_the_first_unfinished_layer(two_layers, tmp_path):
              keep_checkpoint=True)
     with pytest.raises(CheckpointError, match="braid_length"):
         run_case(config, out, resume=True)
+
+
+def test_a_layer_may_run_the_interaction_model(tmp_path):
+    """The second layer braided by the yarn-interaction model on the offset surface (short)."""
+    from preform.pipeline import run_case
+
+    layers = ('[[layer]]\n[layer.process]\nbraid_length = 0.06\n'
+              '[[layer]]\n[layer.process]\nbraid_length = 0.04\n[layer.model]\nkind = "interaction"\n')
+    outcome = run_case(load_config(write_case(tmp_path, layers)), tmp_path / "out")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert outcome.status == "done"
+    assert [(e["model"], e["status"]) for e in summary["layers"]] == [("kinematic", "done"),
+                                                                      ("interaction", "done")]
+    history = np.loadtxt(tmp_path / "out" / "layer2" / "history.csv", delimiter=",", skiprows=1)
+    assert history[-1, 7] > 0          # crossings in the zone: the interaction model ran
