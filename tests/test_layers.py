@@ -225,6 +225,14 @@ def test_a_layer_lays_its_keys_over_the_top_level_sections(tmp_path):
     assert second.yarn.thickness == 1e-3 and second.yarn.width == WIDTH
     assert second.model.kind == "interaction" and first.model.kind == "kinematic"
     assert second.layers == cfg.layers and first.layers == cfg.layers[:1]
+    # the top-level sections stay the defaults; a change of them (here: --model) reaches the
+    # layers that do not set the key, not those that do
+    interaction = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction",
+                                                                     time_step=0.5))
+    assert interaction.layer_config(0).model.kind == "interaction"
+    assert interaction.layer_config(1).model.time_step == 0.5
+    kinematic = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, thickness=3e-3))
+    assert kinematic.layer_config(0).yarn.thickness == 3e-3 and kinematic.layer_config(1).yarn.thickness == 1e-3
 
 
 def test_no_layer_tables_is_one_layer_as_before(tmp_path):
@@ -342,9 +350,9 @@ def test_the_two_layers_example_runs_forward_then_backward(tmp_path):
 
     cfg = load_config(Path(__file__).resolve().parents[1] / "examples" / "two_layers.toml")
     assert [layer.direction for layer in cfg.layers] == ["forward", "backward"]
-    short = dataclasses.replace(cfg, layers=tuple(
-        dataclasses.replace(layer, process=dataclasses.replace(layer.process, braid_length=0.04))
-        for layer in cfg.layers))
+    # a top-level change reaches every layer that does not set the key itself
+    short = dataclasses.replace(cfg, process=dataclasses.replace(cfg.process, braid_length=0.04))
+    assert [short.layer_config(k).process.braid_length for k in range(2)] == [0.04, 0.04]
     outcome = run_case(short, tmp_path / "out")
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert outcome.status == "done" and [e["status"] for e in summary["layers"]] == ["done", "done"]
@@ -381,9 +389,9 @@ def test_resume_continues_at_the_first_unfinished_layer(two_layers, tmp_path):
     # the layers' checkpoints are read: one made for other inputs is refused, naming the layer's key
     from preform.checkpoint import CheckpointError
 
-    other = dataclasses.replace(config, layers=(dataclasses.replace(
-        config.layers[0], process=dataclasses.replace(config.layers[0].process, braid_length=0.1)),
-        *config.layers[1:]))
+    other = load_config(write_case(tmp_path / "other", TWO_LAYERS.replace(
+        "[[layer]]\n", "[[layer]]\n[layer.process]\nbraid_length = 0.1\n", 1)))
+    assert other.layer_config(0).process.braid_length == 0.1
     simulate(other.layer_config(0), progress=False, checkpoint=out / LAYER_CHECKPOINT.format(k=1),
              keep_checkpoint=True)
     with pytest.raises(CheckpointError, match="braid_length"):

@@ -140,17 +140,22 @@ class RtmConfig:
 
 @dataclass(frozen=True)
 class LayerConfig:
-    """One braided layer of ``[[layer]]`` (DESIGN.md §1): the top-level sections with the
-    layer's own keys laid over them, validated like them, and its direction of travel."""
+    """One braided layer of ``[[layer]]`` (DESIGN.md §1): its direction of travel and its own
+    values, laid over the run's top-level sections when the layer is braided
+    (:meth:`Config.layer_config`), so that a change of a top-level section (``--model``, a
+    sweep) reaches every layer that does not set that key itself. Validated at load against
+    the top-level sections, like them."""
 
-    machine: MachineConfig
-    yarn: YarnConfig
-    process: ProcessConfig
-    model: ModelConfig
-    axial_yarn: AxialYarnConfig
     #: "forward": braided from the centerline's tip, like a single layer; "backward": from its
-    #: other end (the machine reverses), ``braid_length`` counted from there
+    #: other end (the machine reverses), ``initial_position`` and ``braid_length`` from there
     direction: str = "forward"
+    #: (section, field, value) of every key the layer sets, values as the section dataclasses
+    #: hold them (SI, ``angular_speed`` in rad/s)
+    overrides: tuple[tuple[str, str, object], ...] = ()
+
+    def fields(self, section: str) -> dict:
+        """The layer's own values of one section: field -> value."""
+        return {name: value for sec, name, value in self.overrides if sec == section}
 
 
 @dataclass(frozen=True)
@@ -168,13 +173,13 @@ class Config:
     layers: tuple[LayerConfig, ...] = ()
 
     def layer_config(self, k: int) -> "Config":
-        """The config that braids layer ``k`` (0-based): its sections in place of the top-level
-        ones; ``layers`` keeps the layers up to and including ``k``, so the echo (and a
-        checkpoint's inputs hash) of a layer covers the layers it is braided on."""
+        """The config that braids layer ``k`` (0-based): the top-level sections with the layer's
+        own values laid over them; ``layers`` keeps the layers up to and including ``k``, so the
+        echo (and a checkpoint's inputs hash) of a layer covers the layers it is braided on."""
         layer = self.layers[k]
-        return dataclasses.replace(self, machine=layer.machine, yarn=layer.yarn, process=layer.process,
-                                   model=layer.model, axial_yarn=layer.axial_yarn,
-                                   layers=self.layers[:k + 1])
+        sections = {sec: dataclasses.replace(getattr(self, sec), **layer.fields(sec))
+                    for sec in LAYER_SECTIONS}
+        return dataclasses.replace(self, **sections, layers=self.layers[:k + 1])
 
     def axial(self) -> tuple[int, float, float, float | None]:
         """(count, width m, thickness m, tex or None) of the axial yarns."""
@@ -274,7 +279,7 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
     )
     if layers_raw is None:
         return config
-    return dataclasses.replace(config, layers=_layers(layers_raw, data))
+    return dataclasses.replace(config, layers=_layers(layers_raw, data, config))
 
 
 # ----- messages ------------------------------------------------------------------------------
@@ -562,7 +567,7 @@ def _axial_yarn(sec: _Section) -> AxialYarnConfig:
                                                          positive=True))
 
 
-def _layers(raw, data: dict) -> tuple[LayerConfig, ...]:
+def _layers(raw, data: dict, config: Config) -> tuple[LayerConfig, ...]:
     """``[[layer]]`` tables -> LayerConfigs: each layer's sections are the top-level ones with the
     layer's keys laid over them (a layer's ``guide_ring`` replaces the top-level one), read by
     the same readers, so a bad value names its layer (``[[layer]] 2 [yarn] thickness = ...``)."""
@@ -572,7 +577,8 @@ def _layers(raw, data: dict) -> tuple[LayerConfig, ...]:
     if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
         raise ConfigError(f"layer = {_fmt(raw)}: expected [[layer]] tables, one per braided layer")
     layers = [_layer(k, table, data) for k, table in enumerate(raw, start=1)]
-    with_tow = [layer.yarn.has_material for layer in layers]
+    whole = dataclasses.replace(config, layers=tuple(layers))
+    with_tow = [whole.layer_config(k).yarn.has_material for k in range(len(layers))]
     if any(with_tow) and not all(with_tow):
         k = with_tow.index(False) + 1
         raise ConfigError(f"[[layer]] {k} [yarn] has no tow material data (linear_density_tex, "
@@ -603,12 +609,13 @@ def _layer(k: int, table: dict, data: dict) -> LayerConfig:
     merged = {sec: {**data.get(sec, {}), **table.get(sec, {})} for sec in LAYER_SECTIONS}
     direction = _Section("", {}, table=table, prefix=prefix).choice("direction", DIRECTIONS,
                                                                      default="forward")
-    return LayerConfig(machine=_machine(_Section("machine", merged, prefix=prefix)),
-                       yarn=_yarn(_Section("yarn", merged, prefix=prefix)),
-                       process=_process(_Section("process", merged, prefix=prefix)),
-                       model=_model(_Section("model", merged, prefix=prefix)),
-                       axial_yarn=_axial_yarn(_Section("axial_yarn", merged, prefix=prefix)),
-                       direction=direction)
+    readers = {"machine": _machine, "yarn": _yarn, "process": _process, "model": _model,
+               "axial_yarn": _axial_yarn}
+    overrides = []
+    for sec, read in readers.items():   # the merged section validated; the layer's keys kept
+        section = read(_Section(sec, merged, prefix=prefix))
+        overrides += [(sec, key, getattr(section, key)) for key in table.get(sec, {})]
+    return LayerConfig(direction=direction, overrides=tuple(overrides))
 
 
 RTM_MODELS = ("gebart", "kozeny_carman", "table")
@@ -718,15 +725,23 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
 
 def dump_config(config: Config) -> dict:
     """See :func:`_dump_sections`; with ``[[layer]]`` tables also ``"layers"``: layer number
-    (from "1") -> its direction and sections (file units), a table like the sections."""
+    (from "1") -> its direction and the keys it sets, per section, in file units (a table like
+    the sections)."""
     out = _dump_sections(config)
     if config.layers:
-        out["layers"] = {str(k): {"direction": layer.direction,
-                          **{sec: v for sec, v in _dump_sections(dataclasses.replace(
-                              config, machine=layer.machine, yarn=layer.yarn, process=layer.process,
-                              model=layer.model, axial_yarn=layer.axial_yarn)).items()
-                             if sec in LAYER_SECTIONS}}
-                         for k, layer in enumerate(config.layers, start=1)}
+        out["layers"] = {str(k): _dump_layer(config, k - 1) for k in range(1, len(config.layers) + 1)}
+    return out
+
+
+def _dump_layer(config: Config, k: int) -> dict:
+    """Layer k's direction and its own keys, echoed as :func:`_dump_sections` echoes them."""
+    layer = config.layers[k]
+    echoed = _dump_sections(config.layer_config(k))
+    out = {"direction": layer.direction}
+    for sec in LAYER_SECTIONS:
+        own = layer.fields(sec)
+        if own:
+            out[sec] = {key: echoed[sec][key] for key in own}
     return out
 
 
