@@ -411,3 +411,17 @@ def test_a_layer_may_run_the_interaction_model(tmp_path):
                                                                       ("interaction", "done")]
     history = np.loadtxt(tmp_path / "out" / "layer2" / "history.csv", delimiter=",", skiprows=1)
     assert history[-1, 7] > 0          # crossings in the zone: the interaction model ran
+
+
+def test_check_checks_every_layer(tmp_path, capsys):
+    from preform.cli import main
+
+    path = write_case(tmp_path, TWO_LAYERS)
+    assert main(["check", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert "layer 1: estimated work" in err and "layer 2: estimated work" in err
+    assert "layer 2: Ko's braid angle" in err
+    # an impossible set-up of the second layer alone is refused before anything runs
+    bad = write_case(tmp_path, TWO_LAYERS + "[layer.machine]\nspool_radius = 0.015\n")
+    assert main(["check", str(bad)]) == 2
+    assert "Traceback" not in capsys.readouterr().err

@@ -236,6 +236,28 @@ class LayerStack:
         return mandrel_from_arrays(moved, self.base_faces, source=source), report
 
 
+def check_layers(config, mandrel, centerline, notes=(), *, force=False):
+    """(notes, estimated result bytes) of every layer of ``config`` against the mandrel, before
+    any runs: impossible set-ups raise (PreformError), work beyond the limits is refused unless
+    ``force``; ``notes`` are the geometry check's, whose warnings are not repeated. Each layer's
+    Ko / H_inf notes are the mandrel's (the layer lies further out by the layers below it)."""
+    from .checks import preflight
+
+    notes = list(notes)
+    result_bytes = 0
+    for k in range(1, len(config.layers) + 1):
+        cfg = config.layer_config(k - 1)
+        cl = layer_centerline(centerline, config.layers[k - 1].direction, config.mandrel.roll_reference)
+        notes += [line for w in preflight(cfg, mandrel, cl)
+                  if (line := f"warning: layer {k}: {w}") not in notes and f"warning: {w}" not in notes]
+        if k > 1:
+            notes += [f"note: layer {k}: {line}" for line in reference_lines(cfg, mandrel, cl)]
+        work = estimate(cfg, mandrel, cl, force=force)
+        notes += [f"note: layer {k}: {line}" for line in work.lines()]
+        result_bytes += work.result_bytes
+    return notes, result_bytes
+
+
 def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
                started=None, offset_settings=None) -> CaseOutcome:
     """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
@@ -266,19 +288,9 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     out_dir = Path(out_dir)
     configs = [config.layer_config(k) for k in range(len(config.layers))]
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(configs[0])
-    roll = config.mandrel.roll_reference
-    lines = [layer_centerline(centerline, layer.direction, roll) for layer in config.layers]
-    result_bytes = 0
-    for k, (cfg, cl) in enumerate(zip(configs, lines), start=1):
-        # every layer's set-up against the mandrel (impossible ones raise before anything runs);
-        # warnings the geometry check already gave are not repeated
-        notes += [line for w in preflight(cfg, mandrel, cl)
-                  if (line := f"warning: layer {k}: {w}") not in notes and f"warning: {w}" not in notes]
-        if k > 1:   # on the mandrel; the layer lies further out by the layers below it
-            notes += [f"note: layer {k}: {line}" for line in reference_lines(cfg, mandrel, cl)]
-        work = estimate(cfg, mandrel, cl, force=force)
-        notes += [f"note: layer {k}: {line}" for line in work.lines()]
-        result_bytes += work.result_bytes
+    lines = [layer_centerline(centerline, layer.direction, config.mandrel.roll_reference)
+             for layer in config.layers]
+    notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force)
     check_results_folder(out_dir, result_bytes)
     settings = offset_settings or OffsetSettings()
     stages = {"load_and_check": time.perf_counter() - t0}
