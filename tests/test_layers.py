@@ -454,3 +454,20 @@ def test_a_backward_layer_is_braided_from_the_far_end_at_kos_angle_there(tmp_pat
     assert ko2 - math.degrees(analytic.ko_braid_angle(OMEGA, R, V_TAKE_UP)) > 1.5
     z2 = np.asarray(pv.read(out / "layer2" / "yarns.vtp").points)[:, 2]
     assert z2.max() > 0.29 and 0.06 < z2.min() < 0.1      # from the far end, 0.22 m of it
+
+
+def test_a_layer_whose_surface_folds_ends_the_run_with_the_layers_below_written(tmp_path):
+    from preform.geometry.offset import OffsetSettings
+    from preform.pipeline import run_layers
+
+    # a fold criterion no offset can meet (any turn at all), and no repair
+    strict = OffsetSettings(max_turn_deg=1e-6, repair_passes=0)
+    out = tmp_path / "out"
+    outcome = run_layers(load_config(write_case(tmp_path, TWO_LAYERS)), out, offset_settings=strict)
+    summary = json.loads((out / "summary.json").read_text())
+    assert outcome.status == summary["status"] == "failed"
+    assert summary["message"].startswith("layer 2 cannot be braided on the layers below")
+    assert "fold" in summary["message"]
+    assert [e["layer"] for e in summary["layers"]] == [1] and (out / "surface.vtu").is_file()
+    # the first layer's state is kept, so a resume does not braid it again
+    assert (out / "checkpoint_layer1.npz").is_file()

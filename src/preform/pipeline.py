@@ -266,7 +266,8 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     Every layer's set-up is checked and its work estimated against the mandrel before the first
     runs; layer k (from 1) keeps its state in ``checkpoint_layer{k}.npz`` until all results are
     written (``--resume`` continues at the first unfinished layer). A layer that stops
-    (interrupted, failed) ends the run; the layers done so far are written. The top-level
+    (interrupted, failed), or whose surface folds or makes its set-up impossible, ends the run
+    (status "failed" for the latter, naming the layer); the layers done so far are written. The top-level
     ``history.csv``, ``yarns.vtp`` and ``convergence`` are the first layer's, ``layer{k}/`` holds
     those of layer k >= 2; the surface files hold every layer's fields (``layer{k}_*``) and the
     stacked totals (``preform.fields.stack_layers``, ``preform.rtm.stacked_rtm_fields``);
@@ -295,13 +296,17 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     settings = offset_settings or OffsetSettings()
     stages = {"load_and_check": time.perf_counter() - t0}
     with RunLock(out_dir):
-        results, layer_fields, offsets, stack = [], [], [None], None
+        results, layer_fields, offsets, stack, refused = [], [], [None], None, ""
         surface = mandrel
         for k, (cfg, cl) in enumerate(zip(configs, lines), start=1):
-            if k > 1:
-                surface, report = stack.offset_for(layer_fields, f"layer {k}")
+            if k > 1:   # a surface that folds, or a set-up the stack makes impossible, ends the run
+                try:
+                    surface, report = stack.offset_for(layer_fields, f"layer {k}")
+                    notes += [f"warning: layer {k}: {w}" for w in preflight(cfg, surface, cl)]
+                except PreformError as err:
+                    refused = f"layer {k} cannot be braided on the layers below: {err}"
+                    break
                 offsets.append(report)
-                notes += [f"warning: layer {k}: {w}" for w in preflight(cfg, surface, cl)]
             t = time.perf_counter()
             ckpt = out_dir / LAYER_CHECKPOINT.format(k=k)
             result = simulate(cfg, progress=progress, mandrel=surface, centerline=cl, checkpoint=ckpt,
@@ -317,7 +322,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             layer_fields.append(map_to_surface(on_mandrel, mesh=stack.layer_mesh()))
             stages[f"map_layer{k}"] = time.perf_counter() - t
         fields = _stacked_fields(configs, layer_fields, centerline, config.rtm.cavity_thickness)
-        top = _top_result(config, configs, results)
+        top = _top_result(config, configs, results, refused)
         entries = [layer_summary(k, cfg.layers[-1], r, f, o) for k, (cfg, r, f, o)
                    in enumerate(zip(configs, results, [*layer_fields, None], offsets), start=1)]
         try:
@@ -351,14 +356,17 @@ def _stacked_fields(configs, layer_fields, centerline, cavity_thickness):
     return fields
 
 
-def _top_result(config, configs, results):
+def _top_result(config, configs, results, refused=""):
     """The Result the top-level files describe: the first layer's, with the whole run's config
-    (all layers echoed) and the status of the last layer run (a stopped layer stops the run)."""
+    (all layers echoed) and the status of the last layer run (a stopped layer stops the run);
+    ``refused``: why the next layer could not start ("" if it was not refused)."""
     import dataclasses
 
     last = results[-1]
     status, message = last.status, last.message
-    if status == "done" and len(results) < len(configs):
+    if refused:
+        status, message = "failed", refused
+    elif status == "done" and len(results) < len(configs):
         status, message = "failed", f"layer {len(results)} deposited no yarn; the layers above it were not braided"
     elif status != "done" and len(results) > 1:
         message = f"layer {len(results)}: {message}"
