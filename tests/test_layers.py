@@ -471,3 +471,58 @@ def test_a_layer_whose_surface_folds_ends_the_run_with_the_layers_below_written(
     assert [e["layer"] for e in summary["layers"]] == [1] and (out / "surface.vtu").is_file()
     # the first layer's state is kept, so a resume does not braid it again
     assert (out / "checkpoint_layer1.npz").is_file()
+
+
+def test_stacked_permeability_is_the_layered_medium_of_the_layers():
+    """Two layers of helices (30 and 60 deg) on one field mesh: the stack conducts in the plane
+    as its layers side by side, ``t K_in = sum t_k K_in,k`` (each layer at its share of the
+    cavity), and through the thickness as layers in series, ``t / K3 = sum t_k / K3_k``."""
+    from types import SimpleNamespace as NS
+
+    from preform import rtm
+    from preform.fields import map_to_surface, stack_layers
+    from test_helpers_fields import cylinder, helices, make_result, side_faces
+
+    tow = NS(yarn=NS(linear_density_tex=800.0, fibre_density=1780.0, fibre_radius=3.5e-6,
+                     has_material=True),
+             rtm=NS(cavity_thickness=None, permeability="gebart", packing="hexagonal"))
+    layers = [map_to_surface(make_result(cylinder(), helices(math.radians(a), 24)), edge_length=0.012)
+              for a in (30.0, 60.0)]
+    assert np.array_equal(layers[0].faces, layers[1].faces)          # one field mesh
+    tangents = np.tile([0.0, 0.0, 1.0], (len(layers[0].faces), 1))
+    cavity = 1e-3
+    # the second tow twice as heavy: the layers differ in V_f (so in K3) as well as in angle
+    heavy = NS(yarn=NS(**{**vars(tow.yarn), "linear_density_tex": 1600.0}), rtm=tow.rtm)
+    tows = [tow, heavy]
+    stack = rtm.stacked_rtm_fields(layers, tows, tangents, cavity_thickness=cavity)
+    inner, _ = side_faces(layers[0], margin=2 * layers[0].pool_radius_m)
+    t_k = np.array([f.cell_data["thickness_m"] for f in layers])
+    t = t_k.sum(axis=0)
+    own = [rtm.rtm_fields(f, c, tangents, thickness=tk * cavity / t) for f, c, tk in zip(layers, tows, t_k)]
+    k3 = [o["permeability_k3_m2"][inner] for o in own]
+    assert np.all(k3[0] > 2 * k3[1])       # so series and side-by-side means differ
+    V, F = layers[0].vertices, layers[0].faces
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    P = np.eye(3)[None] - n[:, :, None] * n[:, None, :]
+    K = stack["permeability_m2"].reshape(-1, 3, 3)
+    K_in = P @ K @ P
+    sum_in = sum(tk[:, None, None] * (P @ o["permeability_m2"].reshape(-1, 3, 3) @ P)
+                 for tk, o in zip(t_k, own))
+    # round-off: the same sums in another order
+    np.testing.assert_allclose((t[:, None, None] * K_in)[inner], sum_in[inner], rtol=1e-12,
+                               atol=1e-12 * np.abs(sum_in[inner]).max())
+    series = sum(tk / o["permeability_k3_m2"] for tk, o in zip(t_k, own))
+    np.testing.assert_allclose((t / stack["permeability_k3_m2"])[inner], series[inner], rtol=1e-12)
+    # the stack's fibre fraction fills the cavity with both layers' fibres
+    aw = sum(o["areal_weight_kg_m2"] for o in own)
+    np.testing.assert_allclose(stack["fibre_volume_fraction"][inner], (aw / (1780.0 * cavity))[inner],
+                               rtol=1e-14)
+    # a stack of one layer is that layer
+    one = rtm.stacked_rtm_fields(layers[:1], [tow], tangents, cavity_thickness=cavity)
+    in_cavity = NS(yarn=tow.yarn, rtm=NS(cavity_thickness=cavity, permeability="gebart",
+                                         packing="hexagonal"))
+    alone = rtm.rtm_fields(layers[0], in_cavity, tangents)
+    for name in ("fibre_volume_fraction", "permeability_k1_m2", "permeability_k2_m2", "permeability_k3_m2"):
+        np.testing.assert_allclose(one[name][inner], alone[name][inner], rtol=1e-12)
+    assert stack_layers(layers).cell_data["thickness_m"][inner] == pytest.approx(t[inner], rel=1e-15)
