@@ -512,8 +512,8 @@ def test_stacked_permeability_is_the_layered_medium_of_the_layers():
     # round-off: the same sums in another order
     np.testing.assert_allclose((t[:, None, None] * K_in)[inner], sum_in[inner], rtol=1e-12,
                                atol=1e-12 * np.abs(sum_in[inner]).max())
-    series = sum(tk / o["permeability_k3_m2"] for tk, o in zip(t_k, own))
-    np.testing.assert_allclose((t / stack["permeability_k3_m2"])[inner], series[inner], rtol=1e-12)
+    series = sum(tk[inner] / o["permeability_k3_m2"][inner] for tk, o in zip(t_k, own))
+    np.testing.assert_allclose(t[inner] / stack["permeability_k3_m2"][inner], series, rtol=1e-12)
     # the stack's fibre fraction fills the cavity with both layers' fibres
     aw = sum(o["areal_weight_kg_m2"] for o in own)
     np.testing.assert_allclose(stack["fibre_volume_fraction"][inner], (aw / (1780.0 * cavity))[inner],
