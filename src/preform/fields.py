@@ -75,6 +75,15 @@ class SurfaceFields:
     edge_length_m: float = float("inf")
     pool_radius_m: float = 0.0
 
+    def reached(self) -> np.ndarray:
+        """(nf,) bool: faces some yarn reached, of any layer (``reached_*`` and, on a layered
+        run, ``layer{k}_reached_*``: the unprefixed arrays are the first layer's)."""
+        keys = [k for k in self.cell_data if k.endswith(("reached_warp", "reached_weft"))]
+        out = np.zeros(len(self.faces), dtype=bool)
+        for k in keys:
+            out |= np.asarray(self.cell_data[k]) > 0
+        return out
+
 
 # ---------------------------------------------------------------------------------------- mesh
 
