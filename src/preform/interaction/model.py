@@ -445,8 +445,10 @@ class InteractionZone:
         * "laid": the yarn is conserved. The fell point ``ref`` of the last step (where it
           stuck to the mandrel: a deposited crossing or the end of the yarn laid on it) moves
           with the mandrel to ``ref' = pose (pose_last^-1 ref)``; the yarn laid since, from
-          ``ref'`` to ``bc.fell`` along the surface, takes its material from the free segment:
-          ``u_fell = u_fell_last + |bc.fell - ref'| / (1 + f / EA)``, ``f`` the tension of the
+          the foot of ``ref'`` on the surface (a deposited crossing lies up to the deposit
+          height above it, the distance ``d`` to the mandrel) to ``bc.fell`` along the surface,
+          takes its material from the free segment: ``u_fell = u_fell_last + sqrt(|bc.fell -
+          ref'|^2 - d^2) / (1 + f / EA)``, ``f`` the tension of the
           lowest segment (the chord for the laid arc: both are one step of laying apart,
           a second-order difference). The mandrel's advance thus pulls the yarn through the
           crossings and over the ring, at the rate the braid consumes it. A yarn without a
@@ -458,8 +460,15 @@ class InteractionZone:
         new = frontal.fell_material(st, bc, self.settings)
         if self.settings.zone.fell_material == "tension" or self.pose_end is None or ref is None:
             return new
-        carried = pose.to_machine(self.pose_end.to_mandrel(ref))
-        laid = np.sqrt(np.sum((bc.fell - carried) ** 2, axis=1))
+        on_mandrel = self.pose_end.to_mandrel(ref)
+        carried = pose.to_machine(on_mandrel)
+        gap = np.sum((bc.fell - carried) ** 2, axis=1)
+        if self.distance is not None:
+            # a deposited crossing sat up to the deposit height off the surface, and the yarn
+            # was laid from its foot (the stepper's closest point): that drop along the normal
+            # is no yarn laid
+            gap = np.maximum(gap - self.distance(on_mandrel) ** 2, 0.0)
+        laid = np.sqrt(gap)
         n = st.n_yarns
         lo = st.lowest
         side = (np.arange(n) >= n // 2).astype(np.int64)
