@@ -355,3 +355,46 @@ def project_sampled(points, Q, Sq, lo, hi, left, box, out_s):
                 best_d = d
                 best_s = Sq[a] + u * (Sq[b] - Sq[a])
         out_s[j] = best_s
+
+
+# ------------------------------------------------------------- segment queries through embree
+@njit(cache=True)
+def segment_rays(starts, ends, offset, diagonal, scene_origin, scene_scale, dirs, length, live,
+                 origin32, dirs32, far32):
+    """The rays of ``Mandrel.intersect_segments`` for segments starts -> ends (m, 3), float64.
+
+    Writes dirs (m, 3) unit (zeros for a zero-length segment) and length (m,) ``|end - start|``
+    (squares summed in order, as np.linalg.norm); then for each segment longer than ``offset``,
+    in order, its index into live (m,) and its embree ray: origin ``start + offset d`` in the
+    scene's frame ``(x - scene_origin) * scene_scale``, direction d, and the far distance
+    ``(length - offset + 1e-6 (length + diagonal)) * scene_scale`` (a little past the end, as
+    float32 resolves 6e-8 of a distance), each rounded to float32 (origin32, dirs32, far32).
+    Returns the number of rays. The operations are those of the NumPy set-up they replace, so the
+    rays are the same to the last bit."""
+    m = 0
+    for i in range(starts.shape[0]):
+        dx = ends[i, 0] - starts[i, 0]
+        dy = ends[i, 1] - starts[i, 1]
+        dz = ends[i, 2] - starts[i, 2]
+        L = np.sqrt((dx * dx + dy * dy) + dz * dz)
+        length[i] = L
+        if L > 0:
+            dx = dx / L
+            dy = dy / L
+            dz = dz / L
+        else:
+            dx = dy = dz = 0.0
+        dirs[i, 0] = dx
+        dirs[i, 1] = dy
+        dirs[i, 2] = dz
+        if L > 0 and L > offset:
+            live[m] = i
+            origin32[m, 0] = np.float32(((starts[i, 0] + offset * dx) - scene_origin[0]) * scene_scale)
+            origin32[m, 1] = np.float32(((starts[i, 1] + offset * dy) - scene_origin[1]) * scene_scale)
+            origin32[m, 2] = np.float32(((starts[i, 2] + offset * dz) - scene_origin[2]) * scene_scale)
+            dirs32[m, 0] = np.float32(dx)
+            dirs32[m, 1] = np.float32(dy)
+            dirs32[m, 2] = np.float32(dz)
+            far32[m] = np.float32((L - offset + 1e-6 * (L + diagonal)) * scene_scale)
+            m += 1
+    return m

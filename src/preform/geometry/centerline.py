@@ -8,8 +8,10 @@ the world axis least aligned with the tip tangent.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -61,27 +63,50 @@ class Centerline:
             p[after] = self.points[-1] + (s[after] - S[-1])[:, None] * self.tangents[-1]
         return p, T, N, B
 
-    def frame_at(self, s: float):
-        """(point, T, N, B), each (3,), at one arc length: frames_at for one value, without its
-        array set-up (the pose is taken twice per time step)."""
-        S = self.s
+    @cached_property
+    def _rows(self):
+        """The polyline as Python lists (s, then (x, y, z) tuples of points, tangents, normals)
+        for ``frame_values``, which runs twice per time step."""
+        rows = lambda a: [tuple(r) for r in np.asarray(a, dtype=float).tolist()]
+        return ([float(v) for v in self.s], rows(self.points), rows(self.tangents), rows(self.normals))
+
+    def frame_values(self, s: float):
+        """(point, T, N, B), each an (x, y, z) tuple of floats, at one arc length: frames_at for
+        one value in plain float arithmetic, without its array set-up (the pose is taken twice
+        per time step). T and N are the blends of the vertex frames, normalised (N made normal
+        to T first), B = T x N; the point is interpolated, extrapolated along the end tangent
+        beyond the ends."""
+        S, P, TT, NN = self._rows
         s = float(s)
-        i = min(max(int(np.searchsorted(S, s, side="right")) - 1, 0), len(S) - 2)
+        i = min(max(bisect.bisect_right(S, s) - 1, 0), len(S) - 2)
         u = (s - S[i]) / (S[i + 1] - S[i])
         w = min(max(u, 0.0), 1.0)
-        T = (1 - w) * self.tangents[i] + w * self.tangents[i + 1]
-        T = T / math.sqrt(T @ T)
-        N = (1 - w) * self.normals[i] + w * self.normals[i + 1]
-        N = N - (N @ T) * T
-        N = N / math.sqrt(N @ N)
-        B = np.array([T[1] * N[2] - T[2] * N[1], T[2] * N[0] - T[0] * N[2], T[0] * N[1] - T[1] * N[0]])
+        v = 1 - w
+        t0, t1 = TT[i], TT[i + 1]
+        tx, ty, tz = v * t0[0] + w * t1[0], v * t0[1] + w * t1[1], v * t0[2] + w * t1[2]
+        tn = math.sqrt((tx * tx + ty * ty) + tz * tz)
+        tx, ty, tz = tx / tn, ty / tn, tz / tn
+        n0, n1 = NN[i], NN[i + 1]
+        nx, ny, nz = v * n0[0] + w * n1[0], v * n0[1] + w * n1[1], v * n0[2] + w * n1[2]
+        d = (nx * tx + ny * ty) + nz * tz
+        nx, ny, nz = nx - d * tx, ny - d * ty, nz - d * tz
+        nn = math.sqrt((nx * nx + ny * ny) + nz * nz)
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+        B = (ty * nz - tz * ny, tz * nx - tx * nz, tx * ny - ty * nx)
         if s < S[0]:
-            p = self.points[0] + (s - S[0]) * self.tangents[0]
+            a, e, h = P[0], TT[0], s - S[0]
+            p = (a[0] + h * e[0], a[1] + h * e[1], a[2] + h * e[2])
         elif s > S[-1]:
-            p = self.points[-1] + (s - S[-1]) * self.tangents[-1]
+            a, e, h = P[-1], TT[-1], s - S[-1]
+            p = (a[0] + h * e[0], a[1] + h * e[1], a[2] + h * e[2])
         else:
-            p = self.points[i] + u * (self.points[i + 1] - self.points[i])
-        return p, T, N, B
+            a, b = P[i], P[i + 1]
+            p = (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]))
+        return p, (tx, ty, tz), (nx, ny, nz), B
+
+    def frame_at(self, s: float):
+        """(point, T, N, B), each (3,), at one arc length (``frame_values`` as arrays)."""
+        return tuple(np.array(v) for v in self.frame_values(s))
 
     def project(self, points):
         """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m.
