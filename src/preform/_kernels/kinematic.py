@@ -279,6 +279,17 @@ def smooth_normals_batch(V, T, CN, faces, points, out):
         out[i, 2] = nz
 
 
+@njit(cache=True)
+def lifted_points(V, T, CN, faces, points, clearance, out):
+    """points (m, 3) on faces (m,) lifted along their smooth normal: ``p + clearance n(p)``,
+    into out (m, 3) (where the catch test's free yarn starts)."""
+    for i in range(points.shape[0]):
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
+        out[i, 0] = points[i, 0] + clearance * nx
+        out[i, 1] = points[i, 1] + clearance * ny
+        out[i, 2] = points[i, 2] + clearance * nz
+
+
 # ---------------------------------------------------------------- braid angles of laid yarn
 # Post-processing of a run (``preform.analysis``): per point, the centerline tangent at its arc
 # length s (linear blend of the polyline's vertex tangents, as ``Centerline.frames_at``), the
