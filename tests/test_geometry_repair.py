@@ -342,3 +342,30 @@ def test_random_damage_is_repaired_or_refused(kind, seed, scale, shift, flip, du
     # jitter of 1e-9 of the size moves the volume by ~1e-9 relative: 1e-6 is the brief's bound
     _assert_closed_outward(v2, f2, base.volume * scale**3, rel=1e-6)
     assert report.holes_filled == 0 and len(f2) == len(base.faces)
+
+
+def _pierced(seed):
+    """Icosphere with a cap pushed through the opposite wall, shifted and turned at random."""
+    rng = np.random.default_rng(seed)
+    s = _mesh("icosphere")
+    v = s.vertices.copy()
+    v[v[:, 0] > rng.uniform(0.06, 0.095), 0] -= rng.uniform(0.18, 0.3)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return v @ q + rng.normal(scale=0.5, size=3), s.faces
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_self_intersection_kernels_find_the_edges_of_the_numpy_reference(seed):
+    """The edge-ray kernels flag the same edges as the whole-array NumPy reference on pierced
+    spheres, and none on clean meshes (the reference also none)."""
+    import naive_repair
+
+    v, f = _pierced(seed)
+    got = self_intersections(v, f)
+    ref = naive_repair.self_intersections(v, f)
+    assert len(ref) > 0
+    np.testing.assert_array_equal(np.unique(got, axis=0), np.unique(ref, axis=0))
+    for kind in ("cylinder", "icosphere", "box"):
+        m = _mesh(kind)
+        assert len(self_intersections(m.vertices, m.faces)) == 0
+        assert len(naive_repair.self_intersections(m.vertices, m.faces)) == 0

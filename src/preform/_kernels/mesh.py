@@ -398,3 +398,85 @@ def segment_rays(starts, ends, offset, diagonal, scene_origin, scene_scale, dirs
             far32[m] = np.float32((L - offset + 1e-6 * (L + diagonal)) * scene_scale)
             m += 1
     return m
+
+
+# ------------------------------------------------------ self-intersection test by edge rays
+# ``geometry.repair.self_intersections``: every edge is cast along itself from just past its
+# start; each triangle met before its end is tested, the ray restarted just past the hit.
+
+
+@njit(cache=True)
+def edge_ray_batch(live, origin, a, u, length, eps, scene_origin, scene_scale, out_live, origin32,
+                   dirs32, far32):
+    """The embree rays of the edges ``live`` still being cast: what is left of edge r,
+    ``length - 2 eps - (origin - a).u``; the edges with some left, in order, into out_live, their
+    rays in the scene's frame ``(x - scene_origin) * scene_scale`` and far distances (float32).
+    Returns their number."""
+    m = 0
+    for j in range(live.shape[0]):
+        r = live[j]
+        left = length[r] - 2.0 * eps[r] - ((origin[r, 0] - a[r, 0]) * u[r, 0]
+                                            + (origin[r, 1] - a[r, 1]) * u[r, 1]
+                                            + (origin[r, 2] - a[r, 2]) * u[r, 2])
+        if not left > 0:
+            continue
+        out_live[m] = r
+        for c in range(3):
+            origin32[m, c] = np.float32((origin[r, c] - scene_origin[c]) * scene_scale)
+            dirs32[m, c] = np.float32(u[r, c])
+        far32[m] = np.float32(left * scene_scale)
+        m += 1
+    return m
+
+
+@njit(cache=True)
+def edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offset, last, bad,
+                  out_live):
+    """Process one embree pass of the edge rays ``live`` (hit triangle ``prim``, -1 for none).
+
+    A hit on a new triangle: the ray's line meets the triangle's plane at
+    ``origin + u (p0 - origin).n / u.n`` (no hit if |u.n| <= 1e-5, a grazing ray, which ends);
+    it pierces when that point lies before the edge's end (``(x - a).u < length - 2 eps``) and
+    the triangle holds neither end of the edge (flag ``bad``, the ray ends); otherwise the ray
+    restarts ``base`` past the point. The same triangle hit again (float32 rounding put the
+    origin behind it): the ray moves on by twice its last advance. Writes the rays still going
+    into out_live; returns their number."""
+    m = 0
+    for j in range(live.shape[0]):
+        r = live[j]
+        p = prim[j]
+        if p < 0:
+            continue
+        if last[r] == p:
+            offset[r] *= 2.0
+            for c in range(3):
+                origin[r, c] += u[r, c] * offset[r]
+            out_live[m] = r
+            m += 1
+            continue
+        last[r] = p
+        q0 = F[p, 0]
+        den = u[r, 0] * FN[p, 0] + u[r, 1] * FN[p, 1] + u[r, 2] * FN[p, 2]
+        if not abs(den) > 1e-5:
+            continue
+        num = ((V[q0, 0] - origin[r, 0]) * FN[p, 0] + (V[q0, 1] - origin[r, 1]) * FN[p, 1]
+               + (V[q0, 2] - origin[r, 2]) * FN[p, 2])
+        dist = num / den
+        x0 = u[r, 0] * dist + origin[r, 0]
+        x1 = u[r, 1] * dist + origin[r, 1]
+        x2 = u[r, 2] * dist + origin[r, 2]
+        t = (x0 - a[r, 0]) * u[r, 0] + (x1 - a[r, 1]) * u[r, 1] + (x2 - a[r, 2]) * u[r, 2]
+        own = False
+        for c in range(3):
+            if F[p, c] == e[r, 0] or F[p, c] == e[r, 1]:
+                own = True
+        if t < length[r] - 2.0 * eps[r] and not own:
+            bad[r] = True
+            continue
+        origin[r, 0] = x0 + u[r, 0] * base
+        origin[r, 1] = x1 + u[r, 1] * base
+        origin[r, 2] = x2 + u[r, 2] * base
+        offset[r] = base
+        out_live[m] = r
+        m += 1
+    return m

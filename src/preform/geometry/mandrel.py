@@ -421,4 +421,7 @@ def load_mandrel(path, unit: str = "m", body=None) -> Mandrel:
 
     vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit],
                                            body=body)
-    return mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
+    mandrel = mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
+    if report.ray_mesh is not None:   # the same arrays: its embree scene serves the ray queries
+        mandrel.__dict__["mesh"] = report.ray_mesh
+    return mandrel
