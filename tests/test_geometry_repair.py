@@ -369,3 +369,21 @@ def test_self_intersection_kernels_find_the_edges_of_the_numpy_reference(seed):
         m = _mesh(kind)
         assert len(self_intersections(m.vertices, m.faces)) == 0
         assert len(naive_repair.self_intersections(m.vertices, m.faces)) == 0
+
+
+def test_exact_weld_kernel_matches_numpy_unique():
+    """weld_exact: the distinct rows (first appearances) and the inverse of np.unique(axis=0),
+    -0.0 and 0.0 one value; on a soup with repeated corners and signed zeros."""
+    from preform._kernels.mesh import weld_exact
+
+    rng = np.random.default_rng(5)
+    base = np.round(rng.normal(size=(400, 3)), 2)
+    base[:40, 0] = 0.0
+    V = base[rng.integers(0, len(base), 5000)].copy()
+    V[rng.random(len(V)) < 0.2, 0] *= -1.0                  # some 0.0 become -0.0
+    inverse = np.empty(len(V), dtype=np.int64)
+    first = weld_exact(V, inverse)
+    np.testing.assert_array_equal(V[first][inverse], V)      # every row maps to an equal row
+    ref_rows, ref_first = np.unique(V + 0.0, axis=0, return_index=True)
+    assert len(first) == len(ref_rows)                       # as many distinct rows as NumPy's
+    np.testing.assert_array_equal(np.sort(first), np.sort(ref_first))

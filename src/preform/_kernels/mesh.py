@@ -480,3 +480,43 @@ def edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offs
         out_live[m] = r
         m += 1
     return m
+
+
+# ------------------------------------------------------------------------------ exact welding
+@njit(cache=True)
+def weld_exact(V, inverse):
+    """Distinct rows of V (n, 3) float64 in order of first appearance: writes the index of each
+    row's distinct row into inverse (n,) and returns the index in V of each distinct row's first
+    appearance. Rows are equal when their coordinates are (so 0.0 and -0.0 are one value), through
+    an open-addressing hash table on the coordinates' bits."""
+    n = V.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    table = np.full(size, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    bits = np.empty(3, dtype=np.float64)
+    ibits = bits.view(np.uint64)
+    k = 0
+    for i in range(n):
+        for c in range(3):
+            bits[c] = V[i, c] + 0.0            # -0.0 -> 0.0
+        h = np.uint64(1469598103934665603)
+        for c in range(3):
+            h = (h ^ ibits[c]) * np.uint64(1099511628211)
+            h ^= h >> np.uint64(29)
+        slot = np.int64(h & np.uint64(size - 1))
+        while True:
+            j = table[slot]
+            if j < 0:
+                table[slot] = k
+                first[k] = i
+                inverse[i] = k
+                k += 1
+                break
+            r = first[j]
+            if V[r, 0] == V[i, 0] and V[r, 1] == V[i, 1] and V[r, 2] == V[i, 2]:
+                inverse[i] = j
+                break
+            slot = (slot + 1) & (size - 1)
+    return first[:k].copy()

@@ -427,14 +427,20 @@ def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
 PIECE_FRACTION = 0.02
 
 
-def surface_moments(vertices, faces):
+def surface_moments(vertices, faces, which=None):
     """Areas (nf,) m^2, centroids (nf, 3) m and second moments (nf, 3, 3) m^4 of triangles.
 
     Second moment of triangle (a, b, c) over its area: ``A / 12 (a a^T + b b^T + c c^T + s s^T)``
     with ``s = a + b + c`` (exact for a uniform density), so principal axes computed from them
-    are properties of the surface, not of how it was triangulated.
+    are properties of the surface, not of how it was triangulated. ``which``: a callable taking
+    the centroids and returning a bool mask (nf,); then only the masked triangles' moments are
+    formed and returned (each triangle's values are its own, so they equal the full arrays'
+    masked rows).
     """
     p = vertices[faces]
+    if which is not None:
+        keep = which(p.sum(axis=1) / 3.0)
+        p = p[keep]
     area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     s = p.sum(axis=1)
     second = (np.einsum("fki,fkj->fij", p, p) + np.einsum("fi,fj->fij", s, s)) * (area / 12.0)[:, None, None]
@@ -497,9 +503,8 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
     Vp, Fp, _ = subdivide_long_edges(V, mandrel.faces, PIECE_FRACTION * extent)
-    area, C, M = surface_moments(Vp, Fp)
-    near_pieces = np.linalg.norm(C - tip, axis=1) < 0.25 * extent
-    T, local_centre = _tip_axis(area[near_pieces], C[near_pieces], M[near_pieces], axis)
+    area, C, M = surface_moments(Vp, Fp, which=lambda c: np.linalg.norm(c - tip, axis=1) < 0.25 * extent)
+    T, local_centre = _tip_axis(area, C, M, axis)
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
     n = n_sections or 200
     h = extent / n

@@ -244,13 +244,15 @@ def _merge_vertices(V, F, radius):
 
 
 def _weld_exact(V):
-    """Distinct rows of V (k, 3) and the row of each vertex (n,); a lexsort, faster than unique."""
-    order = np.lexsort(V.T[::-1])
-    rows = V[order]
-    new = np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])
+    """Distinct rows of V (k, 3), in order of first appearance, and the row of each vertex (n,)
+    (hash table, ``_kernels.mesh.weld_exact``). The order of the distinct rows does not reach
+    ``_merge_vertices``'s result, which keeps the lowest input index of each cluster."""
+    from .._kernels.mesh import weld_exact
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
     inverse = np.empty(len(V), dtype=np.int64)
-    inverse[order] = np.cumsum(new) - 1
-    return rows[new], inverse
+    first = weld_exact(V, inverse)
+    return V[first], inverse
 
 
 def _drop_degenerate(V, F, radius):
