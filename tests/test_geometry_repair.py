@@ -387,3 +387,28 @@ def test_exact_weld_kernel_matches_numpy_unique():
     ref_rows, ref_first = np.unique(V + 0.0, axis=0, return_index=True)
     assert len(first) == len(ref_rows)                       # as many distinct rows as NumPy's
     np.testing.assert_array_equal(np.sort(first), np.sort(ref_first))
+
+
+def test_degenerate_face_kernel_matches_numpy():
+    """degenerate_faces against the NumPy form in _drop_degenerate's docstring, on random faces
+    with repeated vertices, near-caps and equal sides."""
+    from preform._kernels.mesh import degenerate_faces
+
+    rng = np.random.default_rng(11)
+    V = rng.normal(size=(300, 3))
+    V[200:] = V[:100] * 0.5 + V[100:200] * 0.5 + rng.normal(scale=1e-10, size=(100, 3))  # near midpoints
+    F = rng.integers(0, 300, size=(4000, 3))
+    F[:100] = np.stack([np.arange(100), np.arange(100, 200), np.arange(200, 300)], axis=1)  # caps
+    F[100:150, 1] = F[100:150, 0]                                                          # collapsed
+    radius = 1e-8
+    collapsed, caps, longest = (np.empty(len(F), bool), np.empty(len(F), bool), np.empty(len(F), np.int64))
+    degenerate_faces(V, F, radius, collapsed, caps, longest)
+    p = V[F]
+    side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    length = np.linalg.norm(side, axis=2)
+    area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
+    ref_collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    np.testing.assert_array_equal(collapsed, ref_collapsed)
+    np.testing.assert_array_equal(caps, ~ref_collapsed & (area2 <= radius * length.max(axis=1)))
+    np.testing.assert_array_equal(longest, length.argmax(axis=1))
+    assert caps[:100].sum() > 50

@@ -520,3 +520,44 @@ def weld_exact(V, inverse):
                 break
             slot = (slot + 1) & (size - 1)
     return first[:k].copy()
+
+
+@njit(cache=True)
+def degenerate_faces(V, F, radius, collapsed, caps, longest):
+    """Per face of F (m, 3) on V (n, 3): collapsed (a repeated vertex), cap (not collapsed, and
+    twice its area ``|s0 x s1|`` at most ``radius`` times its longest side, sides
+    s_k = p_(k+1) - p_k) and the index of its longest side (the first of equal ones), into the
+    (m,) arrays collapsed, caps (bool) and longest (int64). The operations of the NumPy form in
+    ``geometry.repair._drop_degenerate``'s docstring, in its order."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        collapsed[f] = i0 == i1 or i1 == i2 or i0 == i2
+        s0x = V[i1, 0] - V[i0, 0]
+        s0y = V[i1, 1] - V[i0, 1]
+        s0z = V[i1, 2] - V[i0, 2]
+        s1x = V[i2, 0] - V[i1, 0]
+        s1y = V[i2, 1] - V[i1, 1]
+        s1z = V[i2, 2] - V[i1, 2]
+        s2x = V[i0, 0] - V[i2, 0]
+        s2y = V[i0, 1] - V[i2, 1]
+        s2z = V[i0, 2] - V[i2, 2]
+        L0 = np.sqrt((s0x * s0x + s0y * s0y) + s0z * s0z)
+        L1 = np.sqrt((s1x * s1x + s1y * s1y) + s1z * s1z)
+        L2 = np.sqrt((s2x * s2x + s2y * s2y) + s2z * s2z)
+        cx = s0y * s1z - s0z * s1y
+        cy = s0z * s1x - s0x * s1z
+        cz = s0x * s1y - s0y * s1x
+        area2 = np.sqrt((cx * cx + cy * cy) + cz * cz)
+        if L0 >= L1 and L0 >= L2:
+            k = 0
+            top = L0
+        elif L1 >= L2:
+            k = 1
+            top = L1
+        else:
+            k = 2
+            top = L2
+        longest[f] = k
+        caps[f] = (not collapsed[f]) and area2 <= radius * top

@@ -258,15 +258,26 @@ def _weld_exact(V):
 def _drop_degenerate(V, F, radius):
     """Drop zero-area faces (height below ``radius`` m); split the neighbour across a cap's long edge.
 
+    In NumPy (kernel ``_kernels.mesh.degenerate_faces``)::
+
+        collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+        p = V[F]
+        side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+        length = np.linalg.norm(side, axis=2)
+        area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
+        longest = length.argmax(axis=1)
+        caps = ~collapsed & (area2 <= radius * length.max(axis=1))
+
     Returns (faces, dropped).
     """
-    collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    p = V[F]
-    side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
-    length = np.linalg.norm(side, axis=2)
-    area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
-    longest = length.argmax(axis=1)
-    caps = ~collapsed & (area2 <= radius * length.max(axis=1))
+    from .._kernels.mesh import degenerate_faces
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    collapsed = np.empty(len(F), dtype=bool)
+    caps = np.empty(len(F), dtype=bool)
+    longest = np.empty(len(F), dtype=np.int64)
+    degenerate_faces(V, F, float(radius), collapsed, caps, longest)
     if caps.any():
         F = _split_across_caps(F, np.nonzero(caps)[0], longest, collapsed | caps)
     keep = ~(collapsed | caps)
