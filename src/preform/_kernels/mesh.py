@@ -561,3 +561,68 @@ def degenerate_faces(V, F, radius, collapsed, caps, longest):
             top = L2
         longest[f] = k
         caps[f] = (not collapsed[f]) and area2 <= radius * top
+
+
+@njit(cache=True)
+def centroids_and_reach(V, F, centroids, reach):
+    """Face centroids ``(p0 + p1 + p2) / 3`` into centroids (m, 3) and each face's largest
+    centroid-to-corner distance into reach (m,), summed in the order of NumPy's
+    ``tri.mean(axis=1)`` and ``sqrt(((tri - c) ** 2).sum(axis=2).max(axis=1))``."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        for c in range(3):
+            centroids[f, c] = ((V[i0, c] + V[i1, c]) + V[i2, c]) / 3.0
+        best = 0.0
+        for k in range(3):
+            i = F[f, k]
+            dx = V[i, 0] - centroids[f, 0]
+            dy = V[i, 1] - centroids[f, 1]
+            dz = V[i, 2] - centroids[f, 2]
+            d2 = (dx ** 2 + dy ** 2) + dz ** 2
+            if k == 0 or d2 > best:
+                best = d2
+        reach[f] = np.sqrt(best)
+
+
+@njit(cache=True)
+def corner_cosines(V, F, out):
+    """Cosine of the interior angle at every face corner into out (m, 3): ``u.w / max(|u| |w|,
+    1e-300)`` with u, w the sides from corner k to corners k+1, k+2 (the dot summed as NumPy's
+    einsum does here, (x0 y0 + x2 y2) + x1 y1; norms as np.linalg.norm)."""
+    for f in range(F.shape[0]):
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 1) % 3]
+            c = F[f, (k + 2) % 3]
+            ux = V[b, 0] - V[a, 0]
+            uy = V[b, 1] - V[a, 1]
+            uz = V[b, 2] - V[a, 2]
+            wx = V[c, 0] - V[a, 0]
+            wy = V[c, 1] - V[a, 1]
+            wz = V[c, 2] - V[a, 2]
+            dot = (ux * wx + uz * wz) + uy * wy
+            nu = np.sqrt((ux * ux + uy * uy) + uz * uz)
+            nw = np.sqrt((wx * wx + wy * wy) + wz * wz)
+            out[f, k] = dot / max(nu * nw, 1e-300)
+
+
+@njit(cache=True)
+def corners_by_vertex(F, n_vertices, vert_ptr, vert_faces, vert_corner):
+    """The faces around each vertex (CSR): vert_ptr (nv + 1,), and for the corners of vertex v,
+    ``vert_faces / vert_corner[vert_ptr[v]:vert_ptr[v + 1]]`` their faces and corner indices in
+    the order of the flattened corners (a counting sort: the order of a stable argsort)."""
+    vert_ptr[:] = 0
+    for f in range(F.shape[0]):
+        for k in range(3):
+            vert_ptr[F[f, k] + 1] += 1
+    for v in range(n_vertices):
+        vert_ptr[v + 1] += vert_ptr[v]
+    fill = vert_ptr[:-1].copy()
+    for f in range(F.shape[0]):
+        for k in range(3):
+            v = F[f, k]
+            vert_faces[fill[v]] = f
+            vert_corner[fill[v]] = k
+            fill[v] += 1

@@ -265,9 +265,13 @@ def _slab_index(mesh):
     on the trimesh object: a plane farther than that from a centroid cannot cut the face."""
     cached = mesh.metadata.get("_preform_slab")
     if cached is None:
-        tri = mesh.vertices.view(np.ndarray)[mesh.faces.view(np.ndarray)]
-        centroids = tri.mean(axis=1)
-        reach = np.sqrt(((tri - centroids[:, None]) ** 2).sum(axis=2).max(axis=1))
+        from .._kernels.mesh import centroids_and_reach
+
+        F = np.ascontiguousarray(mesh.faces.view(np.ndarray), dtype=np.int64)
+        centroids = np.empty((len(F), 3))
+        reach = np.empty(len(F))
+        centroids_and_reach(np.ascontiguousarray(mesh.vertices.view(np.ndarray), dtype=np.float64), F,
+                            centroids, reach)
         cached = mesh.metadata["_preform_slab"] = (centroids, reach)
     return cached
 

@@ -249,22 +249,22 @@ def face_neighbors(faces) -> np.ndarray:
 
 
 def _corner_normals(vertices, faces, face_normals):
-    from .._kernels.mesh import corner_normals
+    """Crease-split smooth corner normals (``_kernels.mesh.corner_normals``): interior angles
+    ``arccos(clip(cos, -1, 1))`` from ``corner_cosines`` (NumPy's arccos), the faces around each
+    vertex from ``corners_by_vertex``."""
+    from .._kernels.mesh import corner_cosines, corner_normals, corners_by_vertex
 
-    p = vertices[faces]
-    angles = np.empty((len(faces), 3))
-    for k in range(3):
-        u = p[:, (k + 1) % 3] - p[:, k]
-        w = p[:, (k + 2) % 3] - p[:, k]
-        c = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
-        angles[:, k] = np.arccos(np.clip(c, -1.0, 1.0))
-    flat = faces.reshape(-1)
-    order = np.argsort(flat, kind="stable")
-    vert_ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=len(vertices)))]).astype(np.int64)
-    vert_faces = (order // 3).astype(np.int64)
-    vert_corner = (order % 3).astype(np.int64)
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    c = np.empty((len(F), 3))
+    corner_cosines(V, F, c)
+    angles = np.arccos(np.clip(c, -1.0, 1.0))
+    vert_ptr = np.empty(len(V) + 1, dtype=np.int64)
+    vert_faces = np.empty(3 * len(F), dtype=np.int64)
+    vert_corner = np.empty(3 * len(F), dtype=np.int64)
+    corners_by_vertex(F, len(V), vert_ptr, vert_faces, vert_corner)
     cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
-    return corner_normals(faces, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
+    return corner_normals(F, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
 
 
 def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bool = True) -> Mandrel:
