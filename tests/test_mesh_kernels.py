@@ -55,3 +55,14 @@ def test_centroids_and_reach_equal_numpy():
         ref_c = tri.mean(axis=1)
         np.testing.assert_array_equal(c, ref_c)
         np.testing.assert_array_equal(r, np.sqrt(((tri - ref_c[:, None]) ** 2).sum(axis=2).max(axis=1)))
+
+
+def test_any_side_longer_is_the_subdivision_test():
+    from preform._kernels.mesh import any_side_longer
+
+    for m in meshes():
+        V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
+        tri = V[F]
+        sides = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
+        for h in (0.5 * sides.max(), sides.max(), np.nextafter(sides.max(), 0), 2 * sides.max()):
+            assert any_side_longer(V, F, h) == bool((sides > h).any())

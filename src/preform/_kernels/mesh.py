@@ -626,3 +626,19 @@ def corners_by_vertex(F, n_vertices, vert_ptr, vert_faces, vert_corner):
             vert_faces[fill[v]] = f
             vert_corner[fill[v]] = k
             fill[v] += 1
+
+
+@njit(cache=True)
+def any_side_longer(V, F, h):
+    """True when some face of F has a side ``|p_k - p_(k-1)|`` longer than h (the norm summed as
+    np.linalg.norm), the test ``geometry.remesh.subdivide_long_edges`` starts with."""
+    for f in range(F.shape[0]):
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 2) % 3]
+            dx = V[a, 0] - V[b, 0]
+            dy = V[a, 1] - V[b, 1]
+            dz = V[a, 2] - V[b, 2]
+            if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
+                return True
+    return False

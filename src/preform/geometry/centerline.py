@@ -491,6 +491,7 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     are extended to the mesh's extremes along the end tangents. ``perimeter`` is filled from the
     same sections.
     """
+    from .._kernels.mesh import any_side_longer
     from .remesh import subdivide_long_edges
 
     V = mandrel.vertices
@@ -506,7 +507,11 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     tip = V[np.argmin(proj)]
     # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
-    Vp, Fp, _ = subdivide_long_edges(V, mandrel.faces, PIECE_FRACTION * extent)
+    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
+    if any_side_longer(np.ascontiguousarray(V, dtype=np.float64), F, PIECE_FRACTION * extent):
+        Vp, Fp, _ = subdivide_long_edges(V, F, PIECE_FRACTION * extent)
+    else:                                     # nothing to cut: the pieces are the faces
+        Vp, Fp = V, F
     area, C, M = surface_moments(Vp, Fp, which=lambda c: np.linalg.norm(c - tip, axis=1) < 0.25 * extent)
     T, local_centre = _tip_axis(area, C, M, axis)
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
