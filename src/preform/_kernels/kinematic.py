@@ -30,8 +30,10 @@ _MAX_SUBSTEPS = 100000
 
 
 @njit(cache=True)
-def barycentric(V, T, f, x, y, z):
-    """Barycentric coordinates of the point (x, y, z) in the plane of face f."""
+def face_basis(V, T, f):
+    """The parts of ``barycentric`` that depend on face f only: its first corner p0, the edge
+    vectors a = p1 - p0, b = p2 - p0, their dots d00 = a.a, d01 = a.b, d11 = b.b and
+    den = d00 d11 - d01^2, as a tuple (p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den)."""
     i0 = T[f, 0]
     i1 = T[f, 1]
     i2 = T[f, 2]
@@ -41,18 +43,31 @@ def barycentric(V, T, f, x, y, z):
     bx = V[i2, 0] - V[i0, 0]
     by = V[i2, 1] - V[i0, 1]
     bz = V[i2, 2] - V[i0, 2]
-    cx = x - V[i0, 0]
-    cy = y - V[i0, 1]
-    cz = z - V[i0, 2]
     d00 = ax * ax + ay * ay + az * az
     d01 = ax * bx + ay * by + az * bz
     d11 = bx * bx + by * by + bz * bz
+    den = d00 * d11 - d01 * d01
+    return V[i0, 0], V[i0, 1], V[i0, 2], ax, ay, az, bx, by, bz, d00, d01, d11, den
+
+
+@njit(cache=True)
+def barycentric_in(q, x, y, z):
+    """Barycentric coordinates of (x, y, z) in the plane of the face with ``q = face_basis(...)``."""
+    p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den = q
+    cx = x - p0x
+    cy = y - p0y
+    cz = z - p0z
     d20 = cx * ax + cy * ay + cz * az
     d21 = cx * bx + cy * by + cz * bz
-    den = d00 * d11 - d01 * d01
     b1 = (d11 * d20 - d01 * d21) / den
     b2 = (d00 * d21 - d01 * d20) / den
     return 1.0 - b1 - b2, b1, b2
+
+
+@njit(cache=True)
+def barycentric(V, T, f, x, y, z):
+    """Barycentric coordinates of the point (x, y, z) in the plane of face f."""
+    return barycentric_in(face_basis(V, T, f), x, y, z)
 
 
 @njit(cache=True)
@@ -174,6 +189,7 @@ def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez
     linear blend), so a handful of evaluations reach the bracket width 1e-13 m that bisection
     needed about 40 for. Returns the end where ``g >= 0``, so the free yarn never cuts in.
     """
+    q = face_basis(V, T, f)
     lo = 0.0
     hi = h
     side = 0
@@ -184,7 +200,12 @@ def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez
         mid = hi - g_hi * (hi - lo) / den if den > 0.0 else 0.5 * (lo + hi)
         if not (lo < mid < hi):
             mid = 0.5 * (lo + hi)
-        gm = tangency_gap(V, T, CN, f, x + mid * dx, y + mid * dy, z + mid * dz, gex, gey, gez)
+        px = x + mid * dx
+        py = y + mid * dy
+        pz = z + mid * dz
+        b0, b1, b2 = barycentric_in(q, px, py, pz)
+        nx, ny, nz = blended_normal(CN, f, b0, b1, b2)
+        gm = (gex - px) * nx + (gey - py) * ny + (gez - pz) * nz      # tangency_gap
         if gm >= 0.0:
             hi = mid
             g_hi = gm
@@ -211,12 +232,14 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
     against ``G_end`` (the supply point at the end of the step). Sub-steps of at most ``h_max`` use
     the direction at their own midpoint; the last one is cut at the root of ``g`` by bisection.
 
-    The point's barycentric coordinates on its face and the face's double area are kept from
-    one use to the next (the same values the helpers would compute again).
+    The face's barycentric basis (``face_basis``) and double area, and the point's barycentric
+    coordinates, are kept from one use to the next (the same values the helpers would compute
+    again).
 
     Returns (x, y, z, face, status, walked_length).
     """
-    b0, b1, b2 = barycentric(V, T, f, x, y, z)
+    q = face_basis(V, T, f)
+    b0, b1, b2 = barycentric_in(q, x, y, z)
     nx, ny, nz = blended_normal(CN, f, b0, b1, b2)
     g_prev = (gex - x) * nx + (gey - y) * ny + (gez - z) * nz       # tangency_gap
     if g_prev >= 0.0:
@@ -241,7 +264,7 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
         x1 = x + h * dx
         y1 = y + h * dy
         z1 = z + h * dz
-        c0, c1, c2 = barycentric(V, T, f, x1, y1, z1)
+        c0, c1, c2 = barycentric_in(q, x1, y1, z1)
         nx, ny, nz = blended_normal(CN, f, c0, c1, c2)
         g1 = (gex - x1) * nx + (gey - y1) * ny + (gez - z1) * nz     # tangency_gap at x1
         if g1 >= 0.0:
@@ -258,7 +281,8 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
             if nf < 0:
                 return x, y, z, f, WALK_BOUNDARY, walked
             f = nf
-            b0, b1, b2 = barycentric(V, T, f, x, y, z)
+            q = face_basis(V, T, f)
+            b0, b1, b2 = barycentric_in(q, x, y, z)
             two_area = face_double_area(V, T, f)
     return x, y, z, f, WALK_BUDGET, walked
 
