@@ -5,6 +5,8 @@ Written from the definitions with vector operations and ``np.linalg``, not from 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 TANGENT, CONCAVE, BUDGET, DEGENERATE, BOUNDARY, LIFTOFF = 0, 1, 2, 3, 4, -1
@@ -77,3 +79,68 @@ def walk(V, T, FN, CN, NB, x, f, G_mid, G_end, h_max, max_len):
                 return x, f, BOUNDARY, walked
             f = NB[f, edge]
     return x, f, BUDGET, walked
+
+
+def project_to_polyline(points, P, S):
+    """Closest polyline point to each point, from the definition with whole-array NumPy: every
+    segment for every point, u clipped to [0, 1], the first of the nearest (np.argmin).
+    Returns (s (m,), distance (m,))."""
+    a = P[:-1]
+    e = P[1:] - a
+    L2 = np.einsum("ij,ij->i", e, e)
+    u = np.einsum("mjk,jk->mj", points[:, None, :] - a[None], e) / np.where(L2 > 0, L2, 1.0)
+    u = np.where(L2 > 0, np.clip(u, 0.0, 1.0), 0.0)
+    q = a[None] + u[..., None] * e[None]
+    d = np.linalg.norm(q - points[:, None, :], axis=2)
+    j = np.argmin(d, axis=1)
+    rows = np.arange(len(points))
+    return S[j] + u[rows, j] * (S[j + 1] - S[j]), d[rows, j]
+
+
+def project_to_polyline_loops(points, P, S):
+    """The same, one segment after another in plain Python floats, the operations in the order
+    of the kernel's segment test: the brute force the kernel's pruned search must equal bit for
+    bit. Returns (s (m,), distance (m,))."""
+    out_s = np.empty(len(points))
+    out_d = np.empty(len(points))
+    P = P.tolist()
+    S = S.tolist()
+    for i, (px, py, pz) in enumerate(points.tolist()):
+        best, best_s = float("inf"), 0.0
+        for j in range(len(P) - 1):
+            ax, ay, az = P[j]
+            ex, ey, ez = P[j + 1][0] - ax, P[j + 1][1] - ay, P[j + 1][2] - az
+            L2 = ex * ex + ey * ey + ez * ez
+            u = 0.0
+            if L2 > 0.0:
+                u = min(max(((px - ax) * ex + (py - ay) * ey + (pz - az) * ez) / L2, 0.0), 1.0)
+            dx, dy, dz = ax + u * ex - px, ay + u * ey - py, az + u * ez - pz
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < best:
+                best, best_s = d2, S[j] + u * (S[j + 1] - S[j])
+        out_s[i] = best_s
+        out_d[i] = math.sqrt(best)
+    return out_s, out_d
+
+
+def project_sampled(points, Q, Sq):
+    """Arc length on the resampled centerline Q (n, 3), arc lengths Sq (n,), in whole-array
+    NumPy: the nearest sample by a KD-tree, then the nearer of its two resampled segments (the
+    first on a tie), u clipped to [0, 1]."""
+    from scipy.spatial import cKDTree
+
+    _, i = cKDTree(Q).query(points)
+    n = len(Sq)
+    best_s = Sq[i].copy()
+    best_d = np.full(len(points), np.inf)
+    for lo in (np.maximum(i - 1, 0), i):
+        hi = np.minimum(lo + 1, n - 1)
+        a = Q[lo]
+        ab = Q[hi] - a
+        L2 = np.einsum("ij,ij->i", ab, ab)
+        u = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        d = np.linalg.norm(a + u[:, None] * ab - points, axis=1)
+        better = d < best_d
+        best_d[better] = d[better]
+        best_s[better] = (Sq[lo] + u * (Sq[hi] - Sq[lo]))[better]
+    return best_s

@@ -342,3 +342,73 @@ def test_random_damage_is_repaired_or_refused(kind, seed, scale, shift, flip, du
     # jitter of 1e-9 of the size moves the volume by ~1e-9 relative: 1e-6 is the brief's bound
     _assert_closed_outward(v2, f2, base.volume * scale**3, rel=1e-6)
     assert report.holes_filled == 0 and len(f2) == len(base.faces)
+
+
+def _pierced(seed):
+    """Icosphere with a cap pushed through the opposite wall, shifted and turned at random."""
+    rng = np.random.default_rng(seed)
+    s = _mesh("icosphere")
+    v = s.vertices.copy()
+    v[v[:, 0] > rng.uniform(0.06, 0.095), 0] -= rng.uniform(0.18, 0.3)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return v @ q + rng.normal(scale=0.5, size=3), s.faces
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_self_intersection_kernels_find_the_edges_of_the_numpy_reference(seed):
+    """The edge-ray kernels flag the same edges as the whole-array NumPy reference on pierced
+    spheres, and none on clean meshes (the reference also none)."""
+    import naive_repair
+
+    v, f = _pierced(seed)
+    got = self_intersections(v, f)
+    ref = naive_repair.self_intersections(v, f)
+    assert len(ref) > 0
+    np.testing.assert_array_equal(np.unique(got, axis=0), np.unique(ref, axis=0))
+    for kind in ("cylinder", "icosphere", "box"):
+        m = _mesh(kind)
+        assert len(self_intersections(m.vertices, m.faces)) == 0
+        assert len(naive_repair.self_intersections(m.vertices, m.faces)) == 0
+
+
+def test_exact_weld_kernel_matches_numpy_unique():
+    """weld_exact: the distinct rows (first appearances) and the inverse of np.unique(axis=0),
+    -0.0 and 0.0 one value; on a soup with repeated corners and signed zeros."""
+    from preform._kernels.mesh import weld_exact
+
+    rng = np.random.default_rng(5)
+    base = np.round(rng.normal(size=(400, 3)), 2)
+    base[:40, 0] = 0.0
+    V = base[rng.integers(0, len(base), 5000)].copy()
+    V[rng.random(len(V)) < 0.2, 0] *= -1.0                  # some 0.0 become -0.0
+    inverse = np.empty(len(V), dtype=np.int64)
+    first = weld_exact(V, inverse)
+    np.testing.assert_array_equal(V[first][inverse], V)      # every row maps to an equal row
+    ref_rows, ref_first = np.unique(V + 0.0, axis=0, return_index=True)
+    assert len(first) == len(ref_rows)                       # as many distinct rows as NumPy's
+    np.testing.assert_array_equal(np.sort(first), np.sort(ref_first))
+
+
+def test_degenerate_face_kernel_matches_numpy():
+    """degenerate_faces against the NumPy form in _drop_degenerate's docstring, on random faces
+    with repeated vertices, near-caps and equal sides."""
+    from preform._kernels.mesh import degenerate_faces
+
+    rng = np.random.default_rng(11)
+    V = rng.normal(size=(300, 3))
+    V[200:] = V[:100] * 0.5 + V[100:200] * 0.5 + rng.normal(scale=1e-10, size=(100, 3))  # near midpoints
+    F = rng.integers(0, 300, size=(4000, 3))
+    F[:100] = np.stack([np.arange(100), np.arange(100, 200), np.arange(200, 300)], axis=1)  # caps
+    F[100:150, 1] = F[100:150, 0]                                                          # collapsed
+    radius = 1e-8
+    collapsed, caps, longest = (np.empty(len(F), bool), np.empty(len(F), bool), np.empty(len(F), np.int64))
+    degenerate_faces(V, F, radius, collapsed, caps, longest)
+    p = V[F]
+    side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    length = np.linalg.norm(side, axis=2)
+    area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
+    ref_collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    np.testing.assert_array_equal(collapsed, ref_collapsed)
+    np.testing.assert_array_equal(caps, ~ref_collapsed & (area2 <= radius * length.max(axis=1)))
+    np.testing.assert_array_equal(longest, length.argmax(axis=1))
+    assert caps[:100].sum() > 50

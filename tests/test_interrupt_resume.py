@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -60,12 +61,15 @@ def _preform(*args, **kw):
 def test_interrupted_run_is_marked_and_resumes_to_the_same_history(tmp_path):
     cfg = _case(tmp_path, "stopped")
     proc = _preform("run", cfg)
-    # wait until the simulation is stepping (the progress bar is on stderr), then Ctrl-C
+    # wait until the progress bar (stderr) shows 0.02 m of the 0.3 m braided, then Ctrl-C: a
+    # length, not a time, so the stop falls early in the run however fast it steps
     seen = b""
     deadline = time.time() + 300
-    while b"braiding" not in seen and time.time() < deadline:
+    braided = 0.0
+    while braided < 0.02 and time.time() < deadline:
         seen += os.read(proc.stderr.fileno(), 256)
-    time.sleep(1.0)      # of about 3 s of stepping (4861 steps)
+        done = re.findall(rb"(\d+\.\d+)/0\.300 m braided", seen[-512:])
+        braided = float(done[-1]) if done else 0.0
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=300)
     assert proc.returncode == 130, err.decode()[-2000:]

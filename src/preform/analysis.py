@@ -9,44 +9,32 @@ the laid yarn would slip on the mandrel, ``|kappa_g| > mu kappa_n``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
-
 from ._kernels import kinematic as K
+from ._kernels.mesh import project_sampled, sample_tree
 from .tolerances import tol
 
 
 class CenterlineProjector:
-    """Arc length (m) of points near a centerline: KD-tree on a dense resampling.
+    """Arc length (m) of points near a centerline, through a dense resampling.
 
-    Accurate to ``spacing / 2`` in s before refinement; the nearest sample's two segments are then
-    projected exactly, so the result is the polyline's closest point up to ties between branches.
+    The nearest sample (exact, a box tree over the samples), then its two resampled segments
+    projected exactly, so the result is the polyline's closest point up to ties between branches
+    (kernel ``_kernels.mesh.project_sampled``).
     """
 
     def __init__(self, centerline, spacing=tol.projector_spacing):
         L = centerline.length
         n = max(int(np.ceil(L / spacing)) + 1, 2)
         self.s = np.linspace(0.0, L, n)
-        self.points = centerline.frames_at(self.s)[0]
-        self.tree = cKDTree(self.points)
+        self.points = np.ascontiguousarray(centerline.frames_at(self.s)[0])
+        self._tree = sample_tree(self.points)
 
     def __call__(self, points):
         """points (m, 3) float64, m, mandrel frame -> (m,) float64 arc length, m."""
-        points = np.atleast_2d(points)
-        _, i = self.tree.query(points)
-        n = len(self.s)
-        best_s = self.s[i].copy()
-        best_d = np.full(len(points), np.inf)
-        for lo in (np.maximum(i - 1, 0), i):
-            hi = np.minimum(lo + 1, n - 1)
-            a = self.points[lo]
-            ab = self.points[hi] - a
-            L2 = np.einsum("ij,ij->i", ab, ab)
-            u = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-            d = np.linalg.norm(a + u[:, None] * ab - points, axis=1)
-            better = d < best_d
-            best_d[better] = d[better]
-            best_s[better] = (self.s[lo] + u * (self.s[hi] - self.s[lo]))[better]
-        return best_s
+        points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
+        out = np.empty(len(points))
+        project_sampled(points, self.points, self.s, *self._tree, out)
+        return out
 
 
 def mandrel_friction(config) -> float:

@@ -97,6 +97,12 @@ class Depositor:
         moved = walked > 0.0
         end_flag = np.zeros(ny, dtype=np.uint8)
         extra: dict[int, list] = {}
+        # the free yarns of every yarn first: most steps nothing is hit and the step is done
+        starts = np.empty_like(F_out)
+        K.lifted_points(s.V, s.T, s.CN, face_out, F_out, self.clearance, starts)
+        first = self.mandrel.intersect_segments(starts, G_end)
+        if not np.any(first[0]):
+            return StepLaid(F_out, face_out, moved, end_flag, extra)
         pending = np.ones(ny, dtype=np.bool_)
         # True where F_out is already a laid point (the step's start for a yarn that did not move)
         recorded = ~moved
@@ -104,9 +110,13 @@ class Depositor:
             idx = np.nonzero(pending)[0]
             if len(idx) == 0:
                 break
-            n = smooth_normals(s, face_out[idx], F_out[idx])
-            starts = F_out[idx] + self.clearance * n
-            hit, point, hit_face, _dist = self.mandrel.intersect_segments(starts, G_end[idx])
+            if first is not None:
+                hit, point, hit_face, _dist = first
+                first = None
+            else:
+                starts = np.empty((len(idx), 3))
+                K.lifted_points(s.V, s.T, s.CN, face_out[idx], F_out[idx], self.clearance, starts)
+                hit, point, hit_face, _dist = self.mandrel.intersect_segments(starts, G_end[idx])
             if not np.any(hit):
                 break
             jumpers = idx[hit]
@@ -151,14 +161,25 @@ class KinematicZone:
     def __init__(self, config, machine, mandrel=None):
         self.config = config
         self.machine = machine
+        # Machine.supply_points's factors, formed once: azimuth phase0 + (direction omega) t
+        self._rate = machine.direction() * machine.omega
 
     def start(self, t, F_machine, pose):
         """Called once with the tie points (machine frame) and the mandrel pose at time t."""
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
-        """The step from t0 to t0 + dt; F_machine: fell points at its end; pose_end: the mandrel's."""
+        """The step from t0 to t0 + dt; F_machine: fell points at its end; pose_end: the mandrel's.
+
+        The supply points at the middle and the end of the step, ``Machine.supply_points`` for
+        both times in one pass (the same operations, so the same values to the last bit)."""
         m = self.machine
-        return ZoneStep(G_mid=m.supply_points(t0 + 0.5 * dt), G_end=m.supply_points(t0 + dt))
+        phi = m.phase0 + self._rate * np.array([[t0 + 0.5 * dt], [t0 + dt]])
+        r = m.supply_radius
+        G = np.empty(phi.shape + (3,))
+        G[..., 0] = r * np.cos(phi)
+        G[..., 1] = r * np.sin(phi)
+        G[..., 2] = m.supply_z
+        return ZoneStep(G_mid=G[0], G_end=G[1])
 
     def snapshot(self, t, F_machine) -> Snapshot:
         """Fell point, supply point (and spool point behind a guide ring) of every yarn."""

@@ -223,7 +223,7 @@ class Stepper:
         self.F, self.face = laid.final_F, laid.final_face
         self.clock = Clock(t1, travel_end)
         self.step += 1
-        self._record(pose_end, zs)
+        self._record(pose_end, zs, G_end)
         self.consistent = True
 
     def _deposit(self, deposits, pose):
@@ -243,11 +243,14 @@ class Stepper:
         face[k] = np.asarray(faces, dtype=np.int64)
         return F, face, [(int(kk), F[kk].copy(), int(face[kk])) for kk in k]
 
-    def _record(self, pose, zs):
+    def _record(self, pose, zs, G_end=None):
+        """One history row at the pose; G_end: the supply points in the mandrel frame when known."""
         F_machine = pose.to_machine(self.F)
         H = F_machine[:, 2] - self.machine.supply_z
         rec = self.recording
-        rec.record(self.clock.t, self.F, self.face, H, pose.to_mandrel(zs.G_end) - self.F,
+        if G_end is None:
+            G_end = pose.to_mandrel(zs.G_end)
+        rec.record(self.clock.t, self.F, self.face, H, G_end - self.F,
                    zs.contacts, zs.iterations, zs.residual)
         if self.snapshot_stride and (rec.n_rows - 1) % self.snapshot_stride == 0:
             rec.snapshots.append(self.zone.snapshot(self.clock.t, F_machine))

@@ -30,8 +30,10 @@ _MAX_SUBSTEPS = 100000
 
 
 @njit(cache=True)
-def barycentric(V, T, f, x, y, z):
-    """Barycentric coordinates of the point (x, y, z) in the plane of face f."""
+def face_basis(V, T, f):
+    """The parts of ``barycentric`` that depend on face f only: its first corner p0, the edge
+    vectors a = p1 - p0, b = p2 - p0, their dots d00 = a.a, d01 = a.b, d11 = b.b and
+    den = d00 d11 - d01^2, as a tuple (p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den)."""
     i0 = T[f, 0]
     i1 = T[f, 1]
     i2 = T[f, 2]
@@ -41,18 +43,31 @@ def barycentric(V, T, f, x, y, z):
     bx = V[i2, 0] - V[i0, 0]
     by = V[i2, 1] - V[i0, 1]
     bz = V[i2, 2] - V[i0, 2]
-    cx = x - V[i0, 0]
-    cy = y - V[i0, 1]
-    cz = z - V[i0, 2]
     d00 = ax * ax + ay * ay + az * az
     d01 = ax * bx + ay * by + az * bz
     d11 = bx * bx + by * by + bz * bz
+    den = d00 * d11 - d01 * d01
+    return V[i0, 0], V[i0, 1], V[i0, 2], ax, ay, az, bx, by, bz, d00, d01, d11, den
+
+
+@njit(cache=True)
+def barycentric_in(q, x, y, z):
+    """Barycentric coordinates of (x, y, z) in the plane of the face with ``q = face_basis(...)``."""
+    p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den = q
+    cx = x - p0x
+    cy = y - p0y
+    cz = z - p0z
     d20 = cx * ax + cy * ay + cz * az
     d21 = cx * bx + cy * by + cz * bz
-    den = d00 * d11 - d01 * d01
     b1 = (d11 * d20 - d01 * d21) / den
     b2 = (d00 * d21 - d01 * d20) / den
     return 1.0 - b1 - b2, b1, b2
+
+
+@njit(cache=True)
+def barycentric(V, T, f, x, y, z):
+    """Barycentric coordinates of the point (x, y, z) in the plane of face f."""
+    return barycentric_in(face_basis(V, T, f), x, y, z)
 
 
 @njit(cache=True)
@@ -77,6 +92,12 @@ def face_double_area(V, T, f):
 def smooth_normal(V, T, CN, f, x, y, z):
     """Unit smooth normal at (x, y, z) on face f: normalised barycentric blend of corner normals."""
     b0, b1, b2 = barycentric(V, T, f, x, y, z)
+    return blended_normal(CN, f, b0, b1, b2)
+
+
+@njit(cache=True)
+def blended_normal(CN, f, b0, b1, b2):
+    """Unit smooth normal of face f at barycentric coordinates (b0, b1, b2)."""
     nx = b0 * CN[f, 0, 0] + b1 * CN[f, 1, 0] + b2 * CN[f, 2, 0]
     ny = b0 * CN[f, 0, 1] + b1 * CN[f, 1, 1] + b2 * CN[f, 2, 1]
     nz = b0 * CN[f, 0, 2] + b1 * CN[f, 1, 2] + b2 * CN[f, 2, 2]
@@ -118,12 +139,18 @@ def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
     Uses the gradients of the barycentric functions: grad b_i = n x e_i / (2A).
     """
     b0, b1, b2 = barycentric(V, T, f, x, y, z)
+    return exit_distance_at(V, T, FN, f, b0, b1, b2, face_double_area(V, T, f), dx, dy, dz)
+
+
+@njit(cache=True)
+def exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz):
+    """``exit_distance`` from the point's barycentric coordinates (b0, b1, b2) on face f and the
+    face's double area, when the walk already has them."""
     best = np.inf
     edge = -1
     nx = FN[f, 0]
     ny = FN[f, 1]
     nz = FN[f, 2]
-    two_area = face_double_area(V, T, f)
     for i in range(3):
         j = T[f, (i + 1) % 3]
         k = T[f, (i + 2) % 3]
@@ -162,6 +189,7 @@ def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez
     linear blend), so a handful of evaluations reach the bracket width 1e-13 m that bisection
     needed about 40 for. Returns the end where ``g >= 0``, so the free yarn never cuts in.
     """
+    q = face_basis(V, T, f)
     lo = 0.0
     hi = h
     side = 0
@@ -172,7 +200,12 @@ def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez
         mid = hi - g_hi * (hi - lo) / den if den > 0.0 else 0.5 * (lo + hi)
         if not (lo < mid < hi):
             mid = 0.5 * (lo + hi)
-        gm = tangency_gap(V, T, CN, f, x + mid * dx, y + mid * dy, z + mid * dz, gex, gey, gez)
+        px = x + mid * dx
+        py = y + mid * dy
+        pz = z + mid * dz
+        b0, b1, b2 = barycentric_in(q, px, py, pz)
+        nx, ny, nz = blended_normal(CN, f, b0, b1, b2)
+        gm = (gex - px) * nx + (gey - py) * ny + (gez - pz) * nz      # tangency_gap
         if gm >= 0.0:
             hi = mid
             g_hi = gm
@@ -199,11 +232,19 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
     against ``G_end`` (the supply point at the end of the step). Sub-steps of at most ``h_max`` use
     the direction at their own midpoint; the last one is cut at the root of ``g`` by bisection.
 
+    The face's barycentric basis (``face_basis``) and double area, and the point's barycentric
+    coordinates, are kept from one use to the next (the same values the helpers would compute
+    again).
+
     Returns (x, y, z, face, status, walked_length).
     """
-    g_prev = tangency_gap(V, T, CN, f, x, y, z, gex, gey, gez)
+    q = face_basis(V, T, f)
+    b0, b1, b2 = barycentric_in(q, x, y, z)
+    nx, ny, nz = blended_normal(CN, f, b0, b1, b2)
+    g_prev = (gex - x) * nx + (gey - y) * ny + (gez - z) * nz       # tangency_gap
     if g_prev >= 0.0:
         return x, y, z, f, WALK_LIFTOFF, 0.0
+    two_area = face_double_area(V, T, f)
     walked = 0.0
     for _ in range(_MAX_SUBSTEPS):
         if walked >= max_len:
@@ -211,19 +252,21 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
         dx, dy, dz = walk_direction(FN, f, x, y, z, gmx, gmy, gmz)
         if dx == 0.0 and dy == 0.0 and dz == 0.0:
             return x, y, z, f, WALK_DEGENERATE, walked
-        t_exit, edge = exit_distance(V, T, FN, f, x, y, z, dx, dy, dz)
+        t_exit, edge = exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz)
         h = min(h_max, t_exit, max_len - walked)
         # midpoint direction of this sub-step
         mx, my, mz = walk_direction(FN, f, x + 0.5 * h * dx, y + 0.5 * h * dy, z + 0.5 * h * dz,
                                     gmx, gmy, gmz)
         if not (mx == 0.0 and my == 0.0 and mz == 0.0):
             dx, dy, dz = mx, my, mz
-            t_exit, edge = exit_distance(V, T, FN, f, x, y, z, dx, dy, dz)
+            t_exit, edge = exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz)
             h = min(h_max, t_exit, max_len - walked)
         x1 = x + h * dx
         y1 = y + h * dy
         z1 = z + h * dz
-        g1 = tangency_gap(V, T, CN, f, x1, y1, z1, gex, gey, gez)
+        c0, c1, c2 = barycentric_in(q, x1, y1, z1)
+        nx, ny, nz = blended_normal(CN, f, c0, c1, c2)
+        g1 = (gex - x1) * nx + (gey - y1) * ny + (gez - z1) * nz     # tangency_gap at x1
         if g1 >= 0.0:
             hi = tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_prev, g1, gex, gey, gez)
             return x + hi * dx, y + hi * dy, z + hi * dz, f, WALK_TANGENT, walked + hi
@@ -231,12 +274,16 @@ def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez,
             return x1, y1, z1, f, WALK_CONCAVE, walked + h
         walked += h
         x, y, z = x1, y1, z1
+        b0, b1, b2 = c0, c1, c2
         g_prev = g1
         if h >= t_exit and edge >= 0:
             nf = NB[f, edge]
             if nf < 0:
                 return x, y, z, f, WALK_BOUNDARY, walked
             f = nf
+            q = face_basis(V, T, f)
+            b0, b1, b2 = barycentric_in(q, x, y, z)
+            two_area = face_double_area(V, T, f)
     return x, y, z, f, WALK_BUDGET, walked
 
 
@@ -277,6 +324,17 @@ def smooth_normals_batch(V, T, CN, faces, points, out):
         out[i, 0] = nx
         out[i, 1] = ny
         out[i, 2] = nz
+
+
+@njit(cache=True)
+def lifted_points(V, T, CN, faces, points, clearance, out):
+    """points (m, 3) on faces (m,) lifted along their smooth normal: ``p + clearance n(p)``,
+    into out (m, 3) (where the catch test's free yarn starts)."""
+    for i in range(points.shape[0]):
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
+        out[i, 0] = points[i, 0] + clearance * nx
+        out[i, 1] = points[i, 1] + clearance * ny
+        out[i, 2] = points[i, 2] + clearance * nz
 
 
 # ---------------------------------------------------------------- braid angles of laid yarn
@@ -351,7 +409,15 @@ def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curv
     centerline tangent where it is zero. Slip: |kappa_g| > mu |kappa_n| + curvature_tol with
     kvec = (t2 - t1) / ((l1 + l2) / 2), kappa_g = kvec . (n x tm), kappa_n = (n_b - n_a) . tm /
     (l1 + l2), tm the unit mean of the chord directions t1, t2 (points with l1, l2 > 0 only).
+    The smooth normal of every point is evaluated once (each point is also its neighbours'
+    neighbour).
     """
+    normals = np.empty((points.shape[0], 3))
+    for i in range(points.shape[0]):
+        nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
+        normals[i, 0] = nx
+        normals[i, 1] = ny
+        normals[i, 2] = nz
     for i in range(points.shape[0]):
         a = prev_i[i]
         b = next_i[i]
@@ -362,7 +428,9 @@ def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curv
         dy = points[b, 1] - points[a, 1]
         dz = points[b, 2] - points[a, 2]
         tx, ty, tz = centerline_tangent(S, CT, s[i])
-        nx, ny, nz = smooth_normal(V, T, CN, faces[i], px, py, pz)
+        nx = normals[i, 0]
+        ny = normals[i, 1]
+        nz = normals[i, 2]
         if np.sqrt(dx * dx + dy * dy + dz * dz) == 0:
             dx, dy, dz = tx, ty, tz
         cosines[i] = braid_angle_cos(dx, dy, dz, tx, ty, tz, nx, ny, nz)
@@ -398,7 +466,6 @@ def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curv
         cy = nz * mx - nx * mz
         cz = nx * my - ny * mx
         kappa_g = kx * cx + ky * cy + kz * cz
-        nax, nay, naz = smooth_normal(V, T, CN, faces[a], points[a, 0], points[a, 1], points[a, 2])
-        nbx, nby, nbz = smooth_normal(V, T, CN, faces[b], points[b, 0], points[b, 1], points[b, 2])
-        kappa_n = ((nbx - nax) * mx + (nby - nay) * my + (nbz - naz) * mz) / (l1 + l2)
+        kappa_n = ((normals[b, 0] - normals[a, 0]) * mx + (normals[b, 1] - normals[a, 1]) * my
+                   + (normals[b, 2] - normals[a, 2]) * mz) / (l1 + l2)
         slip[i] = abs(kappa_g) > mu * abs(kappa_n) + curvature_tol

@@ -8,8 +8,10 @@ the world axis least aligned with the tip tangent.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -61,27 +63,50 @@ class Centerline:
             p[after] = self.points[-1] + (s[after] - S[-1])[:, None] * self.tangents[-1]
         return p, T, N, B
 
-    def frame_at(self, s: float):
-        """(point, T, N, B), each (3,), at one arc length: frames_at for one value, without its
-        array set-up (the pose is taken twice per time step)."""
-        S = self.s
+    @cached_property
+    def _rows(self):
+        """The polyline as Python lists (s, then (x, y, z) tuples of points, tangents, normals)
+        for ``frame_values``, which runs twice per time step."""
+        rows = lambda a: [tuple(r) for r in np.asarray(a, dtype=float).tolist()]
+        return ([float(v) for v in self.s], rows(self.points), rows(self.tangents), rows(self.normals))
+
+    def frame_values(self, s: float):
+        """(point, T, N, B), each an (x, y, z) tuple of floats, at one arc length: frames_at for
+        one value in plain float arithmetic, without its array set-up (the pose is taken twice
+        per time step). T and N are the blends of the vertex frames, normalised (N made normal
+        to T first), B = T x N; the point is interpolated, extrapolated along the end tangent
+        beyond the ends."""
+        S, P, TT, NN = self._rows
         s = float(s)
-        i = min(max(int(np.searchsorted(S, s, side="right")) - 1, 0), len(S) - 2)
+        i = min(max(bisect.bisect_right(S, s) - 1, 0), len(S) - 2)
         u = (s - S[i]) / (S[i + 1] - S[i])
         w = min(max(u, 0.0), 1.0)
-        T = (1 - w) * self.tangents[i] + w * self.tangents[i + 1]
-        T = T / math.sqrt(T @ T)
-        N = (1 - w) * self.normals[i] + w * self.normals[i + 1]
-        N = N - (N @ T) * T
-        N = N / math.sqrt(N @ N)
-        B = np.array([T[1] * N[2] - T[2] * N[1], T[2] * N[0] - T[0] * N[2], T[0] * N[1] - T[1] * N[0]])
+        v = 1 - w
+        t0, t1 = TT[i], TT[i + 1]
+        tx, ty, tz = v * t0[0] + w * t1[0], v * t0[1] + w * t1[1], v * t0[2] + w * t1[2]
+        tn = math.sqrt((tx * tx + ty * ty) + tz * tz)
+        tx, ty, tz = tx / tn, ty / tn, tz / tn
+        n0, n1 = NN[i], NN[i + 1]
+        nx, ny, nz = v * n0[0] + w * n1[0], v * n0[1] + w * n1[1], v * n0[2] + w * n1[2]
+        d = (nx * tx + ny * ty) + nz * tz
+        nx, ny, nz = nx - d * tx, ny - d * ty, nz - d * tz
+        nn = math.sqrt((nx * nx + ny * ny) + nz * nz)
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+        B = (ty * nz - tz * ny, tz * nx - tx * nz, tx * ny - ty * nx)
         if s < S[0]:
-            p = self.points[0] + (s - S[0]) * self.tangents[0]
+            a, e, h = P[0], TT[0], s - S[0]
+            p = (a[0] + h * e[0], a[1] + h * e[1], a[2] + h * e[2])
         elif s > S[-1]:
-            p = self.points[-1] + (s - S[-1]) * self.tangents[-1]
+            a, e, h = P[-1], TT[-1], s - S[-1]
+            p = (a[0] + h * e[0], a[1] + h * e[1], a[2] + h * e[2])
         else:
-            p = self.points[i] + u * (self.points[i + 1] - self.points[i])
-        return p, T, N, B
+            a, b = P[i], P[i + 1]
+            p = (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]))
+        return p, (tx, ty, tz), (nx, ny, nz), B
+
+    def frame_at(self, s: float):
+        """(point, T, N, B), each (3,), at one arc length (``frame_values`` as arrays)."""
+        return tuple(np.array(v) for v in self.frame_values(s))
 
     def project(self, points):
         """Arc length of the closest polyline point and the distance to it: ((m,), (m,)) m.
@@ -240,9 +265,13 @@ def _slab_index(mesh):
     on the trimesh object: a plane farther than that from a centroid cannot cut the face."""
     cached = mesh.metadata.get("_preform_slab")
     if cached is None:
-        tri = mesh.vertices.view(np.ndarray)[mesh.faces.view(np.ndarray)]
-        centroids = tri.mean(axis=1)
-        reach = np.sqrt(((tri - centroids[:, None]) ** 2).sum(axis=2).max(axis=1))
+        from .._kernels.mesh import centroids_and_reach
+
+        F = np.ascontiguousarray(mesh.faces.view(np.ndarray), dtype=np.int64)
+        centroids = np.empty((len(F), 3))
+        reach = np.empty(len(F))
+        centroids_and_reach(np.ascontiguousarray(mesh.vertices.view(np.ndarray), dtype=np.float64), F,
+                            centroids, reach)
         cached = mesh.metadata["_preform_slab"] = (centroids, reach)
     return cached
 
@@ -402,14 +431,20 @@ def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
 PIECE_FRACTION = 0.02
 
 
-def surface_moments(vertices, faces):
+def surface_moments(vertices, faces, which=None):
     """Areas (nf,) m^2, centroids (nf, 3) m and second moments (nf, 3, 3) m^4 of triangles.
 
     Second moment of triangle (a, b, c) over its area: ``A / 12 (a a^T + b b^T + c c^T + s s^T)``
     with ``s = a + b + c`` (exact for a uniform density), so principal axes computed from them
-    are properties of the surface, not of how it was triangulated.
+    are properties of the surface, not of how it was triangulated. ``which``: a callable taking
+    the centroids and returning a bool mask (nf,); then only the masked triangles' moments are
+    formed and returned (each triangle's values are its own, so they equal the full arrays'
+    masked rows).
     """
     p = vertices[faces]
+    if which is not None:
+        keep = which(p.sum(axis=1) / 3.0)
+        p = p[keep]
     area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     s = p.sum(axis=1)
     second = (np.einsum("fki,fkj->fij", p, p) + np.einsum("fi,fj->fij", s, s)) * (area / 12.0)[:, None, None]
@@ -456,6 +491,7 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     are extended to the mesh's extremes along the end tangents. ``perimeter`` is filled from the
     same sections.
     """
+    from .._kernels.mesh import any_side_longer
     from .remesh import subdivide_long_edges
 
     V = mandrel.vertices
@@ -471,10 +507,13 @@ def auto_centerline(mandrel, n_sections: int | None = None, roll_reference=None)
     tip = V[np.argmin(proj)]
     # local axis at the tip: principal axis of the surface near the tip end (a bent part's global
     # axis is oblique there)
-    Vp, Fp, _ = subdivide_long_edges(V, mandrel.faces, PIECE_FRACTION * extent)
-    area, C, M = surface_moments(Vp, Fp)
-    near_pieces = np.linalg.norm(C - tip, axis=1) < 0.25 * extent
-    T, local_centre = _tip_axis(area[near_pieces], C[near_pieces], M[near_pieces], axis)
+    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
+    if any_side_longer(np.ascontiguousarray(V, dtype=np.float64), F, PIECE_FRACTION * extent):
+        Vp, Fp, _ = subdivide_long_edges(V, F, PIECE_FRACTION * extent)
+    else:                                     # nothing to cut: the pieces are the faces
+        Vp, Fp = V, F
+    area, C, M = surface_moments(Vp, Fp, which=lambda c: np.linalg.norm(c - tip, axis=1) < 0.25 * extent)
+    T, local_centre = _tip_axis(area, C, M, axis)
     near = V[np.linalg.norm(V - tip, axis=1) < 0.25 * extent]
     n = n_sections or 200
     h = extent / n

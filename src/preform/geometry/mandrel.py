@@ -58,14 +58,21 @@ class Mandrel:
         b = self.bounds
         return float(np.linalg.norm(b[1] - b[0]))
 
+    @cached_property
+    def _embree(self):
+        """trimesh's embree scene wrapper of the mesh (its origin and scale), or None without
+        embreex; kept here, as trimesh checks its cache's mesh hash on every access."""
+        scene = getattr(self.mesh.ray, "_scene", None)
+        return scene if scene is not None and hasattr(scene, "scene") else None
+
     def intersect_segments(self, starts, ends):
         """First hit of each segment start -> end with the mandrel.
 
         Hits closer than ``tol.ray_offset * diagonal`` to the start are ignored. Returns
         (hit (n,) bool, point (n, 3), face (n,) int64 (-1 if none), distance (n,) m (inf if none)).
         """
-        starts = np.asarray(starts, dtype=float).reshape(-1, 3)
-        ends = np.asarray(ends, dtype=float).reshape(-1, 3)
+        starts = np.ascontiguousarray(np.asarray(starts, dtype=float).reshape(-1, 3))
+        ends = np.ascontiguousarray(np.asarray(ends, dtype=float).reshape(-1, 3))
         n = len(starts)
         hit = np.zeros(n, dtype=bool)
         point = np.zeros((n, 3))
@@ -73,15 +80,14 @@ class Mandrel:
         dist = np.full(n, np.inf)
         if n == 0:
             return hit, point, face, dist
+        if self._embree is not None:
+            return self._first_hits_embree(self._embree, starts, ends, hit, point, face, dist)
         d = ends - starts
         length = np.linalg.norm(d, axis=1)
         ok = length > 0
         dirs = np.zeros_like(d)
         dirs[ok] = d[ok] / length[ok, None]
         idx = np.nonzero(ok)[0]
-        scene = getattr(self.mesh.ray, "_scene", None)
-        if scene is not None and hasattr(scene, "scene"):
-            return self._first_hits_embree(scene, starts, dirs, length, idx, hit, point, face, dist)
         loc, ray, tri = self.mesh.ray.intersects_location(starts[idx], dirs[idx], multiple_hits=True)
         if len(ray) == 0:
             return hit, point, face, dist
@@ -100,22 +106,31 @@ class Mandrel:
         dist[r] = t[first]
         return hit, point, face, dist
 
-    def _first_hits_embree(self, scene, starts, dirs, length, idx, hit, point, face, dist):
+    def _first_hits_embree(self, scene, starts, ends, hit, point, face, dist):
         """intersect_segments with one embree query: rays from ``start + offset d`` limited to the
-        segment (tfar, a little past the end as float32 resolves 6e-8 of a distance; the end is
-        then enforced in float64), the hit point recomputed in float64 on the hit triangle's plane
+        segment (tfar a little past the end, ``_kernels.mesh.segment_rays``; the end is then
+        enforced in float64), the hit point recomputed in float64 on the hit triangle's plane
         (embree works in float32). The same hits as trimesh's multiple-hit query, which sends
         every ray on through the mandrel and re-casts it after each hit."""
+        from .._kernels.mesh import segment_rays
+
         offset = tol.ray_offset * self.diagonal
-        live = idx[length[idx] > offset]
-        if len(live) == 0:
+        n = len(starts)
+        dirs = np.empty((n, 3))
+        length = np.empty(n)
+        live = np.empty(n, dtype=np.int64)
+        origin32 = np.empty((n, 3), dtype=np.float32)
+        dirs32 = np.empty((n, 3), dtype=np.float32)
+        far32 = np.empty(n, dtype=np.float32)
+        m = segment_rays(starts, ends, offset, self.diagonal, np.asarray(scene.origin, dtype=np.float64),
+                         float(scene.scale), dirs, length, live, origin32, dirs32, far32)
+        if m == 0:
             return hit, point, face, dist
-        origin = starts[live] + offset * dirs[live]
-        slack = 1e-6 * (length[live] + self.diagonal)
-        far = ((length[live] - offset + slack) * scene.scale).astype(np.float32)
-        prim = np.asarray(scene.run(origin, dirs[live], dists=far), dtype=np.int64)
+        prim = np.asarray(scene.scene.run(origin32[:m], dirs32[:m], dists=far32[:m]), dtype=np.int64)
         got = prim >= 0
-        rays, tris = live[got], prim[got]
+        if not got.any():
+            return hit, point, face, dist
+        rays, tris = live[:m][got], prim[got]
         n = self.face_normals[tris]
         a = self.vertices[self.faces[tris, 0]]
         den = np.einsum("ij,ij->i", n, dirs[rays])
@@ -234,22 +249,22 @@ def face_neighbors(faces) -> np.ndarray:
 
 
 def _corner_normals(vertices, faces, face_normals):
-    from .._kernels.mesh import corner_normals
+    """Crease-split smooth corner normals (``_kernels.mesh.corner_normals``): interior angles
+    ``arccos(clip(cos, -1, 1))`` from ``corner_cosines`` (NumPy's arccos), the faces around each
+    vertex from ``corners_by_vertex``."""
+    from .._kernels.mesh import corner_cosines, corner_normals, corners_by_vertex
 
-    p = vertices[faces]
-    angles = np.empty((len(faces), 3))
-    for k in range(3):
-        u = p[:, (k + 1) % 3] - p[:, k]
-        w = p[:, (k + 2) % 3] - p[:, k]
-        c = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
-        angles[:, k] = np.arccos(np.clip(c, -1.0, 1.0))
-    flat = faces.reshape(-1)
-    order = np.argsort(flat, kind="stable")
-    vert_ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=len(vertices)))]).astype(np.int64)
-    vert_faces = (order // 3).astype(np.int64)
-    vert_corner = (order % 3).astype(np.int64)
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    c = np.empty((len(F), 3))
+    corner_cosines(V, F, c)
+    angles = np.arccos(np.clip(c, -1.0, 1.0))
+    vert_ptr = np.empty(len(V) + 1, dtype=np.int64)
+    vert_faces = np.empty(3 * len(F), dtype=np.int64)
+    vert_corner = np.empty(3 * len(F), dtype=np.int64)
+    corners_by_vertex(F, len(V), vert_ptr, vert_faces, vert_corner)
     cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
-    return corner_normals(faces, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
+    return corner_normals(F, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
 
 
 def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bool = True) -> Mandrel:
@@ -406,4 +421,7 @@ def load_mandrel(path, unit: str = "m", body=None) -> Mandrel:
 
     vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit],
                                            body=body)
-    return mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
+    mandrel = mandrel_from_arrays(vertices, faces, source=str(path), repairs=tuple(report.messages))
+    if report.ray_mesh is not None:   # the same arrays: its embree scene serves the ray queries
+        mandrel.__dict__["mesh"] = report.ray_mesh
+    return mandrel

@@ -32,14 +32,14 @@ class Pose:
         return (np.asarray(X, dtype=float) - self.t) @ self.R
 
 
-_EX = np.array([1.0, 0.0, 0.0])
-_EY = np.array([0.0, 1.0, 0.0])
-_EZ = np.array([0.0, 0.0, 1.0])
+#: (e_x[i], e_y[i], e_z[i]) for the rows i of R
+_UNIT_ROWS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
 def pose_at(centerline, travel: float, eccentricity=(0.0, 0.0), lead: float = 0.0) -> Pose:
     """The mandrel pose when ``travel`` m of centerline have been fed past the supply plane."""
-    p, T, N, B = centerline.frame_at(travel - lead)
-    R = np.outer(_EX, N) - np.outer(_EY, B) - np.outer(_EZ, T)
-    t = np.array([eccentricity[0], eccentricity[1], lead]) - R @ p
+    p, T, N, B = centerline.frame_values(travel - lead)
+    # R = e_x N^T - e_y B^T - e_z T^T (rows N, -B, -T), in plain floats (it runs twice a step)
+    R = np.array([[(a * N[j] - b * B[j]) - c * T[j] for j in range(3)] for a, b, c in _UNIT_ROWS])
+    t = np.array([eccentricity[0], eccentricity[1], lead]) - R @ np.array(p)
     return Pose(R=R, t=t)

@@ -30,7 +30,7 @@ format, not a repair, and is not said.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -68,6 +68,8 @@ class RepairReport:
     bodies : disjoint bodies found (one kept)
     holes_filled, largest_hole : small holes filled, and the largest one's span (m)
     messages : one sentence per change, for people
+    ray_mesh : the trimesh.Trimesh of the returned arrays that the self-intersection test cast on,
+        with its embree scene, for ``Mandrel`` to reuse (building it takes 1 s on 1 M faces)
     """
 
     input_vertices: int = 0
@@ -80,6 +82,7 @@ class RepairReport:
     holes_filled: int = 0
     largest_hole: float = 0.0
     messages: tuple[str, ...] = ()
+    ray_mesh: object = field(default=None, compare=False, repr=False)
 
     @property
     def changed(self) -> bool:
@@ -141,8 +144,13 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     elif n_flipped:
         say.change(f"flipped {n_flipped:,} faces to consistent outward winding", first=True)
     V, F = _compact(V, F)
-    _refuse_self_intersections(V, F, say)
-    return V, F, RepairReport(**counts, messages=tuple(say.changes))
+    import trimesh
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    mesh = trimesh.Trimesh(V, F, process=False)
+    _refuse_self_intersections(V, F, say, mesh)
+    return V, F, RepairReport(**counts, messages=tuple(say.changes), ray_mesh=mesh)
 
 
 class _Messages:
@@ -236,27 +244,40 @@ def _merge_vertices(V, F, radius):
 
 
 def _weld_exact(V):
-    """Distinct rows of V (k, 3) and the row of each vertex (n,); a lexsort, faster than unique."""
-    order = np.lexsort(V.T[::-1])
-    rows = V[order]
-    new = np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])
+    """Distinct rows of V (k, 3), in order of first appearance, and the row of each vertex (n,)
+    (hash table, ``_kernels.mesh.weld_exact``). The order of the distinct rows does not reach
+    ``_merge_vertices``'s result, which keeps the lowest input index of each cluster."""
+    from .._kernels.mesh import weld_exact
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
     inverse = np.empty(len(V), dtype=np.int64)
-    inverse[order] = np.cumsum(new) - 1
-    return rows[new], inverse
+    first = weld_exact(V, inverse)
+    return V[first], inverse
 
 
 def _drop_degenerate(V, F, radius):
     """Drop zero-area faces (height below ``radius`` m); split the neighbour across a cap's long edge.
 
+    In NumPy (kernel ``_kernels.mesh.degenerate_faces``)::
+
+        collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+        p = V[F]
+        side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+        length = np.linalg.norm(side, axis=2)
+        area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
+        longest = length.argmax(axis=1)
+        caps = ~collapsed & (area2 <= radius * length.max(axis=1))
+
     Returns (faces, dropped).
     """
-    collapsed = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    p = V[F]
-    side = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
-    length = np.linalg.norm(side, axis=2)
-    area2 = np.linalg.norm(np.cross(side[:, 0], side[:, 1]), axis=1)
-    longest = length.argmax(axis=1)
-    caps = ~collapsed & (area2 <= radius * length.max(axis=1))
+    from .._kernels.mesh import degenerate_faces
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    collapsed = np.empty(len(F), dtype=bool)
+    caps = np.empty(len(F), dtype=bool)
+    longest = np.empty(len(F), dtype=np.int64)
+    degenerate_faces(V, F, float(radius), collapsed, caps, longest)
     if caps.any():
         F = _split_across_caps(F, np.nonzero(caps)[0], longest, collapsed | caps)
     keep = ~(collapsed | caps)
@@ -580,29 +601,32 @@ def _refuse_flat(V, F, say, volume):
 RAY_ADVANCE = 1e-6
 
 
-def self_intersections(vertices, faces):
+def self_intersections(vertices, faces, mesh=None):
     """Edges that pierce a triangle they do not belong to: (k, 2) int64 vertex-index pairs.
 
-    vertices : (n, 3) float64, m; faces : (m, 3) int64. Every pair of crossing, non-coplanar
-    triangles has such an edge. Each edge, shortened by a hair at both ends, is cast along itself
-    (embree when installed, which works in float32: the mesh is centred first) and every
+    vertices : (n, 3) float64, m; faces : (m, 3) int64; mesh : a trimesh.Trimesh of exactly
+    these arrays to cast on (its embree scene is built on first use and kept by it), or None.
+    Every pair of crossing, non-coplanar triangles has such an edge. Each edge, shortened by a
+    hair at both ends, is cast along itself (embree when installed, which works in float32 on
+    the mesh shifted to its bounding box's corner and scaled to a 100-unit box) and every
     triangle it meets before its end is collected: the hit is recomputed in float64 on the
     triangle's plane and the ray restarted just past it (trimesh's multiple-hit scheme), with the
     ray's far limit set to what is left of the edge, so no ray travels on through the mandrel
-    (1 M faces: 17.6 s with unlimited rays, a few s now). Coplanar overlaps are not found.
+    (kernels ``_kernels.mesh.edge_ray_batch`` / ``edge_ray_hits``). Coplanar overlaps are not found.
     """
     import trimesh
-    from trimesh.intersections import planes_lines
 
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    centred = vertices - (vertices.max(axis=0) + vertices.min(axis=0)) / 2
-    mesh = trimesh.Trimesh(centred, faces, process=False)
+    from .._kernels.mesh import edge_ray_batch, edge_ray_hits
+
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    if mesh is None:
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
     n = np.int64(len(vertices))
     key = _unique(_edge_keys(faces, n))
     e = np.stack([key // n, key % n], axis=1)
-    a = centred[e[:, 0]]
-    d = centred[e[:, 1]] - a
+    a = vertices[e[:, 0]]
+    d = vertices[e[:, 1]] - a
     length = np.linalg.norm(d, axis=1)
     ok = length > 0
     e, a, d, length = e[ok], a[ok], d[ok], length[ok]
@@ -616,47 +640,38 @@ def self_intersections(vertices, faces):
         inside = t < length[ray] - 2 * eps[ray]
         own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
         return e[_unique(ray[inside & ~own])]
-    base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(centred, axis=0))))
-    plane_origins = centred[faces[:, 0]]
-    plane_normals = mesh.face_normals
+    base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(vertices, axis=0))))
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    area2 = np.linalg.norm(cross, axis=1)
+    normals = np.ascontiguousarray(cross / np.where(area2 > 0, area2, 1.0)[:, None])
     origin = a + u * eps[:, None]
-    offset = np.full(len(e), base)
-    last = np.full(len(e), -1, dtype=np.int64)
-    live = np.arange(len(e))
-    bad = []
+    k = len(e)
+    offset = np.full(k, base)
+    last = np.full(k, -1, dtype=np.int64)
+    bad = np.zeros(k, dtype=bool)
+    live = np.arange(k, dtype=np.int64)
+    rays = np.empty(k, dtype=np.int64)
+    origin32 = np.empty((k, 3), dtype=np.float32)
+    dirs32 = np.empty((k, 3), dtype=np.float32)
+    far32 = np.empty(k, dtype=np.float32)
+    scene_origin = np.asarray(scene.origin, dtype=np.float64)
     for _ in range(100):
-        if len(live) == 0:
+        m = edge_ray_batch(live, origin, a, u, length, eps, scene_origin, float(scene.scale),
+                           rays, origin32, dirs32, far32)
+        if m == 0:
             break
-        left = length[live] - 2 * eps[live] - np.einsum("ij,ij->i", origin[live] - a[live], u[live])
-        go = left > 0
-        live, left = live[go], left[go]
-        if len(live) == 0:
+        live = rays[:m].copy()
+        prim = np.asarray(scene.scene.run(origin32[:m], dirs32[:m], dists=far32[:m]), dtype=np.int64)
+        m = edge_ray_hits(live, prim, vertices, faces, normals, e, origin, a, u, length, eps,
+                          base, offset, last, bad, rays)
+        live = rays[:m].copy()
+        if m == 0:
             break
-        prim = scene.run(origin[live], u[live], dists=(left * scene.scale).astype(np.float32))
-        hit = prim >= 0
-        rays, tris = live[hit], prim[hit].astype(np.int64)
-        dupe = last[rays] == tris
-        last[rays] = tris
-        fresh, ftri = rays[~dupe], tris[~dupe]
-        at, valid = planes_lines(plane_origins=plane_origins[ftri], plane_normals=plane_normals[ftri],
-                                 line_origins=origin[fresh], line_directions=u[fresh])
-        fresh, ftri = fresh[valid], ftri[valid]
-        t = np.einsum("ij,ij->i", at - a[fresh], u[fresh])
-        own = np.any(faces[ftri] == e[fresh, 0:1], axis=1) | np.any(faces[ftri] == e[fresh, 1:2], axis=1)
-        pierce = (t < length[fresh] - 2 * eps[fresh]) & ~own
-        bad.append(fresh[pierce])
-        origin[fresh] = at + u[fresh] * base
-        offset[fresh] = base
-        dup_rays = rays[dupe]
-        offset[dup_rays] *= 2.0
-        origin[dup_rays] += u[dup_rays] * offset[dup_rays, None]
-        live = np.concatenate([fresh[~pierce], dup_rays])
-    bad = _unique(np.concatenate(bad)) if bad else np.zeros(0, dtype=np.int64)
-    return e[bad]
+    return e[np.nonzero(bad)[0]]
 
 
-def _refuse_self_intersections(V, F, say):
-    bad = self_intersections(V, F)
+def _refuse_self_intersections(V, F, say, mesh=None):
+    bad = self_intersections(V, F, mesh)
     if len(bad):
         say.refuse(f"the surface intersects itself ({len(bad):,} edges pierce other triangles, e.g. "
                    f"{say.where(V[bad[0, 0]])}), so inside and outside are ambiguous",

@@ -1,0 +1,68 @@
+"""Mesh kernels of the intake (``_kernels.mesh``) against the NumPy forms they replace, bit for
+bit: corner angles' cosines, the corners around each vertex, face centroids and reach."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from preform._kernels.mesh import centroids_and_reach, corner_cosines, corners_by_vertex
+
+
+def meshes():
+    rng = np.random.default_rng(2)
+    yield trimesh.creation.cylinder(radius=0.04, height=1.6, sections=64)
+    s = trimesh.creation.icosphere(subdivisions=3)
+    yield trimesh.Trimesh(s.vertices + rng.normal(scale=0.01, size=s.vertices.shape), s.faces, process=False)
+    V = rng.normal(size=(50, 3))
+    yield trimesh.Trimesh(np.vstack([V, [[9.0, 9.0, 9.0]]]), rng.integers(0, 50, size=(200, 3)), process=False)
+
+
+def test_corner_cosines_equal_numpy():
+    for m in meshes():
+        V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
+        got = np.empty((len(F), 3))
+        corner_cosines(V, F, got)
+        p = V[F]
+        for k in range(3):
+            u = p[:, (k + 1) % 3] - p[:, k]
+            w = p[:, (k + 2) % 3] - p[:, k]
+            ref = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
+            np.testing.assert_array_equal(got[:, k], ref)
+
+
+def test_corners_by_vertex_equal_stable_argsort():
+    for m in meshes():
+        V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
+        ptr = np.empty(len(V) + 1, dtype=np.int64)
+        faces = np.empty(3 * len(F), dtype=np.int64)
+        corner = np.empty(3 * len(F), dtype=np.int64)
+        corners_by_vertex(F, len(V), ptr, faces, corner)
+        flat = F.reshape(-1)
+        order = np.argsort(flat, kind="stable")
+        np.testing.assert_array_equal(ptr, np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=len(V)))]))
+        np.testing.assert_array_equal(faces, order // 3)
+        np.testing.assert_array_equal(corner, order % 3)
+
+
+def test_centroids_and_reach_equal_numpy():
+    for m in meshes():
+        V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
+        c = np.empty((len(F), 3))
+        r = np.empty(len(F))
+        centroids_and_reach(V, F, c, r)
+        tri = V[F]
+        ref_c = tri.mean(axis=1)
+        np.testing.assert_array_equal(c, ref_c)
+        np.testing.assert_array_equal(r, np.sqrt(((tri - ref_c[:, None]) ** 2).sum(axis=2).max(axis=1)))
+
+
+def test_any_side_longer_is_the_subdivision_test():
+    from preform._kernels.mesh import any_side_longer
+
+    for m in meshes():
+        V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
+        tri = V[F]
+        sides = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
+        for h in (0.5 * sides.max(), sides.max(), np.nextafter(sides.max(), 0), 2 * sides.max()):
+            assert any_side_longer(V, F, h) == bool((sides > h).any())
