@@ -140,11 +140,14 @@ def test_near_bounds_the_distance_to_the_surface_from_below():
         [rng.uniform(-2e-3, 8e-3, 300), rng.uniform(0.01, 0.3, 100)])
     P = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
     D = np.linalg.norm(exact.closest_points(P)[0] - P, axis=1)
-    clear, at = np.full(len(P), -np.inf), np.zeros((len(P), 3))
+    cache = np.full(len(P), -np.inf), np.full(len(P), np.inf), np.zeros((len(P), 3))
     for step in range(3):
-        near, lower = d.near(P, 5e-3, (clear, at))
+        near, lower = d.near(P, 5e-3, cache)
         assert np.all(lower <= D + 1e-12)        # a bound from below (round-off of the query)
         assert np.all(near[D < 5e-3])
+        # the cache changes which points are looked up, not the answer
+        fresh, fresh_lower = d.near(P, 5e-3)
+        assert np.array_equal(near, fresh) and np.all(fresh_lower <= D + 1e-12)
         P = P + rng.normal(scale=1e-3, size=P.shape)   # moved: the cache's bound decays
         D = np.linalg.norm(exact.closest_points(P)[0] - P, axis=1)
     height = 2.5e-4

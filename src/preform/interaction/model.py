@@ -146,33 +146,40 @@ class MandrelDistance:
         ``clearance`` (plus a margin, below): only those points may lie within ``clearance`` of
         the surface.
 
-        The bounds, from the cheapest: the distance to the mandrel's bounding box; the cache
-        ``(clear (k,), clear_at (k, 3))`` (``ZoneState``: a bound known at another point, less
-        the distance moved since: the distance to a surface is 1-Lipschitz); then, for the points
-        still below ``clearance``, ``r - spacing`` with r the distance to the nearest face
-        sample (the closest surface point lies within ``spacing`` of one), looked up within
-        ``clearance + NearSettings.reach`` (beyond: at least that), and written to the cache.
-        The bound is of the unsigned distance: a point counts as near unless it is proven
-        ``NearSettings.margin`` further off than ``clearance`` (a point inside the surface by
-        less than that, as the wall holds crossings, stays near)."""
+        Two bounds: the distance to the mandrel's bounding box, and ``r - spacing`` with r the
+        distance to the nearest face sample (the closest surface point lies within ``spacing``
+        of one), r looked up within ``clearance + NearSettings.reach`` (beyond: at least that).
+        ``cache``, ``(near_lo, near_hi, near_at)`` (``ZoneState``), holds bounds of r at other
+        points; r is 1-Lipschitz, so a point is looked up only where those bounds, widened by
+        the distance moved, leave it open whether ``r - spacing`` is below the limit, and
+        ``near`` is what a look-up of every point would give. The bound is of the unsigned
+        distance: a point counts as near unless it is proven ``NearSettings.margin`` further
+        off than ``clearance`` (a point inside the surface by less than that, as the wall holds
+        crossings, stays near)."""
         points = np.atleast_2d(points)
-        lower = self._box_distance(points)
-        if cache is not None:
-            clear, at = cache
-            lower = np.maximum(lower, clear - np.linalg.norm(points - at, axis=1))
+        tree, spacing = self._sample_tree()
         limit = max(clearance, 0.0) + self.settings.margin
-        idx = np.nonzero(lower < limit)[0]
+        box = self._box_distance(points)
+        if cache is None:
+            lo, hi = np.full(len(points), -np.inf), np.full(len(points), np.inf)
+        else:
+            lo_c, hi_c, at = cache
+            moved = np.linalg.norm(points - at, axis=1)
+            lo, hi = lo_c - moved, hi_c + moved
+        # r - spacing below the limit for sure (hi), above it for sure (lo), else look it up
+        idx = np.nonzero((box < limit) & (lo - spacing < limit) & ~(hi - spacing < limit))[0]
         if len(idx):
-            tree, spacing = self._sample_tree()
-            beyond = limit + self.settings.reach
-            # a query radius a little wider than beyond + spacing: rounding drops no point
-            r, _ = tree.query(points[idx], distance_upper_bound=(beyond + spacing) * (1.0 + 1e-9))
-            found = np.where(np.isfinite(r), r - spacing, beyond)
-            lower[idx] = np.maximum(lower[idx], found)
+            beyond = limit + self.settings.reach + spacing
+            # a query radius a little wider than beyond: rounding drops no point
+            r, _ = tree.query(points[idx], distance_upper_bound=beyond * (1.0 + 1e-9))
+            found = np.isfinite(r)
+            lo[idx] = np.where(found, r, beyond)
+            hi[idx] = np.where(found, r, np.inf)
             if cache is not None:
-                clear[idx] = lower[idx]
-                at[idx] = points[idx]
-        return lower < limit, lower
+                lo_c[idx], hi_c[idx], at[idx] = lo[idx], hi[idx], points[idx]
+        lower = np.maximum(box, lo - spacing)
+        near = (box < limit) & (lo - spacing < limit)
+        return near, lower
 
     def _box_distance(self, points):
         """(k,) m: distance of points (k, 3), mandrel frame, to the mandrel's bounding box, a
@@ -602,7 +609,7 @@ class InteractionZone:
             return self._with_wall(bc), None
         d = self.distance
         plane, clear = d.near_planes(st.pos[: st.m], self.pose_end, d.settings.wall_clearance,
-                                     (st.clear[: st.m], st.clear_at[: st.m]))
+                                     _near_cache(st))
         return dataclasses.replace(bc, plane=plane), clear
 
     def _left_clearance(self, start, clear) -> bool:
@@ -684,7 +691,7 @@ class InteractionZone:
         if isinstance(self.distance, MandrelDistance):
             # the faces looked up only near the surface (``MandrelDistance.below``)
             hit = np.nonzero(self.distance.below(points, height,
-                                                 (st.clear[: st.m], st.clear_at[: st.m])))[0]
+                                                 (st.near_lo[: st.m], st.near_hi[: st.m], st.near_at[: st.m])))[0]
         else:
             hit = np.nonzero(self.distance(points) < height)[0]
         if len(hit) == 0:
@@ -710,6 +717,12 @@ class InteractionZone:
                 deposits.append((int(st.yarn[c, side]), st.pos[c].copy()))
         st.remove(np.array(dead, dtype=np.int64))
         return deposits
+
+
+def _near_cache(st):
+    """The look-up cache of the crossings of ``st`` (``ZoneState``) for ``MandrelDistance.near``:
+    views, updated in place."""
+    return st.near_lo[: st.m], st.near_hi[: st.m], st.near_at[: st.m]
 
 
 def creation_point(px, gx, po, go, lowest=0.0):

@@ -34,13 +34,11 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
 Not state, a cache of the mandrel look-ups (``model.MandrelDistance.near``; not in ``to_arrays``,
-unknown after ``from_arrays`` and for a new crossing): ``clear (cap,) float64, m``, a lower bound
-of the crossing's distance to the mandrel surface when it was at ``clear_at (cap, 3) float64``
-(mandrel frame); ``-inf``: none known. The distance is 1-Lipschitz, so at a point ``p`` it is at
-least ``clear - |p - clear_at|``.
-
-Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
--1 when it has none; ``material_fell[k]``: material coordinate of its fell point (m).
+unknown after ``from_arrays`` and for a new crossing): ``near_lo``, ``near_hi (cap,) float64, m``,
+bounds from below and above of the crossing's distance to the nearest face sample when it was at
+``near_at (cap, 3) float64`` (mandrel frame); ``-inf``, ``inf``: none known. That distance is
+1-Lipschitz, so at a point ``p`` it lies within ``[near_lo - |p - near_at|, near_hi + |p -
+near_at|]``.
 """
 
 from __future__ import annotations
@@ -71,8 +69,9 @@ _FIELDS = {
 
 #: the look-up cache (module docstring): copied, grown, compacted with the crossings, not saved
 _CACHE = {
-    "clear": ((), np.float64, -np.inf),
-    "clear_at": ((3,), np.float64, 0.0),
+    "near_lo": ((), np.float64, -np.inf),
+    "near_hi": ((), np.float64, np.inf),
+    "near_at": ((3,), np.float64, 0.0),
 }
 _ALL = {**_FIELDS, **_CACHE}
 
@@ -212,7 +211,8 @@ class ZoneState:
         self.uid[c] = self.next_uid
         self.next_uid += 1
         self.t_create[c] = t
-        self.clear[c] = -np.inf
+        self.near_lo[c] = -np.inf
+        self.near_hi[c] = np.inf
         for side, k in enumerate((warp, weft)):
             below = self.highest[k]
             self.low[c, side] = below
