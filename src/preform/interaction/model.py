@@ -44,6 +44,16 @@ everything the solver uses) are an :class:`~preform.interaction.settings.Interac
 passed to the constructor.
 
 Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
+Only the bottom rows come near the mandrel, so the faces are looked up only for the crossings a
+bound does not prove far from it (``MandrelDistance.near``: the bounding box, then a KD-tree of
+face samples with a per-crossing cache of its distances, 1-Lipschitz): the tangent planes for the
+crossings that may lie within ``NearSettings.wall_clearance`` of the surface at the step's start
+(the others have no wall; if the solve moves one of them as far as it was from the mandrel, the
+step is solved again with every crossing's plane), the deposit test for those that may lie within
+the deposit height (a crossing proven further from the surface is not deposited even where the
+nearest face's plane passes close to it, at an edge). Where no crossing's plane becomes active,
+the states are those with every crossing's plane (``docs/decisions.md``: case A histories
+bit-identical).
 """
 
 from __future__ import annotations
