@@ -12,6 +12,12 @@
   crossings next to the fell points by millimetres across segments a centimetre long, and the
   tension there jumps before the next steps bring it back) and the friction-bound change per
   frontal iteration of a few snapshot solves;
+* ``--breakdown``: case A (``examples/case_a.toml``, ``kind = "interaction"``, ``solver =
+  "relax"``, from 0.4 m, ``--length`` braided, 20 snapshots per m) through ``preform run``'s
+  ``run_case`` (simulate, fields, files), timed by part: the zone's step outside its solver and
+  the stepper around it (ms a step), the relaxation's solves, the Newton fallbacks (with the
+  relaxation's failed attempt), the snapshots (and their Newton re-balance), fields and files;
+  wall and process time;
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
@@ -158,6 +164,7 @@ class _Timers:
     def __init__(self):
         self.s = dict.fromkeys(("advance", "step", "solve", "fallback", "snapshot",
                                 "snapshot_newton", "loop"), 0.0)
+        self.cpu = dict.fromkeys(self.s, 0.0)    # process time (s) of the same parts
         self.n = dict.fromkeys(("step", "fallback", "snapshot", "snapshot_newton"), 0)
         self.inside = None          # "step" or "snapshot": who calls the solver now
 
@@ -168,11 +175,12 @@ class _Timers:
             outer = self.inside
             if inside is not None:
                 self.inside = inside
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             try:
                 return orig(*a, **k)
             finally:
                 self.s[part] += time.perf_counter() - t0
+                self.cpu[part] += time.process_time() - c0
                 if count is not None:
                     self.n[count] += 1
                 self.inside = outer
@@ -205,18 +213,20 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
 
     def solve(state, bc, **k):
         before = relax.FALLBACKS[0]
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             return solver(state, bc, **k)
         finally:
-            dt = time.perf_counter() - t0
+            dt, dc = time.perf_counter() - t0, time.process_time() - c0
             if T.inside == "snapshot":
                 pass                                    # counted by the snapshot's timers
             elif relax.FALLBACKS[0] > before:
                 T.s["fallback"] += dt
+                T.cpu["fallback"] += dc
                 T.n["fallback"] += 1
             else:
                 T.s["solve"] += dt
+                T.cpu["solve"] += dc
 
     def newton_timed(*a, **k):
         t0 = time.perf_counter()
@@ -269,6 +279,12 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
     ]
     for name, total, per in rows:
         print(f"  {name:<62s} {total:8.2f} s" + (f"  {per:8.2f} ms each" if per == per else ""))
+    c = T.cpu
+    print(f"  process time: zone step outside the solver "
+          f"{(c['step'] - c['solve'] - c['fallback']) / steps * 1e3:.2f} ms, stepper around it "
+          f"{(c['advance'] - c['step'] - c['snapshot']) / steps * 1e3:.2f} ms, solver "
+          f"{c['solve'] / max(steps - n['fallback'], 1) * 1e3:.2f} ms a step; snapshots "
+          f"{c['snapshot'] / max(n['snapshot'], 1):.2f} s each")
     return s, n, stages
 
 
