@@ -488,11 +488,17 @@ def new_material(state, c, side, below_point, f, bc, settings: InteractionSettin
     """Material coordinate for yarn ``side`` of a crossing ``c`` just created on top of its
     yarn: the new segment from ``below_point`` (the yarn point below) carries the tension f,
     ``u = u_below + l / (1 + f / EA)``."""
-    k = state.yarn[c, side]
-    lo = state.low[c, side]
-    u_below = state.material[lo, side] if lo >= 0 else state.material_fell[k]
-    p = state.centerline_point(c, side, bc.h)
-    l = float(np.sqrt(np.sum((p - below_point) ** 2) + settings.energy.length_smoothing))
+    k = int(state.yarn[c, side])
+    lo = int(state.low[c, side])
+    u_below = float(state.material[lo, side] if lo >= 0 else state.material_fell[k])
+    # the yarn point C + o h N (``ZoneState.centerline_point``), in floats: a crossing is
+    # created a few dozen times a step at 144 carriers, where NumPy's per-call cost dominates
+    o = float(state.over[c]) if side == 0 else -float(state.over[c])
+    a = o * bc.h
+    C, N = state.pos[c].tolist(), state.normal[c].tolist()
+    b = np.asarray(below_point, dtype=float).tolist()
+    d0, d1, d2 = C[0] + a * N[0] - b[0], C[1] + a * N[1] - b[1], C[2] + a * N[2] - b[2]
+    l = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2 + settings.energy.length_smoothing)
     return u_below + l / (1.0 + f / axial_stiffness(bc.f_spool, settings))
 
 
