@@ -59,3 +59,25 @@ def test_colour_ranges_cover_the_braided_faces_only(tmp_path):
 
     img = np.asarray(Image.open(path).convert("RGB"))
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50   # not blank
+
+
+def test_a_layered_run_colours_the_stack_where_any_layer_reached():
+    """Layer 1 braided z < 0.15, layer 2 (prefixed arrays) 0.1 < z < 0.35: the stacked thickness
+    is coloured on every face either reached, grey only where neither did; the braid angle (the
+    first layer's) only where layer 1 has one."""
+    V, F = tube()
+    cl = centerline_from_points(np.array([[0, 0, z] for z in np.linspace(0, 0.4, 9)]))
+    z = V[F].mean(axis=1)[:, 2]
+    one, two = (z < 0.15).astype(np.uint8), ((z > 0.1) & (z < 0.35)).astype(np.uint8)
+    data = {"reached_warp": one, "reached_weft": one, "layer1_reached_warp": one,
+            "layer1_reached_weft": one, "layer2_reached_warp": two, "layer2_reached_weft": two,
+            "braid_angle_deg": np.where(one, 45.0, 0.0), "layer2_braid_angle_deg": 60.0 * two,
+            "cover_factor": 0.9 * (one | two),
+            "thickness_m": 4e-4 * one + 5e-4 * two}
+    fields = SurfaceFields(vertices=V, faces=F, source_faces=np.arange(len(F)), cell_data=data)
+    assert np.array_equal(fields.reached(), (one | two) > 0)
+    fig = surface_map_figure(fields, cl, "two layers")
+    for ax, shown in ((fig.axes[0], one > 0), (fig.axes[2], (one | two) > 0)):
+        coloured = [c for c in ax.collections if c.get_array() is not None]
+        assert len(coloured[0].get_array()) == shown.sum()
+    assert fig.axes[0].get_title().startswith("braid angle of layer 1")

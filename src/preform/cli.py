@@ -139,6 +139,12 @@ def cmd_check(args) -> int:
 
     config = _with_model(load_config(args.config), getattr(args, "model", None))
     mandrel, centerline, notes = checked_geometry(config)
+    if config.layers:   # [[layer]] tables: every layer's checks and estimate
+        from .pipeline import check_layers
+
+        _print_notes(check_layers(config, mandrel, centerline, notes, force=args.force)[0])
+        print(f"OK: {config.source or args.config}")
+        return EXIT_DONE
     _print_notes(notes)
     work = estimate(config, mandrel, centerline, force=args.force)
     for line in work.lines():

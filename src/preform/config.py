@@ -10,6 +10,7 @@ The dataclasses below are the contract between the config and the rest of the pa
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import math
@@ -138,6 +139,26 @@ class RtmConfig:
 
 
 @dataclass(frozen=True)
+class LayerConfig:
+    """One braided layer of ``[[layer]]`` (DESIGN.md §1): its direction of travel and its own
+    values, laid over the run's top-level sections when the layer is braided
+    (:meth:`Config.layer_config`), so that a change of a top-level section (``--model``, a
+    sweep) reaches every layer that does not set that key itself. Validated at load against
+    the top-level sections, like them."""
+
+    #: "forward": braided from the centerline's tip, like a single layer; "backward": from its
+    #: other end (the machine reverses), ``initial_position`` and ``braid_length`` from there
+    direction: str = "forward"
+    #: (section, field, value) of every key the layer sets, values as the section dataclasses
+    #: hold them (SI, ``angular_speed`` in rad/s)
+    overrides: tuple[tuple[str, str, object], ...] = ()
+
+    def fields(self, section: str) -> dict:
+        """The layer's own values of one section: field -> value."""
+        return {name: value for sec, name, value in self.overrides if sec == section}
+
+
+@dataclass(frozen=True)
 class Config:
     mandrel: MandrelConfig
     machine: MachineConfig
@@ -148,6 +169,17 @@ class Config:
     source: Path | None = None      # the TOML file this came from
     rtm: RtmConfig = field(default_factory=RtmConfig)
     axial_yarn: AxialYarnConfig = field(default_factory=AxialYarnConfig)
+    #: ``[[layer]]`` tables, from the mandrel outwards; empty: one layer of the top-level sections
+    layers: tuple[LayerConfig, ...] = ()
+
+    def layer_config(self, k: int) -> "Config":
+        """The config that braids layer ``k`` (0-based): the top-level sections with the layer's
+        own values laid over them; ``layers`` keeps the layers up to and including ``k``, so the
+        echo (and a checkpoint's inputs hash) of a layer covers the layers it is braided on."""
+        layer = self.layers[k]
+        sections = {sec: dataclasses.replace(getattr(self, sec), **layer.fields(sec))
+                    for sec in LAYER_SECTIONS}
+        return dataclasses.replace(self, **sections, layers=self.layers[:k + 1])
 
     def axial(self) -> tuple[int, float, float, float | None]:
         """(count, width m, thickness m, tex or None) of the axial yarns."""
@@ -173,6 +205,10 @@ KEYS = {
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
+#: the sections a ``[[layer]]`` table may override, and its own keys
+LAYER_SECTIONS = ("machine", "yarn", "process", "model", "axial_yarn")
+LAYER_KEYS = ("direction",)
+DIRECTIONS = ("forward", "backward")
 REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
 
 STL_UNITS = ("m", "mm")
@@ -226,9 +262,11 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
     base_dir : folder that relative paths resolve against. name : stem of the default output dir.
     """
     base_dir = Path(base_dir).expanduser().resolve()
+    layers_raw = data.get("layer", None)
+    data = {k: v for k, v in data.items() if k != "layer"}
     _check_layout(data)
     machine = _machine(_Section("machine", data))
-    return Config(
+    config = Config(
         mandrel=_mandrel(_Section("mandrel", data), base_dir),
         machine=machine,
         yarn=_yarn(_Section("yarn", data)),
@@ -239,6 +277,9 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         rtm=_rtm(_Section("rtm", data), base_dir),
         axial_yarn=_axial_yarn(_Section("axial_yarn", data)),
     )
+    if layers_raw is None:
+        return config
+    return dataclasses.replace(config, layers=_layers(layers_raw, data, config))
 
 
 # ----- messages ------------------------------------------------------------------------------
@@ -284,6 +325,10 @@ def _check_layout(data: dict) -> None:
 
 def _unknown_top_level(name, value) -> None:
     sections = ", ".join(f"[{s}]" for s in KEYS)
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        hint = "did you mean [[layer]]? " if _suggest(name, ["layer"]) else ""
+        raise ConfigError(f"unknown array of tables [[{name}]]: {hint}[[layer]] is the only one "
+                          "(one table per braided layer)")
     if not isinstance(value, dict):
         home = _home_of(name)
         where = f"it belongs in [{home}]" if home else f"expected the sections {sections}"
@@ -307,12 +352,14 @@ def _unknown_key(sec, key, value) -> None:
 class _Section:
     """One table of the document with its name, for reading keys with error messages."""
 
-    def __init__(self, name: str, data: dict, table: dict | None = None):
+    def __init__(self, name: str, data: dict, table: dict | None = None, prefix: str = ""):
         self.name = name
         self.table = data.get(name, {}) if table is None else table
+        self.prefix = prefix   # "[[layer]] 2 " for a layer's sections
 
     def where(self, key: str) -> str:
-        return f"[{self.name}] {key}"
+        """How messages name the key: ``[name] key`` (a [[layer]] table's own keys: no name)."""
+        return f"{self.prefix}[{self.name}] {key}" if self.name else f"{self.prefix}{key}"
 
     def error(self, key: str, value, expected: str) -> ConfigError:
         return ConfigError(f"{self.where(key)} = {_fmt(value)}: {expected}")
@@ -456,7 +503,8 @@ def _guide_ring(machine: _Section, spool_radius: float) -> GuideRingConfig | Non
         return None
     if not isinstance(table, dict):
         raise machine.error("guide_ring", table, "expected a table { radius = ..., offset = ... } (m)")
-    sec = _Section("machine", {}, table={f"guide_ring.{k}": v for k, v in table.items()})
+    sec = _Section("machine", {}, table={f"guide_ring.{k}": v for k, v in table.items()},
+                   prefix=machine.prefix)
     for key in table:
         if key not in GUIDE_RING_KEYS:
             hint = _suggest(key, GUIDE_RING_KEYS)
@@ -517,6 +565,57 @@ def _axial_yarn(sec: _Section) -> AxialYarnConfig:
                            thickness=sec.number("thickness", "m", default=None, positive=True),
                            linear_density_tex=sec.number("linear_density_tex", "g/km (tex)", default=None,
                                                          positive=True))
+
+
+def _layers(raw, data: dict, config: Config) -> tuple[LayerConfig, ...]:
+    """``[[layer]]`` tables -> LayerConfigs: each layer's sections are the top-level ones with the
+    layer's keys laid over them (a layer's ``guide_ring`` replaces the top-level one), read by
+    the same readers, so a bad value names its layer (``[[layer]] 2 [yarn] thickness = ...``)."""
+    if isinstance(raw, dict):
+        raise ConfigError("[layer] must be an array of tables: write [[layer]] (two brackets) once "
+                          "per braided layer, from the mandrel outwards")
+    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
+        raise ConfigError(f"layer = {_fmt(raw)}: expected [[layer]] tables, one per braided layer")
+    layers = [_layer(k, table, data) for k, table in enumerate(raw, start=1)]
+    whole = dataclasses.replace(config, layers=tuple(layers))
+    with_tow = [whole.layer_config(k).yarn.has_material for k in range(len(layers))]
+    if any(with_tow) and not all(with_tow):
+        k = with_tow.index(False) + 1
+        raise ConfigError(f"[[layer]] {k} [yarn] has no tow material data (linear_density_tex, "
+                          "fibre_density, fibre_radius) while other layers have: give them for "
+                          "every layer (or at the top level in [yarn]) for the stacked RTM fields")
+    return tuple(layers)
+
+
+def _layer(k: int, table: dict, data: dict) -> LayerConfig:
+    prefix = f"[[layer]] {k} "
+    expected = ", ".join([*LAYER_KEYS, *(f"[layer.{s}]" for s in LAYER_SECTIONS)])
+    for key, value in table.items():
+        if key in LAYER_KEYS:
+            continue
+        if key not in LAYER_SECTIONS:
+            whole = " (it is set once for all layers, at the top level)" if key in KEYS else ""
+            hint = _suggest(key, [*LAYER_KEYS, *LAYER_SECTIONS])
+            raise ConfigError(f"{prefix}{key} = {_fmt(value)}: unknown key{whole}; {hint}expected "
+                              f"one of {expected}")
+        if not isinstance(value, dict):
+            raise ConfigError(f"{prefix}{key} = {_fmt(value)}: expected a table [layer.{key}] of "
+                              f"[{key}] keys for this layer")
+        for sub in value:
+            if sub not in KEYS[key]:
+                hint = _suggest(sub, KEYS[key])
+                raise ConfigError(f"{prefix}[{key}] {sub} = {_fmt(value[sub])}: unknown key; "
+                                  f"{hint}expected one of {', '.join(KEYS[key])}")
+    merged = {sec: {**data.get(sec, {}), **table.get(sec, {})} for sec in LAYER_SECTIONS}
+    direction = _Section("", {}, table=table, prefix=prefix).choice("direction", DIRECTIONS,
+                                                                     default="forward")
+    readers = {"machine": _machine, "yarn": _yarn, "process": _process, "model": _model,
+               "axial_yarn": _axial_yarn}
+    overrides = []
+    for sec, read in readers.items():   # the merged section validated; the layer's keys kept
+        section = read(_Section(sec, merged, prefix=prefix))
+        overrides += [(sec, key, getattr(section, key)) for key in table.get(sec, {})]
+    return LayerConfig(direction=direction, overrides=tuple(overrides))
 
 
 RTM_MODELS = ("gebart", "kozeny_carman", "table")
@@ -625,6 +724,28 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
 
 
 def dump_config(config: Config) -> dict:
+    """See :func:`_dump_sections`; with ``[[layer]]`` tables also ``"layers"``: layer number
+    (from "1") -> its direction and the keys it sets, per section, in file units (a table like
+    the sections)."""
+    out = _dump_sections(config)
+    if config.layers:
+        out["layers"] = {str(k): _dump_layer(config, k - 1) for k in range(1, len(config.layers) + 1)}
+    return out
+
+
+def _dump_layer(config: Config, k: int) -> dict:
+    """Layer k's direction and its own keys, echoed as :func:`_dump_sections` echoes them."""
+    layer = config.layers[k]
+    echoed = _dump_sections(config.layer_config(k))
+    out = {"direction": layer.direction}
+    for sec in LAYER_SECTIONS:
+        own = layer.fields(sec)
+        if own:
+            out[sec] = {key: echoed[sec][key] for key in own}
+    return out
+
+
+def _dump_sections(config: Config) -> dict:
     """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
 
     Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a

@@ -75,6 +75,15 @@ class SurfaceFields:
     edge_length_m: float = float("inf")
     pool_radius_m: float = 0.0
 
+    def reached(self) -> np.ndarray:
+        """(nf,) bool: faces some yarn reached, of any layer (``reached_*`` and, on a layered
+        run, ``layer{k}_reached_*``: the unprefixed arrays are the first layer's)."""
+        keys = [k for k in self.cell_data if k.endswith(("reached_warp", "reached_weft"))]
+        out = np.zeros(len(self.faces), dtype=bool)
+        for k in keys:
+            out |= np.asarray(self.cell_data[k]) > 0
+        return out
+
 
 # ---------------------------------------------------------------------------------------- mesh
 
@@ -356,7 +365,7 @@ def principal_direction_2d(aa, ab, bb):
 
 
 def map_to_surface(result, edge_length=None, pool_radius_m=None,
-                   remesh: RemeshSettings = RemeshSettings()) -> SurfaceFields:
+                   remesh: RemeshSettings = RemeshSettings(), mesh=None) -> SurfaceFields:
     """Map the deposited yarns of ``result`` onto the mandrel surface (DESIGN.md §3.4).
 
     result : preform.result.Result (uses yarns, mandrel, centerline, config.yarn, config.output)
@@ -366,6 +375,9 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     remesh : settings of the isotropic remesher (preform.geometry.remesh.RemeshSettings)
     pool_radius_m : float, m, radius of the neighbourhood a face borrows from; None:
         POOL_EDGES field edge lengths; 0: no pooling (raw per-face values)
+    mesh : (vertices (nv, 3), faces (nf, 3), source_faces (nf,), edge length m) of the field
+        mesh to map onto, or None to remesh the mandrel (:func:`field_mesh`); several layers
+        map onto offset copies of one field mesh, so that their fields share the faces
     returns : SurfaceFields on the field mesh
 
     Per face and group (warp, weft), from the clipped yarn pieces (lengths ``l_i``, unit
@@ -414,7 +426,7 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     length per area (its integral over the surface is the deposited length, up to the pooling's
     smoothing at the ends of the braided zone).
     """
-    V, F, source, h = field_mesh(result, edge_length, remesh)
+    V, F, source, h = field_mesh(result, edge_length, remesh) if mesh is None else mesh
     normals, areas, centroids = face_geometry(V, F)
     length, moment, first, unmapped = clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
     width = float(result.config.yarn.width)
@@ -616,3 +628,38 @@ def fields_on_input(fields: SurfaceFields, mandrel) -> SurfaceFields:
     return SurfaceFields(vertices=V.copy(), faces=F.copy(), source_faces=np.arange(nf, dtype=np.int64),
                          cell_data=out, jammed=jammed, unmapped_length_m=fields.unmapped_length_m,
                          edge_length_m=fields.edge_length_m, pool_radius_m=fields.pool_radius_m)
+
+
+# ------------------------------------------------------------------------- a stack of layers
+
+def stack_layers(layer_fields) -> SurfaceFields:
+    """The fields of several braided layers on one set of faces (docs/theory.md, "Several layers").
+
+    layer_fields : SurfaceFields of each layer, from the mandrel outwards, mapped onto offset
+    copies of one field mesh (``map_to_surface(mesh=...)``), so face ``i`` of every layer lies
+    over face ``i`` of the first. The result lies on the first layer's faces (on the mandrel) and
+    holds
+
+    - every array of layer ``k`` (from 1) as ``layer{k}_<name>``;
+    - the stack's totals under the single-layer names: ``thickness_m = sum_k t_k``,
+      ``cover_factor = 1 - prod_k (1 - CF_k)`` (the share of the surface that some layer covers,
+      the layers' yarns lying independently of each other), ``jammed`` where any layer jammed;
+    - the first layer's braid angles, directions, coverages, yarn lengths and ``reached_*``
+      under their single-layer names (the layer on the mandrel, which the top-level history and
+      quality checks describe; each layer's own are prefixed).
+    """
+    base = layer_fields[0]
+    data = dict(base.cell_data)
+    for k, fields in enumerate(layer_fields, start=1):
+        for name, values in fields.cell_data.items():
+            if name != "source_face":
+                data[f"layer{k}_{name}"] = values
+    cd = [f.cell_data for f in layer_fields]
+    data["thickness_m"] = np.sum([c["thickness_m"] for c in cd], axis=0)
+    data["cover_factor"] = 1.0 - np.prod([1.0 - c["cover_factor"] for c in cd], axis=0)
+    data["jammed"] = np.max([c["jammed"] for c in cd], axis=0).astype(np.uint8)
+    jammed = data["jammed"].astype(bool)
+    return SurfaceFields(vertices=base.vertices, faces=base.faces, source_faces=base.source_faces,
+                         cell_data=data, jammed=jammed,
+                         unmapped_length_m=float(sum(f.unmapped_length_m for f in layer_fields)),
+                         edge_length_m=base.edge_length_m, pool_radius_m=base.pool_radius_m)

@@ -13,6 +13,10 @@
    fails, the checkpoint stays and the error says how to finish: ``--resume`` on a finished
    checkpoint writes the results without simulating again.
 
+With ``[[layer]]`` tables :func:`run_layers` does the same once per layer, from the mandrel
+outwards, each layer braided on the mandrel offset by the thickness of the layers below
+(``preform.geometry.offset``), and writes the layers' fields and their stacked totals.
+
 It returns a :class:`CaseOutcome` instead of printing, so the CLI and a sweep's workers run
 exactly the same path.
 """
@@ -133,6 +137,9 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     import time
 
     t0 = time.perf_counter() if started is None else started
+    if config.layers:
+        return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
+                          geometry=geometry, started=t0)
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
     work = estimate(config, mandrel, centerline, force=force)
@@ -158,3 +165,236 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         if result.status == "done":
             Checkpoint(checkpoint, result.config).remove()
     return CaseOutcome(result=result, out_dir=out_dir, written=written, notes=notes)
+
+
+# ------------------------------------------------------------------------------ several layers
+
+#: the checkpoint of layer k (from 1) of a run with [[layer]] tables
+LAYER_CHECKPOINT = "checkpoint_layer{k}.npz"
+
+
+def layer_centerline(centerline, direction: str, roll_reference=None):
+    """The centerline a layer travels along: the mandrel's, or reversed for ``"backward"`` (its
+    tip is then the far end, and arc lengths count from there)."""
+    if direction == "forward":
+        return centerline
+    from .geometry.centerline import centerline_from_points
+
+    perimeter = None if centerline.perimeter is None else np.asarray(centerline.perimeter)[::-1]
+    return centerline_from_points(np.asarray(centerline.points)[::-1], roll_reference=roll_reference,
+                                  perimeter=perimeter)
+
+
+@dataclass
+class LayerStack:
+    """The geometry shared by the layers of a run: the base surface (the mandrel refined to the
+    field edge, ``offset.refined_surface``) and the field mesh of the first layer, which every
+    layer maps onto an offset copy of. ``displacement`` (nv, 3) m: the base vertices' offset
+    under the layers mapped so far."""
+
+    mandrel: object
+    base_vertices: np.ndarray
+    base_faces: np.ndarray
+    field_mesh: tuple
+    displacement: np.ndarray
+    settings: object
+
+    @classmethod
+    def start(cls, mandrel, field_mesh, settings):
+        from .geometry.offset import refined_surface
+
+        V, F = refined_surface(mandrel.vertices, mandrel.faces, field_mesh[3])
+        return cls(mandrel, V, F, field_mesh, np.zeros_like(V), settings)
+
+    @property
+    def reach(self) -> float:
+        from .fields import LOCATE_REACH_EDGES
+
+        return LOCATE_REACH_EDGES * float(self.field_mesh[3])
+
+    def layer_mesh(self):
+        """The field mesh moved by the current displacement (same faces, same source faces)."""
+        from .geometry.offset import interpolate, vertex_normals
+
+        V, F, source, h = self.field_mesh
+        moved = interpolate(self.base_vertices, self.base_faces, self.displacement, V,
+                            vertex_normals(V, F), self.reach)
+        return V + moved, F, source, h
+
+    def offset_for(self, layer_fields, name: str):
+        """(Mandrel, OffsetReport) of the surface on the stacked thickness of ``layer_fields``."""
+        from .geometry.mandrel import mandrel_from_arrays
+        from .geometry.offset import interpolate, offset_surface, vertex_means, vertex_normals
+
+        V, F, _, _ = self.field_mesh
+        total = np.sum([f.cell_data["thickness_m"] for f in layer_fields], axis=0)
+        at_base = interpolate(V, F, vertex_means(V, F, total), self.base_vertices,
+                              vertex_normals(self.base_vertices, self.base_faces), self.reach)
+        moved, self.displacement, report = offset_surface(self.base_vertices, self.base_faces,
+                                                          at_base, self.settings)
+        source = f"{self.mandrel.source or 'mandrel'} offset for {name}"
+        return mandrel_from_arrays(moved, self.base_faces, source=source), report
+
+
+def check_layers(config, mandrel, centerline, notes=(), *, force=False):
+    """(notes, estimated result bytes) of every layer of ``config`` against the mandrel, before
+    any runs: impossible set-ups raise (PreformError), work beyond the limits is refused unless
+    ``force``; ``notes`` are the geometry check's, whose warnings are not repeated. Each layer's
+    Ko / H_inf notes are the mandrel's (the layer lies further out by the layers below it)."""
+    from .checks import preflight
+
+    notes = list(notes)
+    result_bytes = 0
+    for k in range(1, len(config.layers) + 1):
+        cfg = config.layer_config(k - 1)
+        cl = layer_centerline(centerline, config.layers[k - 1].direction, config.mandrel.roll_reference)
+        notes += [line for w in preflight(cfg, mandrel, cl)
+                  if (line := f"warning: layer {k}: {w}") not in notes and f"warning: {w}" not in notes]
+        if k > 1:
+            notes += [f"note: layer {k}: {line}" for line in reference_lines(cfg, mandrel, cl)]
+        work = estimate(cfg, mandrel, cl, force=force)
+        notes += [f"note: layer {k}: {line}" for line in work.lines()]
+        result_bytes += work.result_bytes
+    return notes, result_bytes
+
+
+def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
+               started=None, offset_settings=None) -> CaseOutcome:
+    """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
+    from the mandrel outwards, on the mandrel offset by the thickness of the layers below.
+
+    Every layer's set-up is checked and its work estimated against the mandrel before the first
+    runs; layer k (from 1) keeps its state in ``checkpoint_layer{k}.npz`` until all results are
+    written (``--resume`` continues at the first unfinished layer). A layer that stops
+    (interrupted, failed), or whose surface folds or makes its set-up impossible, ends the run
+    (status "failed" for the latter, naming the layer); the layers done so far are written. The top-level
+    ``history.csv``, ``yarns.vtp`` and ``convergence`` are the first layer's, ``layer{k}/`` holds
+    those of layer k >= 2; the surface files hold every layer's fields (``layer{k}_*``) and the
+    stacked totals (``preform.fields.stack_layers``, ``preform.rtm.stacked_rtm_fields``);
+    ``summary.json`` ``layers`` has one entry per layer.
+    offset_settings : preform.geometry.offset.OffsetSettings (None: the defaults)
+    """
+    import dataclasses
+    import time
+
+    from .checks import preflight
+    from .checkpoint import Checkpoint
+    from .fields import field_mesh, map_to_surface
+    from .geometry.offset import OffsetSettings
+    from .io import write_results
+    from .io.folder import RunLock, check_results_folder
+    from .simulation import simulate
+
+    t0 = time.perf_counter() if started is None else started
+    out_dir = Path(out_dir)
+    configs = [config.layer_config(k) for k in range(len(config.layers))]
+    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(configs[0])
+    lines = [layer_centerline(centerline, layer.direction, config.mandrel.roll_reference)
+             for layer in config.layers]
+    notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force)
+    check_results_folder(out_dir, result_bytes)
+    settings = offset_settings or OffsetSettings()
+    stages = {"load_and_check": time.perf_counter() - t0}
+    with RunLock(out_dir):
+        results, layer_fields, offsets, stack, refused = [], [], [None], None, ""
+        surface = mandrel
+        for k, (cfg, cl) in enumerate(zip(configs, lines), start=1):
+            if k > 1:   # a surface that folds, or a set-up the stack makes impossible, ends the run
+                try:
+                    surface, report = stack.offset_for(layer_fields, f"layer {k}")
+                    notes += [f"warning: layer {k}: {w}" for w in preflight(cfg, surface, cl)]
+                except PreformError as err:
+                    refused = f"layer {k} cannot be braided on the layers below: {err}"
+                    break
+                offsets.append(report)
+            t = time.perf_counter()
+            ckpt = out_dir / LAYER_CHECKPOINT.format(k=k)
+            result = simulate(cfg, progress=progress, mandrel=surface, centerline=cl, checkpoint=ckpt,
+                              resume=resume and ckpt.exists(), keep_checkpoint=True)
+            stages[f"simulate_layer{k}"], t = time.perf_counter() - t, time.perf_counter()
+            results.append(result)
+            if result.status != "done" or not len(result.yarns.points):
+                break
+            # every layer's angles are measured against the mandrel's centerline, forwards
+            on_mandrel = dataclasses.replace(result, centerline=centerline)
+            if stack is None:
+                stack = LayerStack.start(mandrel, field_mesh(on_mandrel), settings)
+            layer_fields.append(map_to_surface(on_mandrel, mesh=stack.layer_mesh()))
+            stages[f"map_layer{k}"] = time.perf_counter() - t
+        fields = _stacked_fields(configs, layer_fields, centerline, config.rtm.cavity_thickness)
+        top = _top_result(config, configs, results, refused)
+        entries = [layer_summary(k, cfg.layers[-1], r, f, o) for k, (cfg, r, f, o)
+                   in enumerate(zip(configs, results, [*layer_fields, None], offsets), start=1)]
+        try:
+            written = write_results(top, fields, out_dir, stages=stages, layers=entries,
+                                    layer_results=results[1:])
+        except OSError as err:
+            raise ResultsWriteError(
+                f"cannot write the results to {out_dir} ({err.strerror or err}); the simulations "
+                f"are kept in {out_dir}/checkpoint_layer*.npz: once the folder is writable, "
+                "`preform run CONFIG --resume` writes the results without simulating again") from None
+        if top.status == "done":
+            for k, cfg in enumerate(configs, start=1):
+                Checkpoint(out_dir / LAYER_CHECKPOINT.format(k=k), cfg).remove()
+    return CaseOutcome(result=top, out_dir=out_dir, written=written, notes=notes)
+
+
+def _stacked_fields(configs, layer_fields, centerline, cavity_thickness):
+    """The stacked SurfaceFields of the layers mapped (with the stacked RTM arrays when every
+    layer has tow data), or None when no layer was."""
+    from .fields import stack_layers
+    from .rtm import missing_material, stacked_rtm_fields
+
+    if not layer_fields:
+        return None
+    fields = stack_layers(layer_fields)
+    if not any(missing_material(cfg) for cfg in configs[:len(layer_fields)]):
+        V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
+        s, _ = centerline.project(V[F].mean(axis=1))
+        tangents = centerline.frames_at(s)[1]
+        fields.cell_data.update(stacked_rtm_fields(layer_fields, configs, tangents, cavity_thickness))
+    return fields
+
+
+def _top_result(config, configs, results, refused=""):
+    """The Result the top-level files describe: the first layer's, with the whole run's config
+    (all layers echoed) and the status of the last layer run (a stopped layer stops the run);
+    ``refused``: why the next layer could not start ("" if it was not refused)."""
+    import dataclasses
+
+    last = results[-1]
+    status, message = last.status, last.message
+    if refused:
+        status, message = "failed", refused
+    elif status == "done" and len(results) < len(configs):
+        status, message = "failed", f"layer {len(results)} deposited no yarn; the layers above it were not braided"
+    elif status != "done" and len(results) > 1:
+        message = f"layer {len(results)}: {message}"
+    whole = dataclasses.replace(configs[0], layers=config.layers)
+    wall = float(sum(r.wall_time_s for r in results))
+    return dataclasses.replace(results[0], config=whole, status=status, message=message, wall_time_s=wall,
+                               stop_signal=last.stop_signal)
+
+
+def layer_summary(k, layer, result, fields, offset) -> dict:
+    """summary.json's entry for layer k (from 1): its process figures and quality verdict (its
+    history, yarns and fields, located on its own centerline), its fields' means over the faces
+    it reached, and for k >= 2 the offset surface it was braided on."""
+    from .io.tables import summary_dict
+    from .quality import surface_reasons
+
+    s = summary_dict(result, {"quality_reasons": surface_reasons(result, fields)})
+    entry = {"layer": k, "direction": layer.direction, "model": s["model"], "status": s["status"],
+             "message": s["message"], "steps": s["steps"], "wall_time_s": s["wall_time_s"],
+             "braided_length_m": s["braided_length_m"], "braid_angle_deg": s["braid_angle_deg"],
+             "convergence_length_m": s["convergence_length_m"], "quality": s["quality"],
+             "offset": None if offset is None else offset.as_dict(), "fields": None}
+    if fields is not None:
+        cd = fields.cell_data
+        V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
+        area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+        on = (cd["reached_warp"] > 0) | (cd["reached_weft"] > 0)
+        if on.any():
+            entry["fields"] = {f"mean_{name}": float(np.average(cd[name][on], weights=area[on]))
+                               for name in ("thickness_m", "cover_factor", "braid_angle_deg")}
+    return entry

@@ -205,11 +205,13 @@ def read_permeability_table(path) -> PermeabilityTable:
     return PermeabilityTable(angles_deg=angles, vf=vfs, k1=grid[..., 2], k2=grid[..., 3])
 
 
-def rtm_fields(fields, config, tangents) -> dict:
+def rtm_fields(fields, config, tangents, thickness=None) -> dict:
     """The RTM cell arrays of :data:`RTM_ARRAYS` on the field mesh (see module docstring).
 
     fields : preform.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
     tangents : (nf, 3), the centerline tangent at each face (fixes the in-plane reference)
+    thickness : (nf,) m, the thickness the fibres fill, or None: ``[rtm] cavity_thickness``,
+        else the preform's own ``thickness_m`` (a layer of a stack: its share of the cavity)
     """
     cd = fields.cell_data
     V, F = np.asarray(fields.vertices), np.asarray(fields.faces)
@@ -224,8 +226,9 @@ def rtm_fields(fields, config, tangents) -> dict:
         per_area = np.column_stack([per_area, axial])
         families.append("axial_direction")
     total = per_area.sum(axis=1)
-    thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
-        np.full(len(F), config.rtm.cavity_thickness)
+    if thickness is None:
+        thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
+            np.full(len(F), config.rtm.cavity_thickness)
     vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
     valid = (total > 0) & (vf >= MIN_VF) & (vf < 1)
     angle = cd["braid_angle_deg"]
@@ -260,3 +263,70 @@ def rtm_fields(fields, config, tangents) -> dict:
     return {"areal_weight_kg_m2": aw, "fibre_volume_fraction": vf, "porosity": 1.0 - vf, "permeability_m2": K.reshape(len(F), 9),
             "permeability_k1_m2": k1, "permeability_k2_m2": k2, "permeability_k3_m2": k3,
             "permeability_direction": direction, "rtm_valid": ok.astype(np.uint8)}
+
+
+# ------------------------------------------------------------------------------ a stack of layers
+
+#: per-layer RTM arrays kept with a ``layer{k}_`` prefix next to the stack's
+LAYER_RTM_ARRAYS = ("areal_weight_kg_m2", "fibre_volume_fraction", "permeability_k1_m2",
+                    "permeability_k2_m2", "rtm_valid")
+
+
+def stacked_rtm_fields(layer_fields, layer_configs, tangents, cavity_thickness=None) -> dict:
+    """The RTM arrays of a stack of layers on one set of faces (docs/theory.md, "Several layers").
+
+    layer_fields : SurfaceFields of each layer, from the mandrel outwards, on copies of one field
+    mesh (the same faces); layer_configs : each layer's Config (its tow data); tangents : (nf, 3).
+
+    With ``t_k`` the layers' thicknesses and ``t = sum t_k`` (or the cavity ``c``, which
+    compresses every layer alike, to ``t_k c / t``):
+
+    * areal weight ``A_w = sum_k A_w,k``; fibre volume fraction ``V_f = sum_k (A_w,k / rho_f,k) / t``
+      (or ``/ c``), so a stack of one tow is ``A_w / (rho_f t)`` as for one layer;
+    * each layer's permeability at its own (compressed) ``V_f,k``, then the layered-medium rule:
+      in the plane the layers conduct side by side under one pressure gradient,
+      ``K_in = sum_k (t_k / t) K_in,k``; through the thickness in series,
+      ``K3 = t / sum_k (t_k / K3_k)`` (over the layers that are preform there).
+
+    Returns the stack's arrays under :data:`RTM_ARRAYS` names and each layer's
+    :data:`LAYER_RTM_ARRAYS` as ``layer{k}_<name>`` (k from 1).
+    """
+    base = layer_fields[0]
+    V, F = np.asarray(base.vertices), np.asarray(base.faces)
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    normals = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
+    nn = normals[:, :, None] * normals[:, None, :]
+    t_layers = np.array([f.cell_data["thickness_m"] for f in layer_fields])
+    t = t_layers.sum(axis=0)
+    fill = t if cavity_thickness is None else np.full(len(F), float(cavity_thickness))
+    squeeze = np.divide(fill, t, out=np.ones_like(t), where=t > 0)
+    out, aw, solid = {}, np.zeros(len(F)), np.zeros(len(F))
+    K_in, resist, share = np.zeros((len(F), 3, 3)), np.zeros(len(F)), np.zeros(len(F))
+    for k, (fields, config) in enumerate(zip(layer_fields, layer_configs), start=1):
+        own = rtm_fields(fields, config, tangents, thickness=t_layers[k - 1] * squeeze)
+        aw += own["areal_weight_kg_m2"]
+        solid += own["areal_weight_kg_m2"] / config.yarn.fibre_density
+        ok = own["rtm_valid"] > 0
+        w = np.where(ok, t_layers[k - 1], 0.0)
+        Kk = own["permeability_m2"].reshape(-1, 3, 3)
+        k3k = np.einsum("fi,fij,fj->f", normals, Kk, normals)
+        K_in += w[:, None, None] * (Kk - k3k[:, None, None] * nn)
+        resist += np.divide(w, k3k, out=np.zeros_like(w), where=ok & (k3k > 0))
+        share += w
+        for name in LAYER_RTM_ARRAYS:
+            out[f"layer{k}_{name}"] = own[name]
+    vf = np.divide(solid, fill, out=np.zeros_like(solid), where=fill > 0)
+    valid = (share > 0) & (vf >= MIN_VF) & (vf < 1) & (resist > 0)
+    K = np.zeros((len(F), 3, 3))
+    k3 = np.divide(share, resist, out=np.zeros_like(share), where=valid)
+    K[valid] = (K_in[valid] / share[valid, None, None] + k3[valid, None, None] * nn[valid])
+    k1, k2, direction = np.zeros(len(F)), np.zeros(len(F)), np.zeros((len(F), 3))
+    if np.any(valid):
+        k1[valid], k2[valid], direction[valid] = principal_in_plane(K[valid], normals[valid], tangents[valid])
+    vf = np.minimum(vf, 1.0)
+    ok = valid & (k2 > 0)
+    out.update({"areal_weight_kg_m2": aw, "fibre_volume_fraction": vf, "porosity": 1.0 - vf,
+                "permeability_m2": K.reshape(len(F), 9), "permeability_k1_m2": k1,
+                "permeability_k2_m2": k2, "permeability_k3_m2": k3,
+                "permeability_direction": direction, "rtm_valid": ok.astype(np.uint8)})
+    return out

@@ -4,7 +4,9 @@
 Each step (``step``):
 
 1. the material coordinate of every fell point is anchored to the new fell points
-   (``frontal.fell_material``: the yarn laid on the mandrel leaves the lowest segment's tension);
+   (``fell_anchor``, ``ZoneSettings.fell_material``): by default the yarn laid on the mandrel
+   leaves the lowest segment's tension (``frontal.fell_material``); "laid" conserves the yarn,
+   the fell material advancing by the yarn laid since the last step;
 2. a crossing is created at every carrier pass of the step (``machine.pass_times``) at the top of
    both yarns, at the midpoint of the closest points of the two top segments (from the yarn's
    highest crossing, or fell point, to its ring or spool point at the step's end); over/under from
@@ -304,6 +306,9 @@ class InteractionZone:
         self.ring_capstan = None      # (2n,) in [-1, 1]: Capstan factor by the yarn's slide (_ring_flow)
         self.ring_u = None            # (2n,) m, material coordinate at the ring point, last step
         self.ring_s_long = None       # (2n,) m, slide along the ring in the last step (``_ring_flow``)
+        if self.settings.zone.fell_material not in ("laid", "tension"):
+            raise ValueError(f"ZoneSettings.fell_material = {self.settings.zone.fell_material!r}: "
+                             "expected 'laid' or 'tension'")
         if self.settings.ring.capstan not in CAPSTAN_MODES:
             raise ValueError(f"RingSettings.capstan = {self.settings.ring.capstan!r}: expected one "
                              f"of {', '.join(map(repr, CAPSTAN_MODES))}")
@@ -347,7 +352,8 @@ class InteractionZone:
         self.step_index += 1
         bc = self.boundary(t1, F_machine)
         st = self.state
-        st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
+        fell_start = st.material_fell.copy()
+        st.material_fell[:] = self.fell_anchor(st, bc, self.fell_ref, pose_end)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
         frontal_kernels.radial_normals(st.m, st.pos, st.normal)
@@ -376,7 +382,7 @@ class InteractionZone:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
                 raise
             st.pos[: st.m], st.material[: st.m] = start
-            bc = self._staged(t0, t1, bc, where, centre)
+            bc = self._staged(t0, t1, bc, where, centre, fell_start)
         self.f_top = self.last_report.f_top
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
@@ -405,12 +411,13 @@ class InteractionZone:
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
 
-    def _staged(self, t0, t1, bc, where, centre):
+    def _staged(self, t0, t1, bc, where, centre, fell_start):
         """The step solved again with its boundary moved in the ``boundary_stages`` (fell points
         from where the last step left them, supply or ring points from their last places, each
         solve warm-started from the last; the same friction centres ``centre``): where the
-        boundary's move in one go takes Newton out of its reach. Sets ``last_report``; returns the
-        final boundary (with the wall)."""
+        boundary's move in one go takes Newton out of its reach. ``fell_start``: the fell
+        points' material the last step left ("laid" anchoring; "tension" anchors the stages'
+        start itself). Sets ``last_report``; returns the final boundary (with the wall)."""
         st = self.state
         m = self.machine
         stages = self.settings.zone.boundary_stages
@@ -423,11 +430,11 @@ class InteractionZone:
                      if m.has_ring else None)
             return self.boundary(t0 + lam * (t1 - t0), fell, theta)
 
-        # the fell points' material moves with them: from where the last step's fell points
-        # hold the lowest segments' tensions to the step's own anchoring (``fell_material``), so
-        # the last stage is the step's problem itself
+        # the fell points' material moves with them: from the last step's anchoring to the
+        # step's own (``fell_anchor``), so the last stage is the step's problem itself
         fell_end = st.material_fell.copy()
-        fell_start = frontal.fell_material(st, at(0.0), self.settings)
+        if self.settings.zone.fell_material == "tension":
+            fell_start = frontal.fell_material(st, at(0.0), self.settings)
         for lam in stages:
             bcl = at(lam) if lam < 1.0 else bc
             st.material_fell[:] = fell_start + lam * (fell_end - fell_start)
@@ -446,6 +453,9 @@ class InteractionZone:
         # each yarn's friction centre at each crossing (``frontal.solve_zone_inplace``)
         anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
         fell = np.array(F_machine, dtype=float)
+        # the fell points' material as the last step left it, and where they were then: the
+        # snapshot's fell points are those the stepper laid the yarn to since (same pose)
+        ref, ref_material = self.fell_ref.copy(), st.material_fell.copy()
         theta = self.ring_theta
         zs = self.settings.zone
         where = f"in the snapshot at t = {t:.6g} s"
@@ -453,14 +463,16 @@ class InteractionZone:
             # the same stick anchors (yarn material, ring angles) in every pass: a fixed point
             # of the step's state, not further steps
             bc = self._with_wall(self.boundary(t, fell, theta), st)
-            st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
+            st.material_fell[:] = ref_material
+            st.material_fell[:] = self.fell_anchor(st, bc, ref, self.pose_end)
             centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
             self.solve_zone(st, bc, settings=self.settings, max_iter=zs.ring_pass_iterations,
                             where=where, centre=centre)
             # a crossing the re-solve laid on the mandrel is deposited there, as a step would
             deposits = self._deposit(self.pose_end, st)
             for k, p in deposits:
-                fell[k] = p
+                fell[k] = ref[k] = p
+                ref_material[k] = st.material_fell[k]
             moved = 0.0
             if self.machine.has_ring:
                 new = self.slide_rings(st, bc, self.ring_anchor)
@@ -470,7 +482,8 @@ class InteractionZone:
                 break
         # the friction bounds to convergence at the final ring points and fell points
         bc = self._with_wall(self.boundary(t, fell, theta), st)
-        st.material_fell[:] = frontal.fell_material(st, bc, self.settings)
+        st.material_fell[:] = ref_material
+        st.material_fell[:] = self.fell_anchor(st, bc, ref, self.pose_end)
         centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
@@ -602,6 +615,45 @@ class InteractionZone:
         self.pose_end = pose
 
     # -- pieces -----------------------------------------------------------------------------
+    def fell_anchor(self, st, bc, ref, pose) -> np.ndarray:
+        """(2n,) m: the material coordinate of every yarn's fell point ``bc.fell`` (machine
+        frame, pose ``pose``), ``ZoneSettings.fell_material``:
+
+        * "laid": the yarn is conserved. The fell point ``ref`` of the last step (where it
+          stuck to the mandrel: a deposited crossing or the end of the yarn laid on it) moves
+          with the mandrel to ``ref' = pose (pose_last^-1 ref)``; the yarn laid since, from
+          the foot of ``ref'`` on the surface (a deposited crossing lies up to the deposit
+          height above it, the distance ``d`` to the mandrel) to ``bc.fell`` along the surface,
+          takes its material from the free segment: ``u_fell = u_fell_last + sqrt(|bc.fell -
+          ref'|^2 - d^2) / (1 + f / EA)``, ``f`` the tension of the
+          lowest segment (the chord for the laid arc: both are one step of laying apart,
+          a second-order difference). The mandrel's advance thus pulls the yarn through the
+          crossings and over the ring, at the rate the braid consumes it. A yarn without a
+          lowest crossing (none at the last step or now), and the first step, anchor as
+          "tension".
+        * "tension": ``frontal.fell_material``, the lowest segment keeps its tension.
+
+        Reads ``st.material_fell`` as the last step left it."""
+        new = frontal.fell_material(st, bc, self.settings)
+        if self.settings.zone.fell_material == "tension" or self.pose_end is None or ref is None:
+            return new
+        on_mandrel = self.pose_end.to_mandrel(ref)
+        carried = pose.to_machine(on_mandrel)
+        gap = np.sum((bc.fell - carried) ** 2, axis=1)
+        if self.distance is not None:
+            # a deposited crossing sat up to the deposit height off the surface, and the yarn
+            # was laid from its foot (the stepper's closest point): that drop along the normal
+            # is no yarn laid
+            gap = np.maximum(gap - self.distance(on_mandrel) ** 2, 0.0)
+        laid = np.sqrt(gap)
+        n = st.n_yarns
+        lo = st.lowest
+        side = (np.arange(n) >= n // 2).astype(np.int64)
+        f = st.tension[np.maximum(lo, 0), side]
+        EA = frontal.axial_stiffness(bc.f_spool, self.settings)
+        stiff = np.where(f >= 0.0, EA, self.settings.energy.compression * EA)
+        return np.where(lo >= 0, st.material_fell + laid / (1.0 + f / stiff), new)
+
     def _with_wall(self, bc, state=None):
         """bc with the mandrel's tangent planes at every crossing (no wall without a mandrel)."""
         st = self.state if state is None else state
@@ -722,9 +774,13 @@ class InteractionZone:
         for c in hit:
             take(int(c))
         deposits = []
-        for c in dead:
+        laid = self.settings.zone.fell_material == "laid"
+        for c in dead:      # lowest first: a yarn's last is its highest deposited crossing
             for side in range(2):
-                deposits.append((int(st.yarn[c, side]), st.pos[c].copy()))
+                k = int(st.yarn[c, side])
+                deposits.append((k, st.pos[c].copy()))
+                if laid:    # the yarn sticks to the mandrel there (``fell_anchor``)
+                    st.material_fell[k] = st.material[c, side]
         st.remove(np.array(dead, dtype=np.int64))
         return deposits
 

@@ -145,6 +145,14 @@ class ZoneSettings:
     #: where a step's solve fails, the step is solved again with its boundary moved in these
     #: fractions of the move, each stage warm-started from the last (empty: no staging)
     boundary_stages: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
+    #: the material coordinate of a yarn's fell point (``InteractionZone.fell_anchor``): "laid"
+    #: conserves the yarn, the fell point's material advancing by the yarn laid on the mandrel
+    #: since the last step (and jumping to a deposited crossing's), so the yarn the braid
+    #: consumes is drawn through the zone and over the ring; "tension" re-anchors it so that the
+    #: lowest segment keeps its tension (about half the yarn laid appears at the fell point, and
+    #: hardly any is drawn over the ring). "tension" stays the default until "laid"'s break of
+    #: the case-B mirror symmetry (0.37 deg) is understood (docs/decisions.md)
+    fell_material: str = "tension"
 
 
 @dataclass(frozen=True)
@@ -166,7 +174,8 @@ class RingSettings:
     #: "flow" by the yarn's slide over the ring in the last step (towards the mandrel: the
     #: mandrel side higher; towards the spool: lower; stick in between, one Coulomb cone along
     #: and across the ring); "drawn" exp(+mu_r eta) always. "flow" locks the ring points at
-    #: mu_r 0.6 and reads no slide once crossings exist (docs/decisions.md)
+    #: mu_r 0.6 and reads no slide once crossings exist unless ``ZoneSettings.fell_material`` is
+    #: "laid" (docs/decisions.md)
     capstan: str = "paper"
     #: m of yarn over the ring in a step below which the yarn sticks along the ring (holds its
     #: tension within the Capstan cone): the friction creep of the crossings (friction_creep)

@@ -38,7 +38,7 @@ def _relative(path, out_dir) -> str:
     return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
 
 
-def write_results(result, fields, out_dir, stages=None) -> list[Path]:
+def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=()) -> list[Path]:
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
@@ -46,6 +46,9 @@ def write_results(result, fields, out_dir, stages=None) -> list[Path]:
     out_dir : str or Path, created if missing
     stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
         ``wall_time_s`` is then the whole command's, these stages and this writing included
+    layers : summary.json's ``layers`` entries of a run with [[layer]] tables, or None
+    layer_results : the Results of layers 2, 3, ...: their ``history.csv`` and ``yarns.vtp`` go
+        to ``layer2/``, ``layer3/``, ... (``result`` is the first layer's)
     returns : the paths written, summary.json last
     """
     import time
@@ -58,6 +61,9 @@ def write_results(result, fields, out_dir, stages=None) -> list[Path]:
     written = [write_history(result, out_dir / HISTORY),
                write_yarns_vtp(result.yarns, out_dir / YARNS),
                *write_convergence(result.snapshots, out_dir)]
+    for k, layer in enumerate(layer_results, start=2):
+        folder = safe_folder(out_dir, f"layer{k}")
+        written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
     if fields is not None:
         from .plots import run_label
 
@@ -76,6 +82,10 @@ def write_results(result, fields, out_dir, stages=None) -> list[Path]:
     from ..quality import surface_reasons
 
     extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields)}
+    if layers is not None:   # the run is suspect when a layer above the first is
+        extra["layers"] = layers
+        extra["quality_reasons"] += [f"layer {e['layer']}: {reason}" for e in layers[1:]
+                                     for reason in e["quality"]["reasons"]]
     if stages is not None:
         stages = {**stages, "write": time.perf_counter() - t_write}
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,

@@ -60,13 +60,15 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
     """The unrolled panels (see module docstring); ``panels``: (cell array, label, scale) each."""
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
-    reached = (np.asarray(data["reached_warp"]) > 0) | (np.asarray(data["reached_weft"]) > 0)
+    reached = fields.reached()
     fig = Figure(figsize=(10.0, 3.0 * len(panels)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
     fig.suptitle(title)
     for ax, (name, label, scale) in zip(axes, panels):
         values = np.asarray(data[name], dtype=float) * scale
         shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
+        if name == "braid_angle_deg" and "layer2_braid_angle_deg" in data:
+            label = "braid angle of layer 1 (deg)"     # the stack's totals in the other panels
         if np.any(~shown):
             ax.add_collection(PolyCollection(polys[~shown], facecolors=UNREACHED, edgecolors=UNREACHED,
                                           linewidths=0.1))

@@ -113,9 +113,11 @@ def _render(fields, array, label, path, title="", scale=1.0):
     cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
     surface = pv.PolyData(vertices, cells)
     values = np.asarray(fields.cell_data[array], dtype=np.float64) * scale
-    reached = (fields.cell_data["reached_warp"] > 0) | (fields.cell_data["reached_weft"] > 0)
+    reached = fields.reached()
     if array == "braid_angle_deg":  # 0 there means "undefined" (end caps): grey, not a colour
         reached &= values > 0
+        if "layer2_braid_angle_deg" in fields.cell_data:
+            label = "braid angle of layer 1 (deg)"
     surface.cell_data[label] = values
     focus = vertices[np.unique(faces[reached])] if reached.any() else vertices
     centre, _, across, third = view_axes(focus)
