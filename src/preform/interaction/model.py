@@ -752,8 +752,7 @@ class InteractionZone:
         points = pose.to_mandrel(st.pos[: st.m])
         if isinstance(self.distance, MandrelDistance):
             # the faces looked up only near the surface (``MandrelDistance.below``)
-            hit = np.nonzero(self.distance.below(points, height,
-                                                 (st.near_lo[: st.m], st.near_hi[: st.m], st.near_at[: st.m])))[0]
+            hit = np.nonzero(self.distance.below(points, height, _near_cache(st)))[0]
         else:
             hit = np.nonzero(self.distance(points) < height)[0]
         if len(hit) == 0:
