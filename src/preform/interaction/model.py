@@ -53,9 +53,9 @@ crossings that may lie within ``NearSettings.wall_clearance`` of the surface at 
 (the others have no wall; if the solve moves one of them as far as it was from the mandrel, the
 step is solved again with every crossing's plane), the deposit test for those that may lie within
 the deposit height (a crossing proven further from the surface is not deposited even where the
-nearest face's plane passes close to it, at an edge). Where no crossing's plane becomes active,
-the states are those with every crossing's plane (``docs/decisions.md``: case A histories
-bit-identical).
+nearest face's plane passes close to it, at an edge). Where no iterate of the solve reaches the
+plane of a crossing that has none, the states are those with every crossing's plane (measured:
+case A, bent tube and bulge histories bit-identical, ``docs/decisions.md``).
 """
 
 from __future__ import annotations
