@@ -12,6 +12,12 @@
   crossings next to the fell points by millimetres across segments a centimetre long, and the
   tension there jumps before the next steps bring it back) and the friction-bound change per
   frontal iteration of a few snapshot solves;
+* ``--breakdown``: case A (``examples/case_a.toml``, ``kind = "interaction"``, ``solver =
+  "relax"``, from 0.4 m, ``--length`` braided, 20 snapshots per m) through ``preform run``'s
+  ``run_case`` (simulate, fields, files), timed by part: the zone's step outside its solver and
+  the stepper around it (ms a step), the relaxation's solves, the Newton fallbacks (with the
+  relaxation's failed attempt), the snapshots (and their Newton re-balance), fields and files;
+  wall and process time;
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
@@ -147,6 +153,143 @@ def full(carriers, mu, length, step_factor=None):
           f"steps per step, max {int(h['contacts'].max())} crossings; {at}")
 
 
+class _Timers:
+    """Wall time (s) and call counts by part of a run through ``preform run``'s ``run_case``: the
+    zone's steps, their solves (the relaxation, and the Newton fallbacks with the relaxation's
+    failed attempt before them), the snapshots (and the Newton re-balance inside them), the
+    stepper's work around the zone, packing the result, the fields and the files. The wrappers
+    are a benchmark's instrument (installed on the classes and the solver table for one run,
+    removed after it), not model settings."""
+
+    def __init__(self):
+        self.s = dict.fromkeys(("advance", "step", "solve", "fallback", "snapshot",
+                                "snapshot_newton", "loop"), 0.0)
+        self.cpu = dict.fromkeys(self.s, 0.0)    # process time (s) of the same parts
+        self.n = dict.fromkeys(("step", "fallback", "snapshot", "snapshot_newton"), 0)
+        self.inside = None          # "step" or "snapshot": who calls the solver now
+
+    def wrap(self, owner, name, part, count=None, inside=None):
+        orig = getattr(owner, name)
+
+        def timed(*a, **k):
+            outer = self.inside
+            if inside is not None:
+                self.inside = inside
+            t0, c0 = time.perf_counter(), time.process_time()
+            try:
+                return orig(*a, **k)
+            finally:
+                self.s[part] += time.perf_counter() - t0
+                self.cpu[part] += time.process_time() - c0
+                if count is not None:
+                    self.n[count] += 1
+                self.inside = outer
+
+        setattr(owner, name, timed)
+        return lambda: setattr(owner, name, orig)
+
+
+def breakdown(carriers, mu, length, snapshots, out_dir):
+    """Case A (``examples/case_a.toml``, interaction model, ``solver = "relax"``, from 0.4 m)
+    through ``pipeline.run_case`` (simulate, fields, files) with the time of every part (see
+    ``_Timers``); snapshots: the number a run of ``length`` writes (default: as many as a 1 m run
+    writes per metre, 20 per m, so the snapshots' share is that of the full run)."""
+    import preform as pf
+    from preform import simulation, stepping
+    from preform.interaction import frontal, relax
+    from preform.interaction.model import InteractionZone
+    from preform.pipeline import run_case
+
+    cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
+    cfg = dataclasses.replace(
+        cfg, model=dataclasses.replace(cfg.model, kind="interaction", solver="relax"),
+        machine=dataclasses.replace(cfg.machine, carriers=carriers),
+        yarn=dataclasses.replace(cfg.yarn, friction=mu),
+        process=dataclasses.replace(cfg.process, braid_length=length, initial_position=0.4),
+        output=dataclasses.replace(cfg.output, snapshots=snapshots))
+    T = _Timers()
+    solver = simulation.SOLVERS["relax"]
+    newton = frontal.solve_zone_inplace
+
+    def solve(state, bc, **k):
+        before = relax.FALLBACKS[0]
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            return solver(state, bc, **k)
+        finally:
+            dt, dc = time.perf_counter() - t0, time.process_time() - c0
+            if T.inside == "snapshot":
+                pass                                    # counted by the snapshot's timers
+            elif relax.FALLBACKS[0] > before:
+                T.s["fallback"] += dt
+                T.cpu["fallback"] += dc
+                T.n["fallback"] += 1
+            else:
+                T.s["solve"] += dt
+                T.cpu["solve"] += dc
+
+    def newton_timed(*a, **k):
+        t0 = time.perf_counter()
+        try:
+            return newton(*a, **k)
+        finally:
+            if T.inside == "snapshot":
+                T.s["snapshot_newton"] += time.perf_counter() - t0
+                T.n["snapshot_newton"] += 1
+
+    undo = [T.wrap(stepping.Stepper, "advance", "advance"),
+            T.wrap(stepping.Stepper, "run", "loop"),
+            T.wrap(InteractionZone, "step", "step", "step", inside="step"),
+            T.wrap(InteractionZone, "snapshot", "snapshot", "snapshot", inside="snapshot")]
+    simulation.SOLVERS["relax"] = solve
+    frontal.solve_zone_inplace = newton_timed
+    try:
+        t0 = time.perf_counter()
+        outcome = run_case(cfg, out_dir)
+        wall = time.perf_counter() - t0
+    finally:
+        simulation.SOLVERS["relax"] = solver
+        frontal.solve_zone_inplace = newton
+        for u in undo:
+            u()
+    import json
+    summary = json.loads((Path(out_dir) / "summary.json").read_text())
+    stages = summary.get("stages_s", {})
+    s, n = T.s, T.n
+    steps = max(n["step"], 1)
+    outside = s["step"] - s["solve"] - s["fallback"]
+    h = outcome.result.history
+    print(f"case A, {carriers} carriers, mu {mu}, {length} m, relax: {outcome.result.status}, "
+          f"wall {wall:.1f} s, {n['step']} steps, max {int(np.max(h['contacts']))} crossings")
+    rows = [
+        ("zone step outside the solver", outside, outside / steps * 1e3),
+        ("stepper around the zone step", s["advance"] - s["step"] - s["snapshot"],
+         (s["advance"] - s["step"] - s["snapshot"]) / steps * 1e3),
+        ("relaxation solves (converged)", s["solve"],
+         s["solve"] / max(steps - n["fallback"], 1) * 1e3),
+        (f"Newton fallbacks ({n['fallback']}, with the failed relaxation)", s["fallback"],
+         s["fallback"] / max(n["fallback"], 1) * 1e3),
+        (f"snapshots ({n['snapshot']}; {n['snapshot_newton']} Newton solves "
+         f"{s['snapshot_newton']:.1f} s)", s["snapshot"],
+         s["snapshot"] / max(n["snapshot"], 1) * 1e3),
+        ("time loop, rest", s["loop"] - s["advance"], float("nan")),
+        ("simulate outside the loop (geometry, result)", stages.get("simulate", 0.0) - s["loop"],
+         float("nan")),
+        ("load and check", stages.get("load_and_check", 0.0), float("nan")),
+        ("fields (map)", stages.get("map", 0.0), float("nan")),
+        ("files (write)", stages.get("write", 0.0), float("nan")),
+    ]
+    for name, total, per in rows:
+        print(f"  {name:<62s} {total:8.2f} s" + (f"  {per:8.2f} ms each" if per == per else ""))
+    c = T.cpu
+    print(f"  process time: zone step outside the solver "
+          f"{(c['step'] - c['solve'] - c['fallback']) / steps * 1e3:.2f} ms, stepper around it "
+          f"{(c['advance'] - c['step'] - c['snapshot']) / steps * 1e3:.2f} ms, solver "
+          f"{c['solve'] / max(steps - n['fallback'], 1) * 1e3:.2f} ms a step; snapshots "
+          f"{c['snapshot'] / max(n['snapshot'], 1):.2f} s each")
+    return s, n, stages
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--full", action="store_true")
@@ -158,11 +301,24 @@ def main(argv=None):
     ap.add_argument("--step-factor", type=float, default=None,
                     help="--full: time step as a multiple of the kinematic model's default step "
                          "(default: the interaction model's own)")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="case A with solver = 'relax' through preform run's run_case, time by "
+                         "part (--carriers, --mu, --length, --snapshots, --out)")
+    ap.add_argument("--snapshots", type=int, default=None,
+                    help="--breakdown: snapshots written (default 20 per m braided)")
+    ap.add_argument("--out", default=None, help="--breakdown: results folder (default: temporary)")
     ap.add_argument("--png", default=str(ROOT / "benchmarks" / "frontal_residual.png"))
     ap.add_argument("--linear-solver", default="auto", choices=("auto", "cholmod", "splu"),
                     help="factorisation of the Newton systems (interaction/linalg.py)")
     ap.add_argument("--no-plot", action="store_true", help="timings only")
     args = ap.parse_args(argv)
+    if args.breakdown:
+        import tempfile
+        snaps = args.snapshots if args.snapshots is not None else max(1, round(20 * args.length))
+        for n in args.carriers:
+            with tempfile.TemporaryDirectory() as tmp:
+                breakdown(n, args.mu, args.length, snaps, args.out or tmp)
+        return
     if args.full:
         for n in args.carriers:
             full(n, args.mu, args.length, args.step_factor)

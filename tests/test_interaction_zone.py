@@ -22,7 +22,9 @@ from preform.errors import SimulationError
 from preform.geometry import shapes
 from preform.interaction import frontal, linalg
 from preform.interaction.contact import psi as friction_function
-from preform.interaction.model import InteractionZone, MandrelDistance, creation_point
+from preform.geometry.mandrel import mandrel_from_arrays
+from preform.interaction.model import (NEAR, InteractionZone, MandrelDistance, NearSettings,
+                                      creation_point)
 from preform.interaction.settings import DEFAULT
 from preform.interaction.zone_state import ZoneState
 from preform.io.vtk_yarns import write_convergence
@@ -66,14 +68,15 @@ class _Mandrel:
 
 
 def run_zone(mu=0.2, tension=4.7, steps=60, carriers=16, settings=None, solve_zone=None,
-             wall=False):
+             wall=False, near=NEAR):
     """A zone after ``steps`` steps; wall: deposit and wall on the flared mandrel ``_Mandrel``
-    (``MandrelDistance``) instead of the plain cylinder distance (no wall)."""
+    (``MandrelDistance`` with the look-up settings ``near``) instead of the plain cylinder
+    distance (no wall)."""
     mc = MachineConfig(carriers=carriers, spool_radius=0.3, angular_speed=0.2309401, pattern="regular")
     machine = Machine.from_config(mc)
     cfg = NS(yarn=NS(width=4e-3, thickness=2.5e-4, tension=tension, friction=mu, ring_friction=0.0),
              machine=mc)
-    distance = MandrelDistance(_Mandrel()) if wall else _cylinder_distance
+    distance = MandrelDistance(_Mandrel(), near) if wall else _cylinder_distance
     zone = InteractionZone(cfg, machine, None, distance=distance, settings=settings,
                            solve_zone=solve_zone)
     phi = machine.azimuths(0.0)
@@ -121,6 +124,98 @@ def test_creation_point_is_closest_point_midpoint():
     C, N = creation_point(px, gx, po, go)
     assert np.allclose(C, [0.5, 0, 0.5])
     assert np.allclose(np.abs(N), [0, 0, 1])
+
+
+def test_near_bounds_the_distance_to_the_surface_from_below():
+    """``MandrelDistance.near``'s lower bound never exceeds the exact distance to the faces
+    (``Mandrel.closest_points``) of points around the flared mandrel, from mm to 0.3 m off, also
+    from its cache after the points moved; every point within the clearance is near; and
+    ``below`` equals the full nearest-face-plane test wherever the point is near the surface."""
+    m = _Mandrel()
+    exact = mandrel_from_arrays(m.vertices, m.faces, check=False)
+    d = MandrelDistance(m)
+    rng = np.random.default_rng(3)
+    z = rng.uniform(0.05, 0.55, 400)
+    phi = rng.uniform(0, 2 * np.pi, 400)
+    r = np.array([_flared(zz) for zz in z]) + np.concatenate(
+        [rng.uniform(-2e-3, 8e-3, 300), rng.uniform(0.01, 0.3, 100)])
+    P = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    D = np.linalg.norm(exact.closest_points(P)[0] - P, axis=1)
+    cache = np.full(len(P), -np.inf), np.full(len(P), np.inf), np.zeros((len(P), 3))
+    for step in range(3):
+        near, lower = d.near(P, 5e-3, cache)
+        assert np.all(lower <= D + 1e-12)        # a bound from below (round-off of the query)
+        assert np.all(near[D < 5e-3])
+        # the cache changes which points are looked up, not the answer
+        fresh, fresh_lower = d.near(P, 5e-3)
+        assert np.array_equal(near, fresh) and np.all(fresh_lower <= D + 1e-12)
+        P = P + rng.normal(scale=1e-3, size=P.shape)   # moved: the cache's bound decays
+        D = np.linalg.norm(exact.closest_points(P)[0] - P, axis=1)
+    height = 2.5e-4
+    full = d(P) < height
+    assert np.array_equal(d.below(P, height), full & (D < 0.05))
+    assert full.any()
+
+
+@pytest.mark.parametrize("clearance", [NEAR.wall_clearance, 1e-3])
+def test_near_planes_give_the_states_of_every_crossings_plane(clearance):
+    """The zone on the flared mandrel (wall and deposits active) with the tangent planes of the
+    crossings near it only (``NearSettings``) and with every crossing's plane (a clearance of
+    10 m): the same states, bit for bit, the same deposits; some steps moved a crossing without
+    its plane as far as it was from the mandrel and were solved again with every plane (6 and
+    16 of 90 measured)."""
+    near, _, _, last = run_zone(mu=0.3, steps=90, wall=True,
+                                near=NearSettings(wall_clearance=clearance))
+    every, _, _, last_every = run_zone(mu=0.3, steps=90, wall=True,
+                                       near=NearSettings(wall_clearance=10.0))
+    assert near.wall_resolves > 0 and every.wall_resolves == 0
+    assert near.state.m == every.state.m > 0
+    assert np.array_equal(near.state.pos[: near.state.m], every.state.pos[: every.state.m])
+    assert np.array_equal(near.state.tension[: near.state.m],
+                          every.state.tension[: every.state.m])
+    assert near.state.next_uid == every.state.next_uid
+
+
+def _creation_point_numpy(px, gx, po, go, lowest=0.0):
+    """NumPy twin of ``_kernels.frontal.creation_point``: the closest points of two segments
+    (Ericson, Real-Time Collision Detection, 5.1.9), clamped below at ``lowest``."""
+    d1, d2, r = gx - px, go - po, px - po
+    a, e, b = d1 @ d1, d2 @ d2, d1 @ d2
+    c, f = d1 @ r, d2 @ r
+    if a <= 1e-30 and e <= 1e-30:
+        tx = to = 0.0
+    elif a <= 1e-30:
+        tx, to = 0.0, float(np.clip(f / e, 0.0, 1.0))
+    elif e <= 1e-30:
+        tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+    else:
+        den = a * e - b * b
+        tx = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > 1e-30 else 1.0
+        to = (b * tx + f) / e
+        if to < 0.0:
+            tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
+        elif to > 1.0:
+            tx, to = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
+    tx, to = max(tx, lowest), max(to, lowest)
+    C = 0.5 * (px + tx * d1 + po + to * d2)
+    N = np.cross(d1, d2)
+    nn = np.linalg.norm(N)
+    N = N / nn if nn > 0 else np.array([C[0], C[1], 0.0]) / max(np.hypot(C[0], C[1]), 1e-300)
+    return C, (-N if N[0] * C[0] + N[1] * C[1] < 0 else N)
+
+
+def test_creation_point_kernel_matches_numpy_twin():
+    """Random segment pairs, parallel ones, degenerate (zero-length) ones and a lower clamp:
+    the kernel equals the NumPy twin to round-off (1e-12 m on points within 1 m)."""
+    rng = np.random.default_rng(7)
+    cases = [tuple(rng.uniform(-1, 1, (4, 3))) + (lo,) for lo in (0.0, 0.3) for _ in range(50)]
+    p, g = rng.uniform(-1, 1, (2, 3))
+    cases += [(p, g, p + [0, 0, 0.1], g + [0, 0, 0.1], 0.0),       # parallel
+              (p, p, p + 0.1, g, 0.0), (p, g, g, g, 0.0), (p, p, g, g, 0.2)]   # no length
+    for px, gx, po, go, lo in cases:
+        C, N = creation_point(px, gx, po, go, lowest=lo)
+        C0, N0 = _creation_point_numpy(px, gx, po, go, lowest=lo)
+        assert np.allclose(C, C0, atol=1e-12) and np.allclose(N, N0, atol=1e-12)
 
 
 def _perturbed(mu=0.3, steps=60, seed=0):

@@ -540,3 +540,62 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
 def _wall_distance(pos, plane, c):
     return ((pos[c, 0] - plane[c, 0]) * plane[c, 3] + (pos[c, 1] - plane[c, 1]) * plane[c, 4]
             + (pos[c, 2] - plane[c, 2]) * plane[c, 5])
+
+
+@njit(cache=True)
+def creation_point(px, gx, po, go, lowest, out):
+    """Where a new crossing starts (``interaction.model.creation_point``): out[:3] the midpoint of
+    the closest points ``px + tx d1`` and ``po + to d2`` of the segments px->gx (``d1``) and
+    po->go (``d2``) (3,), ``tx, to`` in [lowest, 1]; out[3:] the unit normal ``d1 x d2``
+    turned outward (away from the machine axis at the midpoint), the radial direction where the
+    segments are parallel."""
+    d1x, d1y, d1z = gx[0] - px[0], gx[1] - px[1], gx[2] - px[2]
+    d2x, d2y, d2z = go[0] - po[0], go[1] - po[1], go[2] - po[2]
+    rx, ry, rz = px[0] - po[0], px[1] - po[1], px[2] - po[2]
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    b = d1x * d2x + d1y * d2y + d1z * d2z
+    c = d1x * rx + d1y * ry + d1z * rz
+    f = d2x * rx + d2y * ry + d2z * rz
+    tiny = 1e-30
+    if a <= tiny and e <= tiny:
+        tx = 0.0
+        to = 0.0
+    elif a <= tiny:
+        tx = 0.0
+        to = min(max(f / e, 0.0), 1.0)
+    elif e <= tiny:
+        tx = min(max(-c / a, 0.0), 1.0)
+        to = 0.0
+    else:
+        den = a * e - b * b
+        tx = min(max((b * f - c * e) / den, 0.0), 1.0) if den > tiny else 1.0
+        to = (b * tx + f) / e
+        if to < 0.0:
+            tx = min(max(-c / a, 0.0), 1.0)
+            to = 0.0
+        elif to > 1.0:
+            tx = min(max((b - c) / a, 0.0), 1.0)
+            to = 1.0
+    tx = max(tx, lowest)
+    to = max(to, lowest)
+    cx = 0.5 * (px[0] + tx * d1x + po[0] + to * d2x)
+    cy = 0.5 * (px[1] + tx * d1y + po[1] + to * d2y)
+    cz = 0.5 * (px[2] + tx * d1z + po[2] + to * d2z)
+    nx = d1y * d2z - d1z * d2y
+    ny = d1z * d2x - d1x * d2z
+    nz = d1x * d2y - d1y * d2x
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn > 0.0:
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+    else:
+        r = max(math.sqrt(cx * cx + cy * cy), 1e-300)
+        nx, ny, nz = cx / r, cy / r, 0.0
+    if nx * cx + ny * cy < 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    out[0] = cx
+    out[1] = cy
+    out[2] = cz
+    out[3] = nx
+    out[4] = ny
+    out[5] = nz

@@ -67,6 +67,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 import pymetis
 import scipy.sparse as sp
@@ -298,14 +300,22 @@ def _newton_direction(net, nnz, grad):
 
     dx = solve(-grad)
     Hx = np.empty(n)
-    gnorm = np.linalg.norm(grad)
+    gnorm = math.sqrt(_dot(grad, grad))
     for _ in range(newton.refinement_steps):
         frontal_kernels.triplet_matvec(nnz, net.rows, net.cols, net.vals, dx, Hx)
         res = -grad - Hx
-        if not np.linalg.norm(res) > newton.refinement_trigger * gnorm:
+        if not math.sqrt(_dot(res, res)) > newton.refinement_trigger * gnorm:
             break
         dx += solve(res)
     return dx
+
+
+def _dot(a, b) -> float:
+    """a . b of two vectors without BLAS: OpenBLAS runs a dot of more than ~10 000 entries (5
+    per crossing) on all its threads, whose workers then spin while CHOLMOD factorises, and
+    wait for a busy core on a shared machine (measured at 144 carriers under load: a snapshot's
+    solve 5.9 s against 2.3 s with one BLAS thread, 12 ms per such dot)."""
+    return float(np.einsum("i,i->", a, b))
 
 
 def _newton_step_inplace(net, E, nnz):
@@ -321,12 +331,12 @@ def _newton_step_inplace(net, E, nnz):
     m = st.m
     grad = net.grad[:m].ravel()
     dx = _newton_direction(net, nnz, grad)
-    slope = float(grad @ dx) if np.all(np.isfinite(dx)) else 0.0
+    slope = _dot(grad, dx) if np.all(np.isfinite(dx)) else 0.0
     if not slope < 0.0:
         diag = np.bincount(net.rows[:nnz], weights=np.where(
             net.rows[:nnz] == net.cols[:nnz], net.vals[:nnz], 0.0), minlength=grad.size)
         dx = -grad / max(np.abs(diag).max(), 1e-300)   # gradient step as a fallback
-        slope = float(grad @ dx)
+        slope = _dot(grad, dx)
     pos0 = st.pos[:m].copy()
     material0 = st.material[:m].copy()
     step = dx.reshape(m, 5)
@@ -478,11 +488,17 @@ def new_material(state, c, side, below_point, f, bc, settings: InteractionSettin
     """Material coordinate for yarn ``side`` of a crossing ``c`` just created on top of its
     yarn: the new segment from ``below_point`` (the yarn point below) carries the tension f,
     ``u = u_below + l / (1 + f / EA)``."""
-    k = state.yarn[c, side]
-    lo = state.low[c, side]
-    u_below = state.material[lo, side] if lo >= 0 else state.material_fell[k]
-    p = state.centerline_point(c, side, bc.h)
-    l = float(np.sqrt(np.sum((p - below_point) ** 2) + settings.energy.length_smoothing))
+    k = int(state.yarn[c, side])
+    lo = int(state.low[c, side])
+    u_below = float(state.material[lo, side] if lo >= 0 else state.material_fell[k])
+    # the yarn point C + o h N (``ZoneState.centerline_point``), in floats: a crossing is
+    # created a few dozen times a step at 144 carriers, where NumPy's per-call cost dominates
+    o = float(state.over[c]) if side == 0 else -float(state.over[c])
+    a = o * bc.h
+    C, N = state.pos[c].tolist(), state.normal[c].tolist()
+    b = np.asarray(below_point, dtype=float).tolist()
+    d0, d1, d2 = C[0] + a * N[0] - b[0], C[1] + a * N[1] - b[1], C[2] + a * N[2] - b[2]
+    l = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2 + settings.energy.length_smoothing)
     return u_below + l / (1.0 + f / axial_stiffness(bc.f_spool, settings))
 
 

@@ -46,6 +46,16 @@ everything the solver uses) are an :class:`~preform.interaction.settings.Interac
 passed to the constructor.
 
 Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
+Only the bottom rows come near the mandrel, so the faces are looked up only for the crossings a
+bound does not prove far from it (``MandrelDistance.near``: the bounding box, then a KD-tree of
+face samples with a per-crossing cache of its distances, 1-Lipschitz): the tangent planes for the
+crossings that may lie within ``NearSettings.wall_clearance`` of the surface at the step's start
+(the others have no wall; if the solve moves one of them as far as it was from the mandrel, the
+step is solved again with every crossing's plane), the deposit test for those that may lie within
+the deposit height (a crossing proven further from the surface is not deposited even where the
+nearest face's plane passes close to it, at an edge). Where no iterate of the solve reaches the
+plane of a crossing that has none, the states are those with every crossing's plane (measured:
+case A, bent tube and bulge histories bit-identical, ``docs/decisions.md``).
 """
 
 from __future__ import annotations
@@ -70,30 +80,184 @@ from .zone_state import ZoneState
 CAPSTAN_MODES = {"flow": 0.0, "paper": -1.0, "drawn": 1.0}
 
 
-class MandrelDistance:
-    """Signed distance (m, positive outside) of points to a mandrel, mandrel frame."""
+@dataclasses.dataclass(frozen=True)
+class NearSettings:
+    """Which crossings the mandrel's faces are looked up for (``MandrelDistance.near``): only
+    those a cheap bound does not prove far from the surface."""
 
-    def __init__(self, mandrel):
+    #: m, every surface point lies within this of a face sample, so the bound ``D >= r - spacing``
+    #: (r: distance to the nearest sample) is this tight (case A: 0.82 M samples, 0.5 s to build)
+    spacing: float = 5e-3
+    #: the most samples: a large mandrel is sampled coarser (about 50 bytes per sample)
+    max_samples: int = 2_000_000
+    #: m, a crossing that may lie within this of the surface at a step's start gets its tangent
+    #: plane; one further off moving this far in the step makes the step solved again with all
+    wall_clearance: float = 5e-3
+    #: m, how far beyond the clearance the face samples are looked up (``near``): a crossing
+    #: further off is looked up again only once it has moved about this far
+    reach: float = 2e-2
+    #: m, a point counts as near unless proven this much further off than the clearance: the
+    #: bound is of the unsigned distance, and a crossing the wall holds lies behind its tangent
+    #: plane by the wall's give (Newton's penalty: f / k_wall, about 1 um), inside the surface
+    margin: float = 1e-4
+
+
+NEAR = NearSettings()
+
+
+class MandrelDistance:
+    """Signed distance (m, positive outside) of points to a mandrel, mandrel frame: the distance
+    to the plane of the face with the nearest centroid (KD-tree), good to the facet size.
+
+    ``near`` bounds the true distance to the surface from below by a second KD-tree of face
+    samples, so that the faces are looked up only where a crossing may be close (``settings``:
+    :class:`NearSettings`)."""
+
+    def __init__(self, mandrel, settings: NearSettings = NEAR):
         faces = np.asarray(mandrel.faces)
         v = np.asarray(mandrel.vertices, dtype=float)
-        self.centroids = v[faces].mean(axis=1)
+        self.settings = settings
+        self._triangles = v[faces]
+        self.centroids = self._triangles.mean(axis=1)
         self.normals = np.asarray(mandrel.face_normals, dtype=float)
         self.tree = cKDTree(self.centroids)
+        self._box = v[np.unique(faces)].min(axis=0), v[np.unique(faces)].max(axis=0)
+        self._samples = None
 
     def __call__(self, points):
         points = np.atleast_2d(points)
         _, f = self.tree.query(points)
         return np.einsum("ij,ij->i", points - self.centroids[f], self.normals[f])
 
+    def _sample_tree(self):
+        """(KD-tree of face samples, spacing m): each face on a barycentric grid whose cells'
+        edges are at most ``spacing`` long, so every point of a face lies within ``spacing`` of
+        a sample (a point of a triangle lies within its longest edge of a corner); built on
+        first use."""
+        if self._samples is None:
+            tri = self._triangles
+            longest = np.linalg.norm(tri - np.roll(tri, -1, axis=1), axis=2).max(axis=1)
+            spacing = float(self.settings.spacing)
+            while True:
+                k = np.maximum(np.ceil(longest / spacing), 1).astype(np.int64)
+                if int(np.sum((k + 1) * (k + 2) // 2)) <= self.settings.max_samples:
+                    break
+                spacing *= 1.5
+            parts = []
+            for kk in np.unique(k):
+                i, j = np.meshgrid(np.arange(kk + 1), np.arange(kk + 1), indexing="ij")
+                keep = i + j <= kk
+                w = np.stack([1.0 - (i[keep] + j[keep]) / kk, i[keep] / kk, j[keep] / kk], axis=1)
+                parts.append(np.einsum("sj,fjk->fsk", w, tri[k == kk]).reshape(-1, 3))
+            self._samples = cKDTree(np.vstack(parts)), spacing
+        return self._samples
+
+    def near(self, points, clearance, cache=None):
+        """(near (k,) bool, lower (k,) m) for points (k, 3), mandrel frame: ``lower`` bounds the
+        distance of each point to the surface from below, and ``near`` is where it is below
+        ``clearance`` (plus a margin, below): only those points may lie within ``clearance`` of
+        the surface.
+
+        Two bounds: the distance to the mandrel's bounding box, and ``r - spacing`` with r the
+        distance to the nearest face sample (the closest surface point lies within ``spacing``
+        of one), r looked up within ``clearance + NearSettings.reach`` (beyond: at least that).
+        ``cache``, ``(near_lo, near_hi, near_at)`` (``ZoneState``), holds bounds of r at other
+        points; r is 1-Lipschitz, so a point is looked up only where those bounds, widened by
+        the distance moved, leave it open whether ``r - spacing`` is below the limit, and
+        ``near`` is what a look-up of every point would give. The bound is of the unsigned
+        distance: a point counts as near unless it is proven ``NearSettings.margin`` further
+        off than ``clearance`` (a point inside the surface by less than that, as the wall holds
+        crossings, stays near)."""
+        points = np.atleast_2d(points)
+        tree, spacing = self._sample_tree()
+        limit = max(clearance, 0.0) + self.settings.margin
+        box = self._box_distance(points)
+        if cache is None:
+            lo, hi = np.full(len(points), -np.inf), np.full(len(points), np.inf)
+        else:
+            lo_c, hi_c, at = cache
+            moved = np.linalg.norm(points - at, axis=1)
+            lo, hi = lo_c - moved, hi_c + moved
+        # r - spacing below the limit for sure (hi), above it for sure (lo), else look it up
+        idx = np.nonzero((box < limit) & (lo - spacing < limit) & ~(hi - spacing < limit))[0]
+        if len(idx):
+            beyond = limit + self.settings.reach + spacing
+            # a query radius a little wider than beyond: rounding drops no point
+            r, _ = tree.query(points[idx], distance_upper_bound=beyond * (1.0 + 1e-9))
+            found = np.isfinite(r)
+            lo[idx] = np.where(found, r, beyond)
+            hi[idx] = np.where(found, r, np.inf)
+            if cache is not None:
+                lo_c[idx], hi_c[idx], at[idx] = lo[idx], hi[idx], points[idx]
+        lower = np.maximum(box, lo - spacing)
+        near = (box < limit) & (lo - spacing < limit)
+        return near, lower
+
+    def _box_distance(self, points):
+        """(k,) m: distance of points (k, 3), mandrel frame, to the mandrel's bounding box, a
+        lower bound of their distance to its surface (0 inside the box)."""
+        lo, hi = self._box
+        return np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0.0), axis=1)
+
+    def clear_of(self, points, distance) -> np.ndarray:
+        """(k,) bool: whether each point (k, 3), mandrel frame, lies further than ``distance``
+        (k,) m from the surface, proven by the mandrel's bounding box or else by the face
+        samples (``near``)."""
+        points = np.atleast_2d(points)
+        distance = np.asarray(distance, dtype=float)
+        out = self._box_distance(points) > distance
+        rest = np.nonzero(~out)[0]
+        if len(rest):
+            tree, spacing = self._sample_tree()
+            reach = (float(distance[rest].max()) + spacing) * (1.0 + 1e-9) + 1e-12
+            r, _ = tree.query(points[rest], distance_upper_bound=reach)
+            out[rest] = r - spacing > distance[rest]
+        return out
+
     def planes(self, points, pose):
         """(n, 6): point and outward unit normal of the nearest face's plane, machine frame, for
         points given in the machine frame (pose: the mandrel's)."""
         _, f = self.tree.query(np.atleast_2d(pose.to_mandrel(points)))
+        return self._planes_of(f, pose)
+
+    def _planes_of(self, f, pose):
         c = self.centroids[f]
         p0 = np.asarray(pose.to_machine(c), dtype=float)
         n = np.asarray(pose.to_machine(c + self.normals[f]), dtype=float) - p0
         n /= np.linalg.norm(n, axis=1)[:, None]
         return np.hstack([p0, n])
+
+    def near_planes(self, points, pose, clearance, cache=None):
+        """(planes (n, 6), lower (n,) m): ``planes`` for the points that may lie within
+        ``clearance`` of the surface (``near``), and for the others a plane far behind
+        (``NO_PLANE``: no wall); ``lower`` the lower bound of each point's distance to the
+        surface (``near``; ``inf`` where the point has its plane)."""
+        points = np.atleast_2d(points)
+        near, lower = self.near(pose.to_mandrel(points), clearance, cache)
+        out = np.tile(NO_PLANE, (len(points), 1))
+        idx = np.nonzero(near)[0]
+        if len(idx):
+            _, f = self.tree.query(pose.to_mandrel(points[idx]))
+            out[idx] = self._planes_of(f, pose)
+        return out, np.where(near, np.inf, lower)
+
+    def below(self, points, height, cache=None):
+        """(k,) bool for points (k, 3), mandrel frame: signed distance (``__call__``) below
+        ``height``, looked up only for the points ``near`` does not prove further than
+        ``height`` from the surface (those are not below it: the nearest face's plane of a
+        point far from the surface may pass close to it at an edge, but the point is not close
+        to the mandrel)."""
+        points = np.atleast_2d(points)
+        near, _ = self.near(points, height, cache)
+        out = np.zeros(len(points), dtype=bool)
+        idx = np.nonzero(near)[0]
+        if len(idx):
+            out[idx] = self(points[idx]) < height
+        return out
+
+
+#: a tangent plane no crossing reaches (as ``frontal.Boundary`` without a mandrel): no wall
+NO_PLANE = np.array([0.0, 0.0, -1e300, 0.0, 0.0, 1.0])
 
 
 class InteractionZone:
@@ -133,6 +297,7 @@ class InteractionZone:
         self.fell = None              # (2n, 3) fell points of the last step
         self.fell_ref = None          # (2n, 3) where the next step's boundary moves from
         self.staged = 0               # steps solved in stages (``_staged``)
+        self.wall_resolves = 0        # steps solved again with every crossing's plane (``step``)
         self.t = 0.0
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
@@ -196,10 +361,22 @@ class InteractionZone:
         centre = frontal.friction_centres(st)
         # what a failed solve leaves moved
         start = st.pos[: st.m].copy(), st.material[: st.m].copy()
+        # what a solve sets, for the step solved again with every crossing's plane
+        solved = {name: getattr(st, name)[: st.m].copy()
+                  for name in ("pos", "material", "tension", "bound", "slip", "offset")}
         try:
-            wall = self._with_wall(bc)
+            wall, clear = self._with_near_wall(bc)
             self.last_report = self.solve_zone(st, wall, settings=self.settings, where=where,
                                                centre=centre)
+            if clear is not None and self._left_clearance(start[0], clear):
+                # a crossing without its plane moved as far as it was from the mandrel (it
+                # may have reached the wall): the step again with every crossing's plane
+                self.wall_resolves += 1
+                for name, value in solved.items():
+                    getattr(st, name)[: st.m] = value
+                wall = self._with_wall(bc)
+                self.last_report = self.solve_zone(st, wall, settings=self.settings,
+                                                   where=where, centre=centre)
             bc = wall
         except SimulationError:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
@@ -478,19 +655,46 @@ class InteractionZone:
         return np.where(lo >= 0, st.material_fell + laid / (1.0 + f / stiff), new)
 
     def _with_wall(self, bc, state=None):
-        """bc with the mandrel's tangent planes near the crossings (no wall without a mandrel)."""
+        """bc with the mandrel's tangent planes at every crossing (no wall without a mandrel)."""
         st = self.state if state is None else state
         if self.planes is None or st.m == 0 or self.pose_end is None:
             return bc
         return dataclasses.replace(bc, plane=self.planes(st.pos[: st.m], self.pose_end))
 
+    def _with_near_wall(self, bc):
+        """(bc with the tangent planes of the crossings that may lie within
+        ``NearSettings.wall_clearance`` of the mandrel, the others without a wall; the lower
+        bound (m) of each crossing's distance to the surface, ``inf`` where it has its plane),
+        or (``_with_wall(bc)``, None) without a mandrel to bound distances on."""
+        st = self.state
+        if self.planes is None or st.m == 0 or self.pose_end is None:
+            return self._with_wall(bc), None
+        d = self.distance
+        plane, clear = d.near_planes(st.pos[: st.m], self.pose_end, d.settings.wall_clearance,
+                                     _near_cache(st))
+        return dataclasses.replace(bc, plane=plane), clear
+
+    def _left_clearance(self, start, clear) -> bool:
+        """Whether a crossing without its tangent plane moved in the solve (from ``start``, (m,
+        3)) at least as far as it was from the mandrel, ``clear`` (m,) (``_with_near_wall``: a
+        bound from below, that of the face samples within the look-up's reach, else that reach;
+        for a crossing that moved further than that, ``MandrelDistance.clear_of``)."""
+        moved = np.linalg.norm(self.state.pos[: self.state.m] - start, axis=1)
+        far = np.nonzero(moved >= clear)[0]
+        if len(far) == 0:
+            return False
+        return not bool(np.all(self.distance.clear_of(self.pose_end.to_mandrel(start[far]),
+                                                      moved[far])))
+
     def lowest_points(self, top) -> np.ndarray:
         """(2n, 3): each yarn's centerline point at its lowest crossing, or its top point."""
         st = self.state
         out = np.array(top, dtype=float)
-        n = self.machine.n_per_group
-        for k in np.nonzero(st.lowest >= 0)[0]:
-            out[k] = st.centerline_point(st.lowest[k], 0 if k < n else 1, self.h)
+        k = np.nonzero(st.lowest >= 0)[0]
+        c = st.lowest[k]
+        # the yarn's centerline point: C + over h N on the warp, C - over h N on the weft
+        o = np.where(k < self.machine.n_per_group, 1.0, -1.0) * st.over[c]
+        out[k] = st.pos[c] + (o * self.h)[:, None] * st.normal[c]
         return out
 
     def _top_point(self, k, fell, state=None):
@@ -544,9 +748,13 @@ class InteractionZone:
         st = self.state if state is None else state
         if self.distance is None or st.m == 0 or pose is None:
             return []
-        cand = np.arange(st.m)
-        d = self.distance(pose.to_mandrel(st.pos[cand]))
-        hit = cand[d < self.settings.zone.deposit_height * 2.0 * self.h]
+        height = self.settings.zone.deposit_height * 2.0 * self.h
+        points = pose.to_mandrel(st.pos[: st.m])
+        if isinstance(self.distance, MandrelDistance):
+            # the faces looked up only near the surface (``MandrelDistance.below``)
+            hit = np.nonzero(self.distance.below(points, height, _near_cache(st)))[0]
+        else:
+            hit = np.nonzero(self.distance(points) < height)[0]
         if len(hit) == 0:
             return []
         dead = []
@@ -576,40 +784,23 @@ class InteractionZone:
         return deposits
 
 
+def _near_cache(st):
+    """The look-up cache of the crossings of ``st`` (``ZoneState``) for ``MandrelDistance.near``:
+    views, updated in place."""
+    return st.near_lo[: st.m], st.near_hi[: st.m], st.near_at[: st.m]
+
+
 def creation_point(px, gx, po, go, lowest=0.0):
     """Where a new crossing starts: midpoint of the closest points of the segments px->gx and
-    po->go (m, machine frame), and the outward unit normal of the two directions. ``lowest``: the
-    closest points are taken no lower than this fraction of each segment (a crossing created on
-    top of the one below would start with a segment of no length)."""
-    d1 = gx - px
-    d2 = go - po
-    r = px - po
-    a, e, b = d1 @ d1, d2 @ d2, d1 @ d2
-    c, f = d1 @ r, d2 @ r
-    tiny = 1e-30
-    # closest points px + tx d1 and po + to d2, tx and to in [0, 1]
-    if a <= tiny and e <= tiny:
-        tx = to = 0.0
-    elif a <= tiny:
-        tx, to = 0.0, float(np.clip(f / e, 0.0, 1.0))
-    elif e <= tiny:
-        tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
-    else:
-        den = a * e - b * b
-        tx = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > tiny else 1.0
-        to = (b * tx + f) / e
-        if to < 0.0:
-            tx, to = float(np.clip(-c / a, 0.0, 1.0)), 0.0
-        elif to > 1.0:
-            tx, to = float(np.clip((b - c) / a, 0.0, 1.0)), 1.0
-    tx, to = max(tx, lowest), max(to, lowest)
-    C = 0.5 * (px + tx * d1 + po + to * d2)
-    N = np.cross(d1, d2)
-    nn = np.linalg.norm(N)
-    N = N / nn if nn > 0 else np.array([C[0], C[1], 0.0]) / max(np.hypot(C[0], C[1]), 1e-300)
-    if N[0] * C[0] + N[1] * C[1] < 0:
-        N = -N
-    return C, N
+    po->go (m, machine frame), and the outward unit normal of the two directions
+    (``_kernels.frontal.creation_point``). ``lowest``: the closest points are taken no lower
+    than this fraction of each segment (a crossing created on top of the one below would start
+    with a segment of no length)."""
+    out = np.empty(6)
+    frontal_kernels.creation_point(np.asarray(px, dtype=float), np.asarray(gx, dtype=float),
+                                   np.asarray(po, dtype=float), np.asarray(go, dtype=float),
+                                   float(lowest), out)
+    return out[:3], out[3:]
 
 
 def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT) -> Snapshot:

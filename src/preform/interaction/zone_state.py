@@ -33,8 +33,12 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``tension (cap, 2) float64, N``: tension of the segment below the crossing on each yarn;
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
-Per yarn ``k`` (``2n``): ``lowest[k]``, ``highest[k]``: array index of its lowest/highest crossing,
--1 when it has none; ``material_fell[k]``: material coordinate of its fell point (m).
+Not state, a cache of the mandrel look-ups (``model.MandrelDistance.near``; not in ``to_arrays``,
+unknown after ``from_arrays`` and for a new crossing): ``near_lo``, ``near_hi (cap,) float64, m``,
+bounds from below and above of the crossing's distance to the nearest face sample when it was at
+``near_at (cap, 3) float64`` (mandrel frame); ``-inf``, ``inf``: none known. That distance is
+1-Lipschitz, so at a point ``p`` it lies within ``[near_lo - |p - near_at|, near_hi + |p -
+near_at|]``.
 """
 
 from __future__ import annotations
@@ -63,6 +67,14 @@ _FIELDS = {
     "t_create": ((), np.float64, 0.0),
 }
 
+#: the look-up cache (module docstring): copied, grown, compacted with the crossings, not saved
+_CACHE = {
+    "near_lo": ((), np.float64, -np.inf),
+    "near_hi": ((), np.float64, np.inf),
+    "near_at": ((3,), np.float64, 0.0),
+}
+_ALL = {**_FIELDS, **_CACHE}
+
 
 class ZoneState:
     """Crossings of the convergence zone plus each yarn's lowest and highest crossing."""
@@ -71,7 +83,7 @@ class ZoneState:
         self.n_yarns = int(n_yarns)
         self.m = 0
         self.next_uid = 0
-        for name, (shape, dtype, fill) in _FIELDS.items():
+        for name, (shape, dtype, fill) in _ALL.items():
             setattr(self, name, np.full((capacity,) + shape, fill, dtype=dtype))
         self.lowest = np.full(self.n_yarns, -1, dtype=np.int64)
         self.highest = np.full(self.n_yarns, -1, dtype=np.int64)
@@ -84,13 +96,13 @@ class ZoneState:
     def _yarn_arrays(self) -> list[str]:
         """Names of the per-yarn arrays (``lowest``, ``highest``, the fell points' material
         coordinates): every array attribute that is not a crossing field of ``_FIELDS``."""
-        return [k for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in _FIELDS]
+        return [k for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in _ALL]
 
     def copy(self) -> "ZoneState":
         """An independent copy (same capacity; every array copied)."""
         new = ZoneState(self.n_yarns, capacity=self.capacity)
         new.m, new.next_uid = self.m, self.next_uid
-        for name in (*_FIELDS, *self._yarn_arrays()):
+        for name in (*_ALL, *self._yarn_arrays()):
             setattr(new, name, getattr(self, name).copy())
         return new
 
@@ -175,7 +187,7 @@ class ZoneState:
             cap *= 2
         if cap == self.capacity:
             return
-        for name, (shape, dtype, fill) in _FIELDS.items():
+        for name, (shape, dtype, fill) in _ALL.items():
             old = getattr(self, name)
             new = np.full((cap,) + shape, fill, dtype=dtype)
             new[: self.m] = old[: self.m]
@@ -199,6 +211,8 @@ class ZoneState:
         self.uid[c] = self.next_uid
         self.next_uid += 1
         self.t_create[c] = t
+        self.near_lo[c] = -np.inf
+        self.near_hi[c] = np.inf
         for side, k in enumerate((warp, weft)):
             below = self.highest[k]
             self.low[c, side] = below
@@ -238,7 +252,7 @@ class ZoneState:
         keep[dead] = False
         new_index = np.full(m + 1, -1, dtype=np.int64)   # index m + ... maps -1 -> -1 below
         new_index[:m][keep] = np.arange(int(keep.sum()))
-        for name in _FIELDS:
+        for name in _ALL:
             a = getattr(self, name)
             a[: int(keep.sum())] = a[:m][keep]
         self.m = int(keep.sum())
@@ -249,16 +263,16 @@ class ZoneState:
             links[:mm] = np.where(v >= 0, new_index[np.where(v >= 0, v, m)], -1)
         for ends in (self.lowest, self.highest):
             ends[:] = np.where(ends >= 0, new_index[np.where(ends >= 0, ends, m)], -1)
-        # a yarn whose lowest crossing was removed: its new lowest is the first kept one above
-        for k in range(self.n_yarns):
-            if self.lowest[k] == -1 and self.highest[k] >= 0:
-                c = self.highest[k]
-                while True:
-                    below = self.low[c, self._side(c, k)]
-                    if below < 0:
-                        break
-                    c = below
-                self.lowest[k] = c
+        # a yarn whose lowest crossing was removed: its new lowest is the first kept one above,
+        # its oldest (chains run in creation order), the first row naming it
+        lost = np.nonzero((self.lowest == -1) & (self.highest >= 0))[0]
+        if len(lost):
+            n = self.n_yarns // 2
+            for side in range(2):
+                ks = lost[(lost >= n) == bool(side)]
+                if len(ks):
+                    yarns, first = np.unique(self.yarn[:mm, side], return_index=True)
+                    self.lowest[ks] = first[np.searchsorted(yarns, ks)]
 
     def check(self) -> None:
         """Consistency of chains and links (for tests): raises AssertionError."""
