@@ -93,8 +93,8 @@ class RelaxSettings:
     newton_fallback: bool = True
     #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
     anderson_depth: int = 10
-    #: iterations between factorisations of the Laplacian: in between, the last factor
-    #: preconditions the update C <- C + L^-1 F(C) (same fixed point; ``bench_relax.py``)
+    #: iterations between factorisations of the Laplacian (scalar preconditioner): in between,
+    #: the last factor preconditions the update C <- C + L^-1 F(C) (same fixed point)
     refactor_every: int = 3
     #: block-Jacobi corrections per iteration after the force-density solve (0: none)
     smoothing: int = 2
@@ -129,6 +129,30 @@ class RelaxSettings:
     material_newton: int = 60
     #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
     floor: float = 1e-3
+    #: the position update's preconditioner: "block", the lattice's geometric stiffness with
+    #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself), or
+    #: "scalar", the force-density Laplacian shared by x, y, z with ``smoothing`` block-Jacobi
+    #: corrections (``docs/decisions.md``: 10-17 iterations of one material sweep on case A
+    #: steps with "block", 33-44 of three with "scalar")
+    preconditioner: str = "block"
+    #: isotropic share of f / l in the block preconditioner: keeps it definite where the
+    #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
+    #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
+    block_reg: float = 1e-3
+    #: iterations between factorisations of the block preconditioner (0: once per solve and
+    #: when the wall's active set changes): a preconditioner that changes within a solve
+    #: changes Anderson's map under it (144 carriers: 12-15 iterations factorising once, 25-35
+    #: every 3 iterations)
+    block_refactor_every: int = 0
+    #: share of f / l the block preconditioner gives a segment along itself
+    block_axial: float = 0.0
+    #: iterations without a new lowest residual after which the block preconditioner gives
+    #: the step to the scalar one (from the same start); case A steps converge in 10-17
+    block_stall: int = 20
+    #: largest move of a crossing in one block update, as a fraction of its shortest segment
+    #: (the whole update is scaled down to it: the stiffness holds for moves small against
+    #: the segments)
+    block_cap: float = 2.0
 
 
 @dataclass
@@ -161,7 +185,10 @@ class RelaxResult:
     iteration), bound_change (last relative change of the bounds; consistent bounds only),
     set_changes (changes of the wall's active set), sweep_stats (Newton steps and energy
     evaluations of the yarns' material problems, summed over yarns),
-    times (s per part: sweep, forces, factor, solve, wall, mix)."""
+    times (s per part: setup (order, pattern, symbolic analysis), sweep (segments and material
+    sweep), forces (net forces, residual, friction bounds), factor, solve, wall, smooth
+    (block-Jacobi corrections), mix (Anderson)); fallback_scalar: the block preconditioner
+    stalled and the scalar one solved the step."""
 
     pos: np.ndarray
     s: np.ndarray
@@ -179,6 +206,8 @@ class RelaxResult:
     times: dict = field(default_factory=dict)
     set_changes: int = 0
     sweep_stats: tuple = (0, 0)
+    #: the block preconditioner stalled and the scalar one solved the step
+    fallback_scalar: bool = False
 
 
 class _Laplacian:
@@ -224,6 +253,67 @@ class _Laplacian:
     def solve(self, rhs, out):
         for i in range(3):
             out[:, i] = self.solver.solve(np.ascontiguousarray(rhs[:, i]))
+
+
+class _BlockStiffness:
+    """The block preconditioner K (``_kernels.relax.block_values``) of a lattice: its pattern of
+    3 x 3 blocks in a nested-dissection order of the band of crossings around the machine axis
+    (``band_dissection``: the order keeps the factor's fill per crossing nearly flat as the zone
+    grows), the symbolic analysis of its block LDL^T once per solve, the factorisation
+    (``ldl_numeric``) and solves (``ldl_solve``)."""
+
+    def __init__(self, lat: Lattice, pos):
+        m = lat.m
+        self.m = m
+        r = np.hypot(pos[:, 0], pos[:, 1])
+        u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(np.median(r)) if m else 1.0)
+        perm = np.empty(m, dtype=np.int64)
+        RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
+        pinv = np.empty(m, dtype=np.int64)
+        pinv[perm] = np.arange(m)
+        self.perm = perm
+        lo = lat.low
+        link = lo >= 0
+        pc = np.broadcast_to(pinv[:, None], lo.shape)
+        plo = np.where(link, pinv[np.maximum(lo, 0)], -1)
+        rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
+        cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
+        key = cols * m + rows
+        uniq, inv = np.unique(key, return_inverse=True)
+        self.nslots = uniq.size
+        self.slot_diag = np.ascontiguousarray(inv[:m], dtype=np.int64)
+        self.slot_below = np.full(lo.shape, -1, dtype=np.int64)
+        self.slot_below[link] = inv[m:]
+        self.below_first = np.ascontiguousarray(link & (plo < pc))
+        self.Ai = (uniq % m).astype(np.int64)
+        col = uniq // m
+        self.Ap = np.zeros(m + 1, dtype=np.int64)
+        np.add.at(self.Ap, col + 1, 1)
+        self.Ap = np.cumsum(self.Ap)
+        self.vals = np.zeros((self.nslots, 3, 3))
+        self.Dg = np.empty((m, 3, 3))
+        self.etree = np.empty(m, dtype=np.int64)
+        self.Lnz = np.empty(m, dtype=np.int64)
+        nnz = RK.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
+                              self.etree)
+        self.Lp = np.empty(m + 1, dtype=np.int64)
+        self.Li = np.empty(max(nnz, 1), dtype=np.int64)
+        self.Lx = np.empty((max(nnz, 1), 3, 3))
+        self.Dinv = np.empty((m, 3, 3))
+        self._marker = np.zeros(m, dtype=np.bool_)
+        self._iw = np.empty((3, m), dtype=np.int64)
+        self._y = np.zeros((m, 3, 3))
+        self._D = np.empty((3, 3))
+        self._x = np.empty((m, 3))
+
+    def factor(self):
+        """Factorise the current ``vals``; False if a pivot is not positive definite."""
+        return RK.ldl_numeric(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx,
+                              self.Dinv, self.etree, self.Lnz, self._marker, self._iw[0],
+                              self._iw[1], self._iw[2], self._y, self._D)
+
+    def solve(self, rhs, out):
+        RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out, self._x)
 
 
 class _Anderson:
@@ -291,8 +381,9 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
     from its converged geometry and tensions, and the step is solved again from there until they
     change by less than ``friction_tol`` relative to the tensions."""
-    res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, f_spool=f_spool,
-                      mu=mu, h=h, width=width, plane=plane, settings=settings, model=model)
+    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
+                              f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                              settings=settings, model=model)
     if not settings.consistent_bounds or not res.converged:
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
@@ -307,9 +398,9 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
         if change < settings.friction_tol:
             break
         bounds = res.bounds
-        res = _relax_held(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
-                          f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                          settings=settings, model=model)
+        res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+                                  f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                                  settings=settings, model=model)
         iterations += res.iterations
         history.append(res.history)
         for key, v in res.times.items():
@@ -320,6 +411,28 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res.bound_change = change
     res.converged = res.converged and change < settings.friction_tol
     return res
+
+
+def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
+                        **kw):
+    """``_relax_held``; where the block preconditioner stalls (no new lowest residual in
+    ``block_stall`` iterations: steps with friction 0.5 and jammed crossings, where it moves
+    the crossings too far), the step again from the same start with the scalar one, the
+    iterations and times of both counted."""
+    res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, settings=settings,
+                      **kw)
+    if res.converged or settings.preconditioner != "block":
+        return res
+    again = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
+                        settings=dataclasses.replace(settings, preconditioner="scalar"), **kw)
+    again.iterations += res.iterations
+    again.history = np.concatenate([res.history, again.history])
+    for key, v in res.times.items():
+        again.times[key] += v
+    again.set_changes += res.set_changes
+    again.sweep_stats = tuple(a + b for a, b in zip(again.sweep_stats, res.sweep_stats))
+    again.fallback_scalar = True
+    return again
 
 
 def _bound_change(lat, new, old, tension, f_top):
@@ -346,7 +459,9 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     compression = e.compression
     l_jam = float(width)
     k_jam = e.jam_force * f_spool / max(l_jam, 1e-300)
-    times = dict(sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0, mix=0.0)
+    times = dict(setup=0.0, sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0,
+                 mix=0.0)
+    t_setup = time.perf_counter()
     pos = np.array(pos, dtype=float)
     s = np.array(s, dtype=float)
     f_top = np.array(f_top, dtype=float)
@@ -390,7 +505,14 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         active[:] = dist < st.wall_contact
         behind = active & (dist < 0.0)
         pos[behind] -= dist[behind, None] * plane[behind, 3:]
-    lap = _Laplacian(lat) if m else None
+    block = st.preconditioner == "block"
+    if st.preconditioner not in ("block", "scalar"):
+        raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
+                         "'block' or 'scalar'")
+    lap = _Laplacian(lat) if m and not block else None
+    blk = _BlockStiffness(lat, pos) if m and block else None
+    rhs = np.empty((m, 3))
+    times["setup"] = time.perf_counter() - t_setup
     mixer = _Anderson(st.anderson_depth)
     history = []
     residual = np.inf
@@ -399,7 +521,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     factored_active = None
     set_changes = 0
     stats = np.zeros(2, dtype=np.int64)
-    smoothing = st.smoothing
+    smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
     while True:
         t0 = time.perf_counter()
@@ -432,24 +554,55 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             smoothing = 0
             mixer.reset()
             best_it = it
-        if it >= st.max_iter:
+        if it >= st.max_iter or (block and it - best_it > st.block_stall):
             break
         it += 1
-        if (it - 1) % st.refactor_every == 0 or factored_active is None or not np.array_equal(
-                active, factored_active):
-            RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
-                                lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
-            lap.factor()
+        if block:
+            due = bool(st.block_refactor_every) and (it - 1) % st.block_refactor_every == 0
+        else:
+            due = (it - 1) % st.refactor_every == 0
+        if due or factored_active is None or not np.array_equal(active, factored_active):
+            if block:
+                reg = st.block_reg
+                while True:
+                    RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
+                                    tension, f_top, l_jam, k_jam, st.floor, reg, st.block_axial,
+                                    plane, active,
+                                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
+                                    blk.Dg)
+                    if blk.factor():
+                        break
+                    reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
+            else:
+                RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
+                                    lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
+                lap.factor()
             factored_active = active.copy()
         t3 = time.perf_counter()
-        rhs = np.where(active[:, None], 0.0, force)
-        lap.solve(rhs, delta)
+        if block:
+            RK.tangent_part(m, force, plane, active, rhs)
+            blk.solve(rhs, delta)
+            RK.cap_moves(m, lat.low, l_below, st.block_cap, lmin, delta)
+        else:
+            rhs = np.where(active[:, None], 0.0, force)
+            lap.solve(rhs, delta)
         t4 = time.perf_counter()
         changed = False
         if has_wall:
-            delta[active] = 0.0
-            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane, active,
-                           st.wall_release, wall_force)
+            if block:
+                # the block update moved the resting crossings in their planes; the local
+                # balance decides who leaves
+                moved = delta.copy()
+                delta[active] = 0.0
+                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
+                               active, st.wall_release, wall_force)
+                RK.wall_distance(m, pos + delta, plane, dist)
+                stay = active & (dist <= st.wall_release)
+                delta[stay] = moved[stay]
+            else:
+                delta[active] = 0.0
+                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
+                               active, st.wall_release, wall_force)
             new = pos + delta
             RK.wall_distance(m, new, plane, dist)
             join = ~active & (dist < -st.wall_release)
