@@ -142,6 +142,17 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     # the yarn problem's stiffness EA / q ~ 1e6 N/m: 1e-10 of a 5 N tension is 1e-15 m
     assert np.abs(s - s_ref).max() < 1e-10
     assert np.abs(ten - ten_ref).max() < 1e-6
+    # started from the strain-keeping prediction for lengths 1 % off: the same minimum
+    s2 = st.material[:m].copy()
+    ten2 = np.empty((m, 2))
+    l_prev = l_below * rng.uniform(0.99, 1.01, size=l_below.shape)
+    worst = RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s2, st.material_fell,
+                              s_old[:m], g, f_top, EA, E.compression, eps_f, kappa0, 1e-10, 60,
+                              ten2, np.empty(m, dtype=np.int64), np.empty((m, 6)),
+                              np.zeros(2, dtype=np.int64), l_prev)
+    assert worst < 1e-10
+    assert np.abs(s2 - s_ref).max() < 1e-10
+    assert np.abs(ten2 - ten_ref).max() < 1e-6
     # net forces against the twin and against the Newton energy's gradient at this state
     # a jamming length that makes a third of the segments between crossings jam
     l_jam = float(np.quantile(l_below[st.low[:m] >= 0], 0.3))

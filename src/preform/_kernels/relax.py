@@ -138,7 +138,8 @@ def _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top, F_top, EA,
 
 @njit(cache=True)
 def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top, EA,
-                   compression, eps_f, kappa0, tol, max_newton, tension, chain, work, stats):
+                   compression, eps_f, kappa0, tol, max_newton, tension, chain, work, stats,
+                   l_prev=None):
     """Per yarn, the material coordinates s of its crossings that make ``dE/ds = 0`` for the
     lengths l_below held (the friction law along the yarn, a convex chain problem): Newton on the
     tridiagonal system (Thomas algorithm), O(crossings of the yarn) per Newton step. A full
@@ -146,8 +147,9 @@ def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_to
     energy along the same direction (the energy is strictly convex in the material, so both
     reach its one minimum). In place on s; tension (m, 2) receives the segment tensions. chain
     (m,) int64 and work (m, 6) are scratch; stats (2,) int64 counts Newton steps and energy
-    evaluations (added to). Returns the largest relative residual |dE/ds| / (|f_below| +
-    |f_above|) left."""
+    evaluations (added to). l_prev (m, 2) or None: the lengths s was solved for; given, Newton
+    starts from the material with every segment's strain of s at the new lengths. Returns the
+    largest relative residual |dE/ds| / (|f_below| + |f_above|) left."""
     n = n_yarns // 2
     worst = 0.0
     for k in range(n_yarns):
@@ -162,8 +164,20 @@ def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_to
             c = up[c, side]
         F_top = f_top[k] + f_top[k] * f_top[k] / (2.0 * EA)
         s0 = s_fell[k]
-        for i in range(nc):
-            work[i, 5] = s[chain[i], side]
+        if l_prev is None:
+            for i in range(nc):
+                work[i, 5] = s[chain[i], side]
+        else:
+            # start from the material that keeps every segment's strain (its tension) at the
+            # new lengths: q <- q l / l_prev (a slipping yarn's material follows its lengths)
+            prev = s0
+            acc = s0
+            for i in range(nc):
+                c = chain[i]
+                q = s[c, side] - prev
+                prev = s[c, side]
+                acc += q * l_below[c, side] / l_prev[c, side]
+                work[i, 5] = acc
         res, norm = _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top, F_top, EA,
                                     compression, eps_f, kappa0, tension, work)
         steps = 0

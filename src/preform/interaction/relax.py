@@ -14,33 +14,43 @@ stiff tows ``f = EA (l - q) / q`` of material length ``q``; thickness offsets of
 tangent plane, a non-negative wall force), where Newton has a penalty of 1e7 N/m (its crossings
 sit up to f / 1e7 m behind the plane: ~1 um).
 
-How (one iteration, O(crossings))
----------------------------------
+How (one iteration)
+-------------------
 1. *Material sweep* (``_kernels.relax.material_sweep``): for the current positions, every yarn's
    material coordinates solve its friction law exactly (a convex chain problem in the material
    alone: tridiagonal Newton, O(crossings of the yarn)); a sticking yarn keeps its material at the
    crossing within the friction creep, a slipping one sits on its discrete Capstan bound. This
-   gives the tensions.
-2. *Force densities* (Schek 1974): with ``w = f / l`` per segment, node balance ``sum_j w_cj (P_j -
-   P_c) = 0`` is linear in the positions, one scalar weighted Laplacian ``L`` of the crossing
-   lattice shared by x, y and z. The update is ``C <- C + L^-1 F(C)`` with ``F`` the net force: for
-   ``w`` the exact force densities this is the force-density solve itself; where a segment is
-   nearly slack or jammed ``w`` is floored and the jamming stiffness added (``forces``), which
-   keeps ``L`` positive definite and changes the iteration, not its fixed point ``F = 0``. ``L`` is
-   factorised every ``refactor_every`` iterations (LDL^T, QDLDL: Apache-2.0; the symbolic
-   analysis once per solve); in between the last factor serves.
-3. *Wall active set*: a crossing resting on its tangent plane is a Dirichlet row of ``L``; after
-   the free crossings moved it goes where its own balance puts it, projected onto the plane
-   (``wall_update``, a block Gauss-Seidel step), the wall taking the normal force. It leaves the
-   set when that point lies more than ``wall_release`` in front; a free crossing that lands more
-   than that behind its plane is projected onto it and joins.
-4. *Block-Jacobi corrections* (``block_jacobi``, ``smoothing`` of them): each crossing moves by
-   ``H_c^-1 F_c`` with its own 3 x 3 stiffness (the yarns' geometric stiffness ``(f/l)(I - d
-   d^T)`` and the jamming's ``k d d^T``), after a new material sweep: the scalar ``L`` gives a
-   segment the stiffness ``f / l`` along itself too, where a yarn has none, and the corrections
-   take the crossings along the soft directions ``L`` holds back. They vanish where ``F = 0``;
-   they stop for the rest of a solve that makes no progress with them (``stall_iterations``).
-5. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
+   gives the tensions and the net force ``F(C)`` on every crossing.
+2. *Position update* ``C <- C + K^-1 F(C)`` with a preconditioner ``K`` (``preconditioner``; the
+   fixed point ``F = 0`` does not depend on it):
+
+   - ``"block"`` (the default): the lattice's geometric stiffness in 3 x 3 blocks per pair of
+     crossings, ``sum_seg (f/l) (I - d d^T)`` (a taut yarn resists a crossing moving across
+     it, not along it) plus jamming's ``k d d^T`` and ``block_reg f / l I`` that keeps ``K``
+     definite (``block_values``). It is factorised once per solve at the start tensions (block
+     LDL^T, ``ldl_numeric``, in a nested-dissection order of the band of crossings around the
+     axis, ``band_dissection``; O(m^1.5) work for the factor, O(m log m) fill, so per
+     iteration the solve is nearly linear). A crossing resting on the wall moves in its tangent
+     plane (its rows projected, ``P K P + n n^T``).
+   - ``"scalar"``: the force-density Laplacian (Schek 1974): with ``w = f / l`` per segment,
+     node balance ``sum_j w_cj (P_j - P_c) = 0`` is linear in the positions, one scalar weighted
+     Laplacian ``L`` shared by x, y and z (``w`` floored where a segment is nearly slack, the
+     jamming stiffness added), factorised every ``refactor_every`` iterations (QDLDL,
+     Apache-2.0); then ``smoothing`` block-Jacobi corrections (``block_jacobi``), each after a
+     new material sweep: each crossing moves by ``H_c^-1 F_c`` with its own 3 x 3 stiffness,
+     because ``L`` gives a segment the stiffness ``f / l`` along itself too. The corrections stop
+     for the rest of a solve that makes no progress with them (``stall_iterations``).
+
+   ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
+   sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
+   with friction 0.5 and jammed crossings) the step is solved again from its start with
+   ``"scalar"``.
+3. *Wall active set*: a crossing resting on its tangent plane moves in it (block) or is a
+   Dirichlet row of ``L`` (scalar); its own balance, ``wall_update`` (the point its segments'
+   force densities put it at), decides whether it stays: it leaves the set when that point lies
+   more than ``wall_release`` in front, the wall taking the normal force otherwise; a free
+   crossing that lands more than that behind its plane is projected onto it and joins.
+4. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
    eq. 17 (the minimum-residual combination of two iterates) in its general form. History is
    cleared when the active set changes (the map changes).
 
@@ -85,8 +95,8 @@ class RelaxSettings:
     #: largest relative imbalance at convergence: Newton's BALANCE_TOLERANCE (1e4 below the 1e-3
     #: the snapshots must meet)
     tol: float = 1e-7
-    #: iterations before the step is declared failed (a case A step takes 15-45; one that has
-    #: not converged by then stalls)
+    #: iterations before the step is declared failed (a case A step takes 10-17 with the block
+    #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
     max_iter: int = 200
     #: a step the relaxation does not converge on is solved by the Newton reference
     #: (``solve_zone``; counted in ``FALLBACKS``) instead of stopping the run
@@ -96,7 +106,8 @@ class RelaxSettings:
     #: iterations between factorisations of the Laplacian (scalar preconditioner): in between,
     #: the last factor preconditions the update C <- C + L^-1 F(C) (same fixed point)
     refactor_every: int = 3
-    #: block-Jacobi corrections per iteration after the force-density solve (0: none)
+    #: block-Jacobi corrections per iteration after the force-density solve (scalar
+    #: preconditioner; 0: none)
     smoothing: int = 2
     #: their weight (damping) and the isotropic share of f / l added to each 3 x 3 block
     smoothing_weight: float = 1.0
@@ -125,6 +136,13 @@ class RelaxSettings:
     #: relative residual of the per-yarn material problems: 1e3 below the balance tolerance;
     #: 1e-12 is below what the round-off of stiff tows (EA / q ~ 5e5 N/m) lets Newton reach
     material_tol: float = 1e-10
+    #: with the block preconditioner, each material sweep starts from the material that keeps
+    #: the segments' strains of the last one at the new lengths (a slipping yarn's material
+    #: follows its lengths), not from the last material itself: 3.4x fewer Newton steps and no
+    #: line search on case A steps (the block update moves crossings by millimetres); not with
+    #: the scalar one, on whose friction-0.5 steps it costs iterations (48 carriers: 322
+    #: against 241)
+    material_predict: bool = True
     #: Newton steps of one material sweep at most
     material_newton: int = 60
     #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
@@ -144,7 +162,8 @@ class RelaxSettings:
     #: changes Anderson's map under it (144 carriers: 12-15 iterations factorising once, 25-35
     #: every 3 iterations)
     block_refactor_every: int = 0
-    #: share of f / l the block preconditioner gives a segment along itself
+    #: share of f / l the block preconditioner gives a segment along itself (0; 0.1 doubles
+    #: the iterations on case A steps, 1 with ``block_reg`` 0 would be the scalar Laplacian)
     block_axial: float = 0.0
     #: iterations without a new lowest residual after which the block preconditioner gives
     #: the step to the scalar one (from the same start); case A steps converge in 10-17
@@ -523,13 +542,19 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     stats = np.zeros(2, dtype=np.int64)
     smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
+    l_prev = np.empty((m, 2))
+    predict = False
+    predict_on = st.material_predict and block
     while True:
         t0 = time.perf_counter()
         RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
                            fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
         RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g, f_top,
                           EA, compression, eps_f, kappa0, st.material_tol, st.material_newton,
-                          tension, chain, work, stats)
+                          tension, chain, work, stats, l_prev if predict else None)
+        if predict_on:
+            l_prev[:] = l_below
+            predict = True
         t1 = time.perf_counter()
         RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
                   f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
@@ -625,7 +650,11 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                                d_top, l_top)
             RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
                               f_top, EA, compression, eps_f, kappa0, st.material_tol,
-                              st.material_newton, tension, chain, work, stats)
+                              st.material_newton, tension, chain, work, stats,
+                              l_prev if predict else None)
+            if predict_on:
+                l_prev[:] = l_below
+                predict = True
             RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
                       tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
             RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
