@@ -43,8 +43,9 @@ How (one iteration)
 
    ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
    sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
-   with friction 0.5 and jammed crossings) the step is solved again from its start with
-   ``"scalar"``.
+   with friction 0.5 and jammed crossings, the first rows of a run) the step is not converged
+   (``solve_zone`` gives it to Newton) or, with ``scalar_retry``, solved again from its start
+   with ``"scalar"``.
 3. *Wall active set*: a crossing resting on its tangent plane moves in it (block) or is a
    Dirichlet row of ``L`` (scalar); its own balance, ``wall_update`` (the point its segments'
    force densities put it at), decides whether it stays: it leaves the set when that point lies
@@ -168,6 +169,11 @@ class RelaxSettings:
     #: iterations without a new lowest residual after which the block preconditioner gives
     #: the step to the scalar one (from the same start); case A steps converge in 10-17
     block_stall: int = 20
+    #: a step the block preconditioner stalls on is solved again with the scalar one (off: it
+    #: is not converged, and ``solve_zone`` gives it to Newton, which is cheaper than the
+    #: scalar iteration there: 218-241 iterations on the friction-0.5 steps of 16 and 48
+    #: carriers, and the start-up steps of a case A run it does not converge on at all)
+    scalar_retry: bool = False
     #: largest move of a crossing in one block update, as a fraction of its shortest segment
     #: (the whole update is scaled down to it: the stiffness holds for moves small against
     #: the segments)
@@ -436,11 +442,11 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
                         **kw):
     """``_relax_held``; where the block preconditioner stalls (no new lowest residual in
     ``block_stall`` iterations: steps with friction 0.5 and jammed crossings, where it moves
-    the crossings too far), the step again from the same start with the scalar one, the
-    iterations and times of both counted."""
+    the crossings too far) and ``scalar_retry``, the step again from the same start with the
+    scalar one, the iterations and times of both counted."""
     res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, settings=settings,
                       **kw)
-    if res.converged or settings.preconditioner != "block":
+    if res.converged or settings.preconditioner != "block" or not settings.scalar_retry:
         return res
     again = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
                         settings=dataclasses.replace(settings, preconditioner="scalar"), **kw)
@@ -560,8 +566,6 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                   f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
         residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
                     if m else 0.0)
-        RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
-                           float(mu), g_new, psi)
         history.append(residual)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
@@ -681,6 +685,9 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
+    # the friction bounds of the last (converged) geometry, for the next step
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
+                       float(mu), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
