@@ -815,21 +815,17 @@ def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
 
 
 @njit(cache=True)
-def _median_split(a, b, perm, coord, low, up, seg, id_l, id_r, buf, key, side):
-    """Sort perm[a:b] by coord into buf, label the halves id_l / id_r in seg and flag in side
-    the crossings of the first half with a neighbour in the second; returns their number."""
+def _split_separator(a, b, order, low, up, seg, id_l, id_r, side):
+    """Label the first half of order[a:b] id_l and the second id_r in seg, flag in side (1)
+    the crossings of the first half with a lattice neighbour in the second (0 the others of the
+    first half, 2 the second half); returns their number."""
     n = b - a
-    for i in range(a, b):
-        key[i - a] = coord[perm[i]]
-    order = np.argsort(key[:n])
-    for i in range(n):
-        buf[i] = perm[a + order[i]]
     half = n // 2
-    for i in range(n):
-        seg[buf[i]] = id_l if i < half else id_r
+    for i in range(a, b):
+        seg[order[i]] = id_l if i - a < half else id_r
     n_s = 0
-    for i in range(half):
-        c = buf[i]
+    for i in range(a, a + half):
+        c = order[i]
         sep = False
         for s in range(2):
             nb = low[c, s]
@@ -840,7 +836,23 @@ def _median_split(a, b, perm, coord, low, up, seg, id_l, id_r, buf, key, side):
                 sep = True
         side[c] = 1 if sep else 0
         n_s += side[c]
+    for i in range(a + half, b):
+        side[order[i]] = 2
     return n_s
+
+
+@njit(cache=True)
+def _partition(a, b, order, side, buf):
+    """Stable partition of order[a:b] into the first half's crossings off the separator (side
+    0), the second half's (2), then the separator's (1)."""
+    k = 0
+    for group in (0, 2, 1):
+        for i in range(a, b):
+            if side[order[i]] == group:
+                buf[k] = order[i]
+                k += 1
+    for i in range(b - a):
+        order[a + i] = buf[i]
 
 
 @njit(cache=True)
@@ -851,14 +863,14 @@ def band_dissection(m, low, up, u, v, leaf, perm):
     of the first half with a lattice neighbour (``low``/``up``, (m, 2)) in the second; the order
     is the first half's, then the second's, then the separator's (George 1973). Sets up to
     ``leaf`` crossings keep their order. On the whole band the median of u cuts it into two
-    arcs at two seams, whose crossings are the first separator. perm (m,) receives the order
-    (perm[i]: the crossing at position i)."""
+    arcs at two seams, whose crossings are the first separator. The crossings are sorted by u
+    and by v once, and every split partitions both orders stably, so each set's crossings stay
+    sorted: O(m log m). perm (m,) receives the order (perm[i]: the crossing at position i)."""
     seg = np.zeros(m, dtype=np.int64)
     side = np.zeros(m, dtype=np.int8)
     buf = np.empty(m, dtype=np.int64)
-    key = np.empty(m)
-    for i in range(m):
-        perm[i] = i
+    by_u = np.argsort(u)
+    by_v = np.argsort(v)
     stack = np.empty((2 * m + 2, 2), dtype=np.int64)
     stack[0, 0] = 0
     stack[0, 1] = m
@@ -870,33 +882,26 @@ def band_dissection(m, low, up, u, v, leaf, perm):
         n = b - a
         if n <= leaf:
             continue
-        half = n // 2
         id_l, id_r = next_id, next_id + 1
         next_id += 2
-        s_u = _median_split(a, b, perm, u, low, up, seg, id_l, id_r, buf, key, side)
-        s_v = _median_split(a, b, perm, v, low, up, seg, id_l, id_r, buf, key, side)
-        if s_u < s_v:
-            _median_split(a, b, perm, u, low, up, seg, id_l, id_r, buf, key, side)
-        n_s = s_u if s_u < s_v else s_v
-        n_l = half - n_s
-        il, ir, isep = a, a + n_l, b - n_s
-        for i in range(n):
-            c = buf[i]
-            if i >= half:
-                perm[ir] = c
-                ir += 1
-            elif side[c] == 1:
-                perm[isep] = c
-                isep += 1
-                seg[c] = -1
-            else:
-                perm[il] = c
-                il += 1
+        s_v = _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
+        s_u = _split_separator(a, b, by_u, low, up, seg, id_l, id_r, side)
+        if s_v <= s_u:
+            _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
+        n_s = min(s_u, s_v)
+        for i in range(a, b):
+            if side[by_u[i]] == 1:
+                seg[by_u[i]] = -1
+        _partition(a, b, by_u, side, buf)
+        _partition(a, b, by_v, side, buf)
+        n_l = n // 2 - n_s
         stack[top, 0] = a
         stack[top, 1] = a + n_l
         stack[top + 1, 0] = a + n_l
         stack[top + 1, 1] = b - n_s
         top += 2
+    for i in range(m):
+        perm[i] = by_u[i]
 
 
 @njit(cache=True)

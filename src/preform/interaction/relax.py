@@ -291,7 +291,7 @@ class _BlockStiffness:
         m = lat.m
         self.m = m
         r = np.hypot(pos[:, 0], pos[:, 1])
-        u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(np.median(r)) if m else 1.0)
+        u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
         perm = np.empty(m, dtype=np.int64)
         RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
         pinv = np.empty(m, dtype=np.int64)
