@@ -157,3 +157,26 @@ def block_stiffness(st, fell, top, ten, f_top, h, eps2, l_jam, k_jam, floor, reg
         P[3 * c:3 * c + 3, 3 * c:3 * c + 3] -= np.outer(n, n)
         N[3 * c:3 * c + 3, 3 * c:3 * c + 3] = np.outer(n, n)
     return P @ K @ P + N, P
+
+
+class Anderson:
+    """Type-II Anderson mixing written out with NumPy (the twin of ``relax._Anderson``):
+    x+ = G(x) - (dX + dR) gamma, gamma the regularised least-squares fit of r by dR over the
+    last ``depth`` differences."""
+
+    def __init__(self, depth):
+        self.depth = depth
+        self.xs, self.rs = [], []
+
+    def __call__(self, x, gx):
+        r = gx - x
+        self.xs.append(x.copy())
+        self.rs.append(r.copy())
+        if len(self.xs) == 1:
+            return gx
+        dX = np.diff(np.array(self.xs[-self.depth - 1:]), axis=0).T
+        dR = np.diff(np.array(self.rs[-self.depth - 1:]), axis=0).T
+        G = dR.T @ dR
+        gamma = np.linalg.solve(G + (1e-12 * np.trace(G) + 1e-300) * np.eye(G.shape[0]),
+                                dR.T @ r)
+        return gx - (dX + dR) @ gamma

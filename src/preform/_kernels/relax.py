@@ -944,3 +944,40 @@ def cap_moves(m, low, l_below, cap, lmin, delta):
             for i in range(3):
                 delta[c, i] *= scale
     return scale
+
+
+@njit(cache=True)
+def anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b):
+    """One pass of Anderson mixing (``interaction/relax._Anderson``) over x, gx (n,), r = gx - x:
+    with a previous iterate (have_prev) the new differences x - x_prev, r - r_prev into column j
+    of DX, DR (n, depth) and row and column j of the Gram matrix G (depth, depth) over the k
+    columns held (j among them); b (depth,) receives DR[:, :k]^T r; x_prev, r_prev become x, r."""
+    col = np.zeros(max(k, 1))
+    for i in range(k):
+        b[i] = 0.0
+    for e in range(n):
+        r = gx[e] - x[e]
+        if have_prev:
+            DX[e, j] = x[e] - x_prev[e]
+            dr = r - r_prev[e]
+            DR[e, j] = dr
+            for i in range(k):
+                col[i] += DR[e, i] * dr
+        for i in range(k):
+            b[i] += DR[e, i] * r
+        x_prev[e] = x[e]
+        r_prev[e] = r
+    if have_prev:
+        for i in range(k):
+            G[j, i] = col[i]
+            G[i, j] = col[i]
+
+
+@njit(cache=True)
+def anderson_combine(n, gx, DX, DR, gamma, k, out):
+    """out (n,) = gx - (DX[:, :k] + DR[:, :k]) gamma."""
+    for e in range(n):
+        v = gx[e]
+        for i in range(k):
+            v -= gamma[i] * (DX[e, i] + DR[e, i])
+        out[e] = v

@@ -345,48 +345,52 @@ class _Anderson:
     """Type-II Anderson mixing of a fixed-point map x -> G(x) (residual r = G(x) - x) over the
     last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
     paper's eq. 17 is the case of one difference). The least-squares problem goes through the
-    Gram matrix dR^T dR, kept up to date one column per iteration: O(N depth) a call."""
+    Gram matrix dR^T dR, kept up to date one column per iteration: two passes over the
+    differences a call (``_kernels.relax.anderson_gram``, ``anderson_combine``)."""
 
     def __init__(self, depth):
         self.depth = depth
+        self.n = -1
         self.reset()
 
     def reset(self):
         self.k = 0            # differences stored
         self.head = 0         # next ring slot
-        self.x_prev = self.r_prev = None
-        self.DX = self.DR = None
-        self.G = np.zeros((self.depth, self.depth))
+        self.have_prev = False
+        self.G = np.zeros((max(self.depth, 1), max(self.depth, 1)))
 
     def __call__(self, x, gx):
-        r = gx - x
         if self.depth <= 0:
             return gx
-        if self.DX is None or self.DX.shape[1] != x.size:
-            self.DX = np.empty((self.depth, x.size))
-            self.DR = np.empty((self.depth, x.size))
-        if self.x_prev is not None:
-            j = self.head
-            np.subtract(x, self.x_prev, out=self.DX[j])
-            np.subtract(r, self.r_prev, out=self.DR[j])
+        n = x.size
+        if n != self.n:
+            self.n = n
+            self.DX = np.empty((n, self.depth))
+            self.DR = np.empty((n, self.depth))
+            self.x_prev = np.empty(n)
+            self.r_prev = np.empty(n)
+            self.b = np.empty(self.depth)
+            self.out = np.empty(n)
+            self.reset()
+        j = self.head
+        if self.have_prev:
             self.head = (j + 1) % self.depth
             self.k = min(self.k + 1, self.depth)
-            col = self.DR[: self.k] @ self.DR[j]
-            self.G[j, : self.k] = col
-            self.G[: self.k, j] = col
-        self.x_prev, self.r_prev = x.copy(), r.copy()
+        RK.anderson_gram(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G, self.k,
+                         j, self.have_prev, self.b)
+        self.have_prev = True
         k = self.k
         if k == 0:
             return gx
         G = self.G[:k, :k]
-        b = self.DR[:k] @ r
         reg = 1e-12 * np.trace(G) + 1e-300
         try:
-            gamma = np.linalg.solve(G + reg * np.eye(k), b)
+            gamma = np.linalg.solve(G + reg * np.eye(k), self.b[:k])
         except np.linalg.LinAlgError:
             self.reset()
             return gx
-        return gx - gamma @ self.DX[:k] - gamma @ self.DR[:k]
+        RK.anderson_combine(n, gx, self.DX, self.DR, gamma, k, self.out)
+        return self.out
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
