@@ -398,6 +398,40 @@ def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
     assert not blk.factor()
 
 
+def test_tangent_part_and_cap_moves_match_numpy(captured):
+    """``tangent_part``: the force less its normal part at the resting crossings only;
+    ``cap_moves``: the whole update scaled so that no crossing moves further than the cap times
+    its shortest segment, the crossing that sets it exactly at the cap."""
+    st, h, lat, fell, top, d_below, l_below, d_top, l_top, ten, f_top, l_jam, active, plane = \
+        _block_inputs(captured)
+    m = st.m
+    rng = np.random.default_rng(4)
+    force = rng.normal(size=(m, 3))
+    out = np.empty((m, 3))
+    RK.tangent_part(m, force, plane, active, out)
+    n = plane[:, 3:]
+    ref = force - np.where(active, np.einsum("ij,ij->i", force, n), 0.0)[:, None] * n
+    assert np.allclose(out, ref, rtol=0, atol=1e-15)
+    lmin = np.full(m, np.inf)
+    for c in range(m):
+        for side in range(2):
+            lmin[c] = min(lmin[c], l_below[c, side])
+            if lat.low[c, side] >= 0:
+                lmin[lat.low[c, side]] = min(lmin[lat.low[c, side]], l_below[c, side])
+    delta = rng.normal(size=(m, 3)) * 1e-3
+    size = np.linalg.norm(delta, axis=1)
+    cap = 0.5 * float(np.min(size / lmin)) * 3.0        # some moves beyond the cap
+    want = min(1.0, float(np.min(cap * lmin / size)))
+    d2 = delta.copy()
+    scale = RK.cap_moves(m, lat.low, l_below, cap, np.empty(m), d2)
+    assert want < 1.0 and np.isclose(scale, want, rtol=1e-12)
+    assert np.allclose(d2, want * delta, rtol=1e-12)
+    assert np.max(np.linalg.norm(d2, axis=1) / lmin) <= cap * (1 + 1e-12)
+    d3 = delta.copy()
+    assert RK.cap_moves(m, lat.low, l_below, 1e9, np.empty(m), d3) == 1.0
+    assert np.array_equal(d3, delta)
+
+
 def test_band_dissection_orders_with_little_fill(captured):
     """``band_dissection`` gives a permutation, and the block factor's fill in its order is
     within 1.5x of METIS nested dissection's (``frontal.dissection_order``; measured 1.2x on

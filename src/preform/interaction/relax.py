@@ -771,7 +771,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     into ``state.bound`` for the next step. A call that asks for the frontal iteration of the
     bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
     to 1e-3) is Newton's (``frontal.solve_zone_inplace``), as is a step the relaxation does not
-    converge on within ``relax_settings.max_iter`` (``newton_fallback``, counted in
+    converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
+    the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``, counted in
     ``FALLBACKS``). ``tol``: the balance tolerance (default ``relax_settings.tol``).
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
@@ -794,8 +795,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 top_tensions=ring_top_tensions(state, bc))
     if not res.converged:
         if rs.newton_fallback:
-            # the relaxation stalls on some steps where new crossings slide far (16 carriers,
-            # friction 0.25: 1 step in 80): the Newton reference solves that step instead
+            # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
+            # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
                                                 centre=centres)
             FALLBACKS[0] += 1
