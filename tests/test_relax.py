@@ -376,7 +376,7 @@ def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
     blk = R._BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))
     RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, ten, f_top,
-                    l_jam, k_jam, 1e-3, 1e-3, 0.0, plane, active, blk.slot_diag, blk.slot_below,
+                    l_jam, k_jam, 1e-3, 1e-3, plane, active, blk.slot_diag, blk.slot_below,
                     blk.below_first, blk.vals, blk.Dg)
     K = np.zeros((3 * m, 3 * m))
     for col in range(m):

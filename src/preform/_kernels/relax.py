@@ -568,8 +568,7 @@ def _project_block(B, pa, na, pb, nb, out, scale):
 
 @njit(cache=True)
 def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tension, f_top, l_jam,
-                 k_jam, floor, reg, axial, plane, active, slot_diag, slot_below, below_first, vals,
-                 Dg):
+                 k_jam, floor, reg, plane, active, slot_diag, slot_below, below_first, vals, Dg):
     """Blocks of the lattice's geometric stiffness K (3m x 3m, 3 x 3 blocks per pair of
     crossings) into vals (nslots, 3, 3), the upper triangle of a fixed pattern in an elimination
     order: per segment ``B = w (I - d d^T) + k_j d d^T + reg max(f, floor) / l I`` with ``w =
@@ -600,8 +599,8 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
             fj = k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
             kj = k_jam if fj > 0.0 else 0.0
             _segment_block(d_below[c, side, 0] / l, d_below[c, side, 1] / l,
-                           d_below[c, side, 2] / l, max(f - fj, floor) / l,
-                           kj + axial * max(f, floor) / l, reg * max(f, floor) / l, B)
+                           d_below[c, side, 2] / l, max(f - fj, floor) / l, kj,
+                           reg * max(f, floor) / l, B)
             for a in range(3):
                 for b in range(3):
                     Dg[c, a, b] += B[a, b]
@@ -623,8 +622,7 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
             continue
         l = l_top[k]
         w = max(f_top[k], floor) / l
-        _segment_block(d_top[k, 0] / l, d_top[k, 1] / l, d_top[k, 2] / l, w, axial * w, reg * w,
-                       B)
+        _segment_block(d_top[k, 0] / l, d_top[k, 1] / l, d_top[k, 2] / l, w, 0.0, reg * w, B)
         for a in range(3):
             for b in range(3):
                 Dg[c, a, b] += B[a, b]

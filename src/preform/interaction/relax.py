@@ -163,9 +163,6 @@ class RelaxSettings:
     #: changes Anderson's map under it (144 carriers: 12-15 iterations factorising once, 25-35
     #: every 3 iterations)
     block_refactor_every: int = 0
-    #: share of f / l the block preconditioner gives a segment along itself (0; 0.1 doubles
-    #: the iterations on case A steps, 1 with ``block_reg`` 0 would be the scalar Laplacian)
-    block_axial: float = 0.0
     #: iterations without a new lowest residual after which the block preconditioner gives
     #: the step to the scalar one (from the same start); case A steps converge in 10-17
     block_stall: int = 20
@@ -233,6 +230,8 @@ class RelaxResult:
     sweep_stats: tuple = (0, 0)
     #: the block preconditioner stalled and the scalar one solved the step
     fallback_scalar: bool = False
+    #: factorisations of the preconditioner
+    factorisations: int = 0
 
 
 class _Laplacian:
@@ -459,6 +458,7 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
     for key, v in res.times.items():
         again.times[key] += v
     again.set_changes += res.set_changes
+    again.factorisations += res.factorisations
     again.sweep_stats = tuple(a + b for a, b in zip(again.sweep_stats, res.sweep_stats))
     again.fallback_scalar = True
     return again
@@ -553,6 +553,9 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
     l_prev = np.empty((m, 2))
+    factorisations = 0
+    inner = lat.low >= 0
+    factored_jam = None
     predict = False
     predict_on = st.material_predict and block
     while True:
@@ -592,15 +595,23 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         it += 1
         if block:
             due = bool(st.block_refactor_every) and (it - 1) % st.block_refactor_every == 0
+            # the jamming stiffness k_jam d d^T enters K where a segment is shorter than a
+            # width: where that set changed since the factorisation, K is factorised anew and
+            # Anderson's history (of the old map) cleared
+            jammed = (l_below < l_jam) & inner
+            if factored_jam is not None and not np.array_equal(jammed, factored_jam):
+                due = True
+                mixer.reset()
         else:
             due = (it - 1) % st.refactor_every == 0
         if due or factored_active is None or not np.array_equal(active, factored_active):
+            factorisations += 1
             if block:
+                factored_jam = jammed
                 reg = st.block_reg
                 while True:
                     RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
-                                    tension, f_top, l_jam, k_jam, st.floor, reg, st.block_axial,
-                                    plane, active,
+                                    tension, f_top, l_jam, k_jam, st.floor, reg, plane, active,
                                     blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
                                     blk.Dg)
                     if blk.factor():
@@ -699,6 +710,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                        f_top=f_top, wall_force=wall_force, active=active.copy(), iterations=it,
                        residual=float(residual), history=np.array(history),
                        converged=converged, times=times, set_changes=set_changes,
+                       factorisations=factorisations,
                        sweep_stats=(int(stats[0]), int(stats[1])))
 
 
