@@ -1,10 +1,10 @@
 """Force-density relaxation against the Newton reference on captured case A steps (issue 14).
 
 ``python benchmarks/bench_relax.py [--carriers 48 96 144] [--mu 0.25] [--steps 3] [--repeat 3]
-[--preconditioner block scalar] [--warm-solver relax|newton]``
+[--preconditioner block scalar] [--warm-solver relax|newton] [--warm N]``
 
 For each carrier count a case A run (``examples/case_a.toml``, interaction model, the
-``--warm-solver``) is advanced to a zone of full size (250 steps; 300 with 144 carriers), then
+``--warm-solver``) is advanced to a zone of full size (``--warm``: 250 steps; 300 with 144 carriers), then
 ``--steps`` consecutive steps are captured (the problem ``InteractionZone.step`` poses its
 solver: fell points anchored, crossings created, wall planes) and each is solved by
 ``frontal.solve_zone_inplace`` and by ``relax.relax`` with each ``--preconditioner``
@@ -56,13 +56,16 @@ def main(argv=None):
                     choices=["block", "scalar"])
     ap.add_argument("--warm-solver", default="relax", choices=["relax", "newton"],
                     help="solver of the run that brings the zone to full size")
+    ap.add_argument("--warm", type=int, default=None,
+                    help="steps before the captured ones (default 250, 300 with 144 carriers; "
+                         "from about 420 at 144 carriers a fifth of the segments jam)")
     args = ap.parse_args(argv)
     from test_relax import _capture
     from preform.interaction import frontal, relax as R
 
     summary = {}
     for n in args.carriers:
-        warm = 300 if n >= 144 else 250
+        warm = args.warm if args.warm is not None else (300 if n >= 144 else 250)
         s, speed = _stepper(n, args.mu, warm, args.warm_solver)
         for k in range(args.steps):
             st, bc, f_top, s_old = _capture(s, speed)
@@ -98,6 +101,7 @@ def main(argv=None):
                 print(f"{n} carriers, mu {args.mu}, step {k}, {pre}: {m} crossings; Newton "
                       f"{1e3 * np.median(tn):.1f} ms ({newton} Newton steps); relax "
                       f"{1e3 * np.median(tr):.1f} ms, {res.iterations} iterations{note}, "
+                      f"{res.factorisations} factorisations, "
                       f"{us:.3f} us per crossing per iteration; ms per step: {per}; "
                       f"{newton_per:.2f} material Newton steps per sweep and yarn; "
                       f"{int(res.active.sum())} on the wall; |pos - Newton| "
