@@ -30,8 +30,10 @@ How (one iteration)
      definite (``block_values``). It is factorised once per solve at the start tensions (block
      LDL^T, ``ldl_numeric``, in a nested-dissection order of the band of crossings around the
      axis, ``band_dissection``; O(m^1.5) work for the factor, O(m log m) fill, so per
-     iteration the solve is nearly linear). A crossing resting on the wall moves in its tangent
-     plane (its rows projected, ``P K P + n n^T``).
+     iteration the solve is nearly linear), and anew, with Anderson's history cleared, where
+     the set of jammed segments changed (the jamming stiffness enters or leaves ``K``). A
+     crossing resting on the wall moves in its tangent plane (its rows projected, ``P K P + n
+     n^T``).
    - ``"scalar"``: the force-density Laplacian (Schek 1974): with ``w = f / l`` per segment,
      node balance ``sum_j w_cj (P_j - P_c) = 0`` is linear in the positions, one scalar weighted
      Laplacian ``L`` shared by x, y and z (``w`` floored where a segment is nearly slack, the
@@ -158,10 +160,10 @@ class RelaxSettings:
     #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
     #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
     block_reg: float = 1e-3
-    #: iterations between factorisations of the block preconditioner (0: once per solve and
-    #: when the wall's active set changes): a preconditioner that changes within a solve
-    #: changes Anderson's map under it (144 carriers: 12-15 iterations factorising once, 25-35
-    #: every 3 iterations)
+    #: iterations between factorisations of the block preconditioner (0: once per solve, and
+    #: when the wall's active set or the set of jammed segments changes): a preconditioner
+    #: that changes within a solve changes Anderson's map under it (144 carriers: 12-15
+    #: iterations factorising once, 25-35 every 3 iterations)
     block_refactor_every: int = 0
     #: iterations without a new lowest residual after which the block preconditioner gives
     #: the step to the scalar one (from the same start); case A steps converge in 10-17
