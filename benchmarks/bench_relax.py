@@ -1,21 +1,25 @@
 """Force-density relaxation against the Newton reference on captured case A steps (issue 14).
 
-``python benchmarks/bench_relax.py [--carriers 48 96 144] [--mu 0.25] [--steps 3] [--repeat 3]``
+``python benchmarks/bench_relax.py [--carriers 48 96 144] [--mu 0.25] [--steps 3] [--repeat 3]
+[--preconditioner block scalar] [--warm-solver relax|newton] [--warm N]``
 
-For each carrier count a case A run (``examples/case_a.toml``, interaction model, Newton solver)
-is advanced to a zone of full size (250 steps; 300 with 144 carriers), then ``--steps``
-consecutive steps are captured (the problem ``InteractionZone.step`` poses its solver: fell points
-anchored, crossings created, wall planes) and each is solved by ``frontal.solve_zone_inplace`` and by
-``relax.relax`` (``--repeat`` times, medians). Printed per carrier count: crossings, Newton ms
-and Newton steps per step, relaxation ms, iterations, microseconds per crossing per iteration and
-the breakdown per part (material sweep, forces and residual, factorisation, solves, wall, Anderson
-mixing), and the largest position difference between the two solutions.
+For each carrier count a case A run (``examples/case_a.toml``, interaction model, the
+``--warm-solver``) is advanced to a zone of full size (``--warm``: 250 steps; 300 with 144 carriers), then
+``--steps`` consecutive steps are captured (the problem ``InteractionZone.step`` poses its
+solver: fell points anchored, crossings created, wall planes) and each is solved by
+``frontal.solve_zone_inplace`` and by ``relax.relax`` with each ``--preconditioner``
+(``--repeat`` times, medians). Printed per step: crossings, Newton ms and Newton steps,
+relaxation ms, iterations, microseconds per crossing per iteration, the breakdown per part in ms
+per step (set-up: order, pattern and symbolic analysis; material sweeps with the segments;
+forces, residual and friction bounds; factorisation; solves; wall; block-Jacobi corrections;
+Anderson mixing), material Newton steps per sweep and yarn, and the largest position difference
+to Newton's solution. Then per carrier count and preconditioner the medians over the steps, and
+the spread of the microseconds per crossing per iteration between the carrier counts.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -26,26 +30,45 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 
+def _stepper(carriers, mu, steps, solver):
+    from test_relax import _config
+    from preform.reference import resolve_pose_lead
+    from preform.simulation import load_geometry, make_stepper
+    from preform.stepping import take_up_speed
+
+    cfg = _config(carriers, mu, solver)
+    mandrel, cl = load_geometry(cfg)
+    cfg = resolve_pose_lead(cfg, mandrel, cl)
+    s = make_stepper(cfg, mandrel, cl)
+    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
+    for _ in range(steps):
+        s.advance(speed())
+    return s, speed
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--carriers", type=int, nargs="+", default=[48, 96, 144])
     ap.add_argument("--mu", type=float, default=0.25)
     ap.add_argument("--steps", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--refactor-every", type=int, default=None,
-                    help="iterations between factorisations (default: RelaxSettings')")
+    ap.add_argument("--preconditioner", nargs="+", default=["block", "scalar"],
+                    choices=["block", "scalar"])
+    ap.add_argument("--warm-solver", default="relax", choices=["relax", "newton"],
+                    help="solver of the run that brings the zone to full size")
+    ap.add_argument("--warm", type=int, default=None,
+                    help="steps before the captured ones (default 250, 300 with 144 carriers; "
+                         "from about 420 at 144 carriers a fifth of the segments jam)")
     args = ap.parse_args(argv)
-    from test_relax import _stepper, captured   # the tests' capture of a zone step
+    from test_relax import _capture
     from preform.interaction import frontal, relax as R
 
-    settings = (R.RelaxSettings() if args.refactor_every is None
-                else R.RelaxSettings(refactor_every=args.refactor_every))
+    summary = {}
     for n in args.carriers:
-        warm = 300 if n >= 144 else 250
-        s, speed = _stepper(n, args.mu, warm)
-        rows = []
+        warm = args.warm if args.warm is not None else (300 if n >= 144 else 250)
+        s, speed = _stepper(n, args.mu, warm, args.warm_solver)
         for k in range(args.steps):
-            st, bc, f_top, s_old = captured(n, args.mu, warm)
+            st, bc, f_top, s_old = _capture(s, speed)
             m = st.m
             tn, newton = [], 0
             for _ in range(args.repeat):
@@ -55,30 +78,50 @@ def main(argv=None):
                 tn.append(time.perf_counter() - t0)
                 newton = rep.newton
             b0, f0 = R.start_bounds(st, bc)
-            tr, parts = [], []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell,
-                              s_old[:m],
-                              bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
-                              width=bc.width, plane=bc.plane, settings=settings)
-                tr.append(time.perf_counter() - t0)
-                parts.append(res.times)
-            it = max(res.iterations, 1)
-            part = {key: 1e3 * float(np.median([p[key] for p in parts])) / it for key in parts[0]}
-            rows.append((m, 1e3 * np.median(tn), newton, 1e3 * np.median(tr), res.iterations,
-                         1e6 * np.median(tr) / (it * m), part,
-                         float(np.abs(res.pos - stN.pos[:m]).max()), res.converged,
-                         int(res.active.sum())))
-            s.advance(speed())          # the next step of the run (Newton)
-        for m, tN, newton, tR, its, us, part, dpos, ok, act in rows:
-            per = ", ".join(f"{key} {v:.3f}" for key, v in part.items())
-            print(f"{n} carriers, mu {args.mu}: {m} crossings; Newton {tN:.1f} ms ({newton} "
-                  f"Newton steps); relax {tR:.1f} ms, {its} iterations{'' if ok else ' (NOT CONVERGED)'}, "
-                  f"{us:.3f} us per crossing per iteration; ms per iteration: {per}; "
-                  f"{act} on the wall; |pos - Newton| {dpos:.2e} m")
-        sys.stdout.flush()
-        _stepper.cache_clear()
+            for pre in args.preconditioner:
+                settings = R.RelaxSettings(preconditioner=pre)
+                tr, parts = [], []
+                for _ in range(args.repeat):
+                    t0 = time.perf_counter()
+                    res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m],
+                                  st.material_fell, s_old[:m], bc.fell, bc.top, f0, b0,
+                                  f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width,
+                                  plane=bc.plane, settings=settings)
+                    tr.append(time.perf_counter() - t0)
+                    parts.append(res.times)
+                it = max(res.iterations, 1)
+                part = {key: 1e3 * float(np.median([p[key] for p in parts])) for key in parts[0]}
+                sweeps = it * (1 + (settings.smoothing if pre == "scalar" else 0)) + 1
+                newton_per = res.sweep_stats[0] / (sweeps * st.n_yarns)
+                us = 1e6 * np.median(tr) / (it * m)
+                summary.setdefault((n, pre), []).append((1e3 * np.median(tr), it, us, part))
+                per = ", ".join(f"{key} {v:.1f}" for key, v in part.items())
+                note = "" if res.converged else " (NOT CONVERGED)"
+                note += " (scalar after a block stall)" if res.fallback_scalar else ""
+                print(f"{n} carriers, mu {args.mu}, step {k}, {pre}: {m} crossings; Newton "
+                      f"{1e3 * np.median(tn):.1f} ms ({newton} Newton steps); relax "
+                      f"{1e3 * np.median(tr):.1f} ms, {res.iterations} iterations{note}, "
+                      f"{res.factorisations} factorisations, "
+                      f"{us:.3f} us per crossing per iteration; ms per step: {per}; "
+                      f"{newton_per:.2f} material Newton steps per sweep and yarn; "
+                      f"{int(res.active.sum())} on the wall; |pos - Newton| "
+                      f"{float(np.abs(res.pos - stN.pos[:m]).max()):.2e} m")
+                sys.stdout.flush()
+            s.advance(speed())          # the next step of the run
+    print("medians over the steps:")
+    for pre in args.preconditioner:
+        per_n = {}
+        for n in args.carriers:
+            rows = summary[(n, pre)]
+            ms, its, us = (float(np.median([r[i] for r in rows])) for i in range(3))
+            per_n[n] = us
+            part = {key: float(np.median([r[3][key] for r in rows])) for key in rows[0][3]}
+            print(f"  {pre}, {n} carriers: {ms:.1f} ms a step, {its:.0f} iterations, {us:.3f} us "
+                  "per crossing per iteration; " + ", ".join(f"{k} {v:.1f}" for k, v in
+                                                              part.items()) + " ms")
+        if len(per_n) > 1:
+            print(f"  {pre}: largest / smallest us per crossing per iteration "
+                  f"{max(per_n.values()) / min(per_n.values()):.2f} (issue 14: within 1.3)")
 
 
 if __name__ == "__main__":

@@ -122,3 +122,61 @@ def laplacian(st, w_below, w_top, active):
         L[:, c] = 0.0
         L[c, c] = 1.0
     return L, diag
+
+
+def block_stiffness(st, fell, top, ten, f_top, h, eps2, l_jam, k_jam, floor, reg, plane, active):
+    """Dense block preconditioner (3m x 3m): per segment ``max(f - f_jam, floor) / l (I - d d^T)
+    + k_jam d d^T + reg max(f, floor) / l I`` on the diagonal blocks of both ends and minus it
+    on their coupling (fell and top segments: the crossing's diagonal only); rows and columns of
+    a crossing on the wall projected onto its plane, plus n n^T on its diagonal."""
+    m = st.m
+    K = np.zeros((3 * m, 3 * m))
+    I3 = np.eye(3)
+    for k, (side, chain, pts, l, lt) in enumerate(segments(st, fell, top, h, eps2)):
+        for i, c in enumerate(chain):
+            d = (pts[i + 1] - pts[i]) / l[i]
+            f = ten[c, side]
+            fj = k_jam * (l_jam - l[i]) if (i > 0 and l[i] < l_jam) else 0.0
+            B = (max(f - fj, floor) / l[i] * (I3 - np.outer(d, d))
+                 + (k_jam if fj > 0 else 0.0) * np.outer(d, d) + reg * max(f, floor) / l[i] * I3)
+            K[3 * c:3 * c + 3, 3 * c:3 * c + 3] += B
+            if i > 0:
+                b = chain[i - 1]
+                K[3 * b:3 * b + 3, 3 * b:3 * b + 3] += B
+                K[3 * c:3 * c + 3, 3 * b:3 * b + 3] -= B
+                K[3 * b:3 * b + 3, 3 * c:3 * c + 3] -= B
+        if chain:
+            c = chain[-1]
+            d = (pts[-1] - pts[-2]) / lt
+            w = max(f_top[k], floor) / lt
+            K[3 * c:3 * c + 3, 3 * c:3 * c + 3] += w * ((1 + reg) * I3 - np.outer(d, d))
+    P = np.eye(3 * m)
+    N = np.zeros((3 * m, 3 * m))
+    for c in np.nonzero(active)[0]:
+        n = plane[c, 3:]
+        P[3 * c:3 * c + 3, 3 * c:3 * c + 3] -= np.outer(n, n)
+        N[3 * c:3 * c + 3, 3 * c:3 * c + 3] = np.outer(n, n)
+    return P @ K @ P + N, P
+
+
+class Anderson:
+    """Type-II Anderson mixing written out with NumPy (the twin of ``relax._Anderson``):
+    x+ = G(x) - (dX + dR) gamma, gamma the regularised least-squares fit of r by dR over the
+    last ``depth`` differences."""
+
+    def __init__(self, depth):
+        self.depth = depth
+        self.xs, self.rs = [], []
+
+    def __call__(self, x, gx):
+        r = gx - x
+        self.xs.append(x.copy())
+        self.rs.append(r.copy())
+        if len(self.xs) == 1:
+            return gx
+        dX = np.diff(np.array(self.xs[-self.depth - 1:]), axis=0).T
+        dR = np.diff(np.array(self.rs[-self.depth - 1:]), axis=0).T
+        G = dR.T @ dR
+        gamma = np.linalg.solve(G + (1e-12 * np.trace(G) + 1e-300) * np.eye(G.shape[0]),
+                                dR.T @ r)
+        return gx - (dX + dR) @ gamma

@@ -97,14 +97,59 @@ def _yarn_energy(nc, chain, side, s_ref, s0, l_below, s_old, g, F_top, EA, compr
 
 
 @njit(cache=True)
+def _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top, F_top, EA, compression,
+                    eps_f, kappa0, tension, work):
+    """At the material work[:nc, 5] of one yarn: the residual dE/ds into work[:, 0], the
+    tridiagonal Hessian (diagonal work[:, 1], coupling of i and i-1 work[:, 2]) and the segment
+    tensions into tension. Returns (largest relative residual |dE/ds| / (|f_below| +
+    |f_above|), squared 2-norm of the residual)."""
+    prev = s0
+    for i in range(nc):
+        c = chain[i]
+        q = work[i, 5] - prev
+        l = l_below[c, side]
+        ka = _ka(l, q, EA, compression)
+        lq = l / q
+        wq = 0.5 * ka * (1.0 - lq * lq)         # dW/dq
+        wqq = ka * lq * lq / q
+        x = work[i, 5] - s_old[c, side]
+        r = math.sqrt(x * x + eps_f * eps_f)
+        gg = g[c, side]
+        work[i, 0] = wq + gg * x / r + kappa0 * x
+        work[i, 1] = wqq + gg * eps_f * eps_f / (r * r * r) + kappa0
+        work[i, 2] = -wqq
+        if i > 0:
+            work[i - 1, 0] -= wq
+            work[i - 1, 1] += wqq
+        tension[c, side] = ka * (lq - 1.0)
+        prev = work[i, 5]
+    work[nc - 1, 0] += F_top
+    res = 0.0
+    norm = 0.0
+    for i in range(nc):
+        fa = tension[chain[i + 1], side] if i + 1 < nc else f_top[k]
+        ri = work[i, 0]
+        norm += ri * ri
+        e = abs(ri) / max(abs(tension[chain[i], side]) + abs(fa), 1e-300)
+        if e > res:
+            res = e
+    return res, norm
+
+
+@njit(cache=True)
 def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top, EA,
-                   compression, eps_f, kappa0, tol, max_newton, tension, chain, work, stats):
+                   compression, eps_f, kappa0, tol, max_newton, tension, chain, work, stats,
+                   l_prev=None):
     """Per yarn, the material coordinates s of its crossings that make ``dE/ds = 0`` for the
     lengths l_below held (the friction law along the yarn, a convex chain problem): Newton on the
-    tridiagonal system with backtracking on the yarn's energy, O(crossings of the yarn) per
-    Newton step. In place on s; tension (m, 2) receives the segment tensions. chain (m,) int64
-    and work (m, 6) are scratch; stats (2,) int64 counts Newton steps and energy evaluations
-    (added to). Returns the largest relative residual |dE/ds| / (|f_below| + |f_above|) left."""
+    tridiagonal system (Thomas algorithm), O(crossings of the yarn) per Newton step. A full
+    step is taken where it lowers the residual's 2-norm; otherwise backtracking on the yarn's
+    energy along the same direction (the energy is strictly convex in the material, so both
+    reach its one minimum). In place on s; tension (m, 2) receives the segment tensions. chain
+    (m,) int64 and work (m, 6) are scratch; stats (2,) int64 counts Newton steps and energy
+    evaluations (added to). l_prev (m, 2) or None: the lengths s was solved for; given, Newton
+    starts from the material with every segment's strain of s at the new lengths. Returns the
+    largest relative residual |dE/ds| / (|f_below| + |f_above|) left."""
     n = n_yarns // 2
     worst = 0.0
     for k in range(n_yarns):
@@ -119,45 +164,28 @@ def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_to
             c = up[c, side]
         F_top = f_top[k] + f_top[k] * f_top[k] / (2.0 * EA)
         s0 = s_fell[k]
-        for i in range(nc):
-            work[i, 5] = s[chain[i], side]
-        E_known = False
-        E_cur = 0.0
-        E1 = 0.0
-        s_ref = 0.0
-        for it in range(max_newton + 1):
-            # residual r (work[:, 0]), diagonal (1), sub-diagonal coupling to i-1 (2)
-            res = 0.0
+        if l_prev is None:
+            for i in range(nc):
+                work[i, 5] = s[chain[i], side]
+        else:
+            # start from the material that keeps every segment's strain (its tension) at the
+            # new lengths: q <- q l / l_prev (a slipping yarn's material follows its lengths)
             prev = s0
-            wq_prev = 0.0
+            acc = s0
             for i in range(nc):
                 c = chain[i]
-                q = work[i, 5] - prev
-                l = l_below[c, side]
-                ka = _ka(l, q, EA, compression)
-                wq = 0.5 * ka * (1.0 - (l / q) ** 2)         # dW/dq
-                wqq = ka * l * l / (q * q * q)
-                x = work[i, 5] - s_old[c, side]
-                r = math.sqrt(x * x + eps_f * eps_f)
-                gg = g[c, side]
-                work[i, 0] = wq + gg * x / r + kappa0 * x
-                work[i, 1] = wqq + gg * eps_f * eps_f / (r * r * r) + kappa0
-                work[i, 2] = -wqq
-                if i > 0:
-                    work[i - 1, 0] -= wq
-                    work[i - 1, 1] += wqq
-                tension[c, side] = ka * (l - q) / q
-                prev = work[i, 5]
-            work[nc - 1, 0] += F_top
-            for i in range(nc):
-                fa = tension[chain[i + 1], side] if i + 1 < nc else f_top[k]
-                e = abs(work[i, 0]) / max(abs(tension[chain[i], side]) + abs(fa), 1e-300)
-                if e > res:
-                    res = e
-            if res < tol or it == max_newton:
-                break
+                q = s[c, side] - prev
+                prev = s[c, side]
+                acc += q * l_below[c, side] / l_prev[c, side]
+                work[i, 5] = acc
+        res, norm = _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top, F_top, EA,
+                                    compression, eps_f, kappa0, tension, work)
+        steps = 0
+        while res >= tol and steps < max_newton:
+            steps += 1
             stats[0] += 1
-            # Thomas algorithm: (diag, sub = work[i, 2] couples i and i-1, symmetric)
+            # Thomas algorithm: (diag, sub = work[i, 2] couples i and i-1, symmetric); the
+            # direction into work[:, 4]
             for i in range(nc):
                 work[i, 3] = work[i, 1]
                 work[i, 4] = -work[i, 0]
@@ -168,39 +196,51 @@ def material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_to
             work[nc - 1, 4] /= work[nc - 1, 3]
             for i in range(nc - 2, -1, -1):
                 work[i, 4] = (work[i, 4] - work[i + 1, 2] * work[i + 1, 4]) / work[i, 3]
-            # backtracking on the yarn energy (trial in work[:, 3])
-            if s_ref != work[nc - 1, 5] or not E_known:
-                s_ref = work[nc - 1, 5]
-                E0 = _yarn_energy(nc, chain, side, s_ref, s0, l_below, s_old, g, F_top, EA,
-                                  compression, eps_f, kappa0, work[:, 5])
-                stats[1] += 1
-            else:
-                E0 = E_cur
             slope = 0.0
             for i in range(nc):
                 slope += work[i, 0] * work[i, 4]
-            t = 1.0
-            # a decrease below the energy's round-off cannot be judged by it: the full step,
-            # which the residual then judges (as frontal._newton_step does)
-            halvings = 60 if -slope > 1e-12 * abs(E0) else 0
+            # the full step (the previous material kept in work[:, 3])
+            feasible = True
+            prev = s0
             for i in range(nc):
-                work[i, 3] = work[i, 5] + work[i, 4]
-            for _ in range(halvings):
+                work[i, 3] = work[i, 5]
+                work[i, 5] += work[i, 4]
+                if work[i, 5] - prev <= 0.0:
+                    feasible = False
+                prev = work[i, 5]
+            if feasible:
+                res1, norm1 = _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top,
+                                              F_top, EA, compression, eps_f, kappa0, tension,
+                                              work)
+                if norm1 < norm:
+                    res, norm = res1, norm1
+                    continue
+            # backtracking on the yarn energy from the previous material, measured from its top
+            # material s_ref so that the payout F_top s (s runs to metres) does not swamp it
+            for i in range(nc):
+                work[i, 5] = work[i, 3]
+            s_ref = work[nc - 1, 5]
+            E0 = _yarn_energy(nc, chain, side, s_ref, s0, l_below, s_old, g, F_top, EA,
+                              compression, eps_f, kappa0, work[:, 5])
+            stats[1] += 1
+            t = 1.0
+            # a decrease below the energy's round-off cannot be judged by it: the feasible step
+            # closest to the full one, which the residual then judges
+            judged = -slope > 1e-12 * abs(E0)
+            for _ in range(60):
                 for i in range(nc):
                     work[i, 3] = work[i, 5] + t * work[i, 4]
                 E1 = _yarn_energy(nc, chain, side, s_ref, s0, l_below, s_old, g, F_top, EA,
                                   compression, eps_f, kappa0, work[:, 3])
                 stats[1] += 1
-                if E1 <= E0 + 1e-4 * t * slope + 1e-13 * abs(E0):
+                if E1 < np.inf and (not judged or E1 <= E0 + 1e-4 * t * slope + 1e-13 * abs(E0)):
                     break
                 t *= 0.5
-            # the accepted trial's energy starts the next step's line search (measured from
-            # the same s_ref, which the next step then keeps)
-            E_known = halvings > 0
-            E_cur = E1 + F_top * (s_ref - work[nc - 1, 3]) if E_known else 0.0
-            s_ref = work[nc - 1, 3]
-            for i in range(nc):
-                work[i, 5] = work[i, 3]
+            if E1 < np.inf:
+                for i in range(nc):
+                    work[i, 5] = work[i, 3]
+            res, norm = _chain_residual(nc, chain, side, k, s0, l_below, s_old, g, f_top, F_top,
+                                        EA, compression, eps_f, kappa0, tension, work)
         for i in range(nc):
             s[chain[i], side] = work[i, 5]
         if res > worst:
@@ -488,3 +528,454 @@ def block_jacobi(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
         if size > cap * lmin[c]:
             for i in range(3):
                 delta[c, i] *= cap * lmin[c] / size
+
+
+# -- the block preconditioner: each crossing's 3 x 3 stiffness, coupled along the lattice -------
+
+@njit(cache=True)
+def _segment_block(dx, dy, dz, w_perp, w_axial, w_iso, B):
+    """B (3, 3) = w_perp (I - d d^T) + w_axial d d^T + w_iso I for the unit vector d."""
+    B[0, 0] = w_perp * (1.0 - dx * dx) + w_axial * dx * dx + w_iso
+    B[1, 1] = w_perp * (1.0 - dy * dy) + w_axial * dy * dy + w_iso
+    B[2, 2] = w_perp * (1.0 - dz * dz) + w_axial * dz * dz + w_iso
+    B[0, 1] = B[1, 0] = (w_axial - w_perp) * dx * dy
+    B[0, 2] = B[2, 0] = (w_axial - w_perp) * dx * dz
+    B[1, 2] = B[2, 1] = (w_axial - w_perp) * dy * dz
+
+
+@njit(cache=True)
+def _project_block(B, pa, na, pb, nb, out, scale):
+    """out = scale P_a B P_b with P = I - n n^T where p (a flag) says the crossing rests on the
+    wall, P = I otherwise."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = B[i, j]
+    if pa:
+        # out <- (I - na na^T) out
+        for j in range(3):
+            t = na[0] * out[0, j] + na[1] * out[1, j] + na[2] * out[2, j]
+            for i in range(3):
+                out[i, j] -= na[i] * t
+    if pb:
+        for i in range(3):
+            t = out[i, 0] * nb[0] + out[i, 1] * nb[1] + out[i, 2] * nb[2]
+            for j in range(3):
+                out[i, j] -= t * nb[j]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] *= scale
+
+
+@njit(cache=True)
+def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tension, f_top, l_jam,
+                 k_jam, floor, reg, plane, active, slot_diag, slot_below, below_first, vals, Dg):
+    """Blocks of the lattice's geometric stiffness K (3m x 3m, 3 x 3 blocks per pair of
+    crossings) into vals (nslots, 3, 3), the upper triangle of a fixed pattern in an elimination
+    order: per segment ``B = w (I - d d^T) + k_j d d^T + reg max(f, floor) / l I`` with ``w =
+    max(f - f_jam, floor) / l`` (the stiffness of a taut string across itself, none along it;
+    jamming's along it; a small isotropic share keeps K definite), added to the diagonal blocks of
+    both ends and subtracted from their coupling (top and fell segments: the crossing's diagonal
+    only). A crossing resting on the wall (active) moves in its tangent plane: its rows and
+    columns are projected, ``P K P + n n^T``. Slots: slot_diag (m,), slot_below (m, 2) the slot of
+    the pair (c, low[c, side]) (-1 none), below_first (m, 2) True where that slot holds the
+    block (low, c) (low first in the order), else (c, low). Dg (m, 3, 3) is scratch."""
+    n = n_yarns // 2
+    B = np.empty((3, 3))
+    T = np.empty((3, 3))
+    for i in range(vals.shape[0]):
+        for a in range(3):
+            for b in range(3):
+                vals[i, a, b] = 0.0
+    for c in range(m):
+        for a in range(3):
+            for b in range(3):
+                Dg[c, a, b] = 0.0
+    for c in range(m):
+        for side in range(2):
+            lo = low[c, side]
+            l = l_below[c, side]
+            f = tension[c, side]
+            gap = l_jam - l
+            fj = k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
+            kj = k_jam if fj > 0.0 else 0.0
+            _segment_block(d_below[c, side, 0] / l, d_below[c, side, 1] / l,
+                           d_below[c, side, 2] / l, max(f - fj, floor) / l, kj,
+                           reg * max(f, floor) / l, B)
+            for a in range(3):
+                for b in range(3):
+                    Dg[c, a, b] += B[a, b]
+            if lo >= 0:
+                for a in range(3):
+                    for b in range(3):
+                        Dg[lo, a, b] += B[a, b]
+                slot = slot_below[c, side]
+                if below_first[c, side]:
+                    _project_block(B, active[lo], plane[lo, 3:], active[c], plane[c, 3:], T, -1.0)
+                else:
+                    _project_block(B, active[c], plane[c, 3:], active[lo], plane[lo, 3:], T, -1.0)
+                for a in range(3):
+                    for b in range(3):
+                        vals[slot, a, b] += T[a, b]
+    for k in range(n_yarns):
+        c = highest[k]
+        if c < 0:
+            continue
+        l = l_top[k]
+        w = max(f_top[k], floor) / l
+        _segment_block(d_top[k, 0] / l, d_top[k, 1] / l, d_top[k, 2] / l, w, 0.0, reg * w, B)
+        for a in range(3):
+            for b in range(3):
+                Dg[c, a, b] += B[a, b]
+    for c in range(m):
+        for a in range(3):
+            for b in range(3):
+                B[a, b] = Dg[c, a, b]
+        _project_block(B, active[c], plane[c, 3:], active[c], plane[c, 3:], T, 1.0)
+        slot = slot_diag[c]
+        for a in range(3):
+            for b in range(3):
+                vals[slot, a, b] += T[a, b]
+        if active[c]:
+            for a in range(3):
+                for b in range(3):
+                    vals[slot, a, b] += plane[c, 3 + a] * plane[c, 3 + b]
+
+
+@njit(cache=True)
+def ldl_symbolic(n, Ap, Ai, work, Lnz, etree):
+    """Elimination tree etree (n,) and column counts Lnz (n,) of the block LDL^T of a symmetric
+    matrix given by the pattern of its upper triangle (CSC: Ap (n+1,), Ai, rows <= column; one
+    entry per 3 x 3 block), QDLDL's ``QDLDL_etree`` (Davis 2005, section 4.1). work (n,) is
+    scratch. Returns the number of blocks of L below the diagonal, -1 if an entry lies below
+    the diagonal."""
+    for i in range(n):
+        work[i] = 0
+        Lnz[i] = 0
+        etree[i] = -1
+    for j in range(n):
+        work[j] = j
+        for p in range(Ap[j], Ap[j + 1]):
+            i = Ai[p]
+            if i > j:
+                return -1
+            while work[i] != j:
+                if etree[i] == -1:
+                    etree[i] = j
+                Lnz[i] += 1
+                work[i] = j
+                i = etree[i]
+    total = 0
+    for i in range(n):
+        total += Lnz[i]
+    return total
+
+
+@njit(cache=True)
+def _inverse3(A, out):
+    """out = A^-1 of a symmetric 3 x 3 block; False if A is not positive definite (a leading
+    minor or the determinant not positive)."""
+    a00, a01, a02 = A[0, 0], A[0, 1], A[0, 2]
+    a11, a12, a22 = A[1, 1], A[1, 2], A[2, 2]
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if not (a00 > 0.0 and a00 * a11 - a01 * a01 > 0.0 and det > 0.0):
+        return False
+    inv = 1.0 / det
+    out[0, 0] = c00 * inv
+    out[0, 1] = out[1, 0] = c01 * inv
+    out[0, 2] = out[2, 0] = c02 * inv
+    out[1, 1] = (a00 * a22 - a02 * a02) * inv
+    out[1, 2] = out[2, 1] = (a01 * a02 - a00 * a12) * inv
+    out[2, 2] = (a00 * a11 - a01 * a01) * inv
+    return True
+
+
+@njit(cache=True, fastmath=True)
+def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
+                y, D):
+    """Block LDL^T factorisation A = L D L^T of a symmetric positive definite matrix of 3 x 3
+    blocks: QDLDL's up-looking ``QDLDL_factor`` with every scalar a block (for each row k of L,
+    its pattern from the elimination tree, then a sparse triangular solve: y_j -= L_ji y_i,
+    L_ki = y_i^T D_i^-1, D_k -= L_ki y_i). A: upper triangle, CSC of blocks (Ap, Ai, Ax (nnz,
+    3, 3), Ax[p] the block (Ai[p], column)); out: Lp (n+1,), Li, Lx (nnz_L, 3, 3) the strictly
+    lower blocks by column, Dinv (n, 3, 3) the inverses of the diagonal blocks of D. etree, Lnz
+    from ``ldl_symbolic``; marker (n,) bool, y_idx, elim, next_space (n,) int64, y (n, 3, 3),
+    D (3, 3) scratch. Returns False if a pivot block is not positive definite."""
+    T = np.empty((3, 3))
+    Lp[0] = 0
+    for i in range(n):
+        marker[i] = False
+        for a in range(3):
+            for b in range(3):
+                y[i, a, b] = 0.0
+        Lp[i + 1] = Lp[i] + Lnz[i]
+        next_space[i] = Lp[i]
+    for k in range(n):
+        nnz_y = 0
+        for a in range(3):
+            for b in range(3):
+                D[a, b] = 0.0
+        for p in range(Ap[k], Ap[k + 1]):
+            i = Ai[p]
+            if i == k:
+                for a in range(3):
+                    for b in range(3):
+                        D[a, b] = Ax[p, a, b]
+                continue
+            for a in range(3):
+                for b in range(3):
+                    y[i, a, b] = Ax[p, a, b]
+            if not marker[i]:
+                marker[i] = True
+                elim[0] = i
+                ne = 1
+                j = etree[i]
+                while j != -1 and j < k:
+                    if marker[j]:
+                        break
+                    marker[j] = True
+                    elim[ne] = j
+                    ne += 1
+                    j = etree[j]
+                while ne:
+                    ne -= 1
+                    y_idx[nnz_y] = elim[ne]
+                    nnz_y += 1
+        for t in range(nnz_y - 1, -1, -1):
+            ci = y_idx[t]
+            end = next_space[ci]
+            y00, y01, y02 = y[ci, 0, 0], y[ci, 0, 1], y[ci, 0, 2]
+            y10, y11, y12 = y[ci, 1, 0], y[ci, 1, 1], y[ci, 1, 2]
+            y20, y21, y22 = y[ci, 2, 0], y[ci, 2, 1], y[ci, 2, 2]
+            for q in range(Lp[ci], end):
+                r = Li[q]
+                # y_r -= L_{r, ci} y_ci
+                for a in range(3):
+                    l0, l1, l2 = Lx[q, a, 0], Lx[q, a, 1], Lx[q, a, 2]
+                    y[r, a, 0] -= l0 * y00 + l1 * y10 + l2 * y20
+                    y[r, a, 1] -= l0 * y01 + l1 * y11 + l2 * y21
+                    y[r, a, 2] -= l0 * y02 + l1 * y12 + l2 * y22
+            Li[end] = k
+            # L_{k, ci} = y_ci^T Dinv_ci ; D_k -= L_{k, ci} y_ci
+            for a in range(3):
+                for b in range(3):
+                    Lx[end, a, b] = (y[ci, 0, a] * Dinv[ci, 0, b] + y[ci, 1, a] * Dinv[ci, 1, b]
+                                     + y[ci, 2, a] * Dinv[ci, 2, b])
+            for a in range(3):
+                l0, l1, l2 = Lx[end, a, 0], Lx[end, a, 1], Lx[end, a, 2]
+                D[a, 0] -= l0 * y00 + l1 * y10 + l2 * y20
+                D[a, 1] -= l0 * y01 + l1 * y11 + l2 * y21
+                D[a, 2] -= l0 * y02 + l1 * y12 + l2 * y22
+            next_space[ci] = end + 1
+            for a in range(3):
+                for b in range(3):
+                    y[ci, a, b] = 0.0
+            marker[ci] = False
+        # symmetrise the pivot against round-off before inverting it
+        for a in range(3):
+            for b in range(a + 1, 3):
+                D[a, b] = D[b, a] = 0.5 * (D[a, b] + D[b, a])
+        if not _inverse3(D, T):
+            return False
+        for a in range(3):
+            for b in range(3):
+                Dinv[k, a, b] = T[a, b]
+    return True
+
+
+@njit(cache=True, fastmath=True)
+def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
+    """out (n, 3) = A^-1 rhs (n, 3) for the factor of ``ldl_numeric``, A in the order perm
+    (perm[i]: the crossing at position i); x (n, 3) is scratch."""
+    for i in range(n):
+        for a in range(3):
+            x[i, a] = rhs[perm[i], a]
+    for i in range(n):
+        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        for q in range(Lp[i], Lp[i + 1]):
+            r = Li[q]
+            for a in range(3):
+                x[r, a] -= Lx[q, a, 0] * x0 + Lx[q, a, 1] * x1 + Lx[q, a, 2] * x2
+    for i in range(n):
+        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        for a in range(3):
+            x[i, a] = Dinv[i, a, 0] * x0 + Dinv[i, a, 1] * x1 + Dinv[i, a, 2] * x2
+    for i in range(n - 1, -1, -1):
+        for q in range(Lp[i], Lp[i + 1]):
+            r = Li[q]
+            for a in range(3):
+                x[i, a] -= Lx[q, 0, a] * x[r, 0] + Lx[q, 1, a] * x[r, 1] + Lx[q, 2, a] * x[r, 2]
+    for i in range(n):
+        for a in range(3):
+            out[perm[i], a] = x[i, a]
+
+
+@njit(cache=True)
+def _split_separator(a, b, order, low, up, seg, id_l, id_r, side):
+    """Label the first half of order[a:b] id_l and the second id_r in seg, flag in side (1)
+    the crossings of the first half with a lattice neighbour in the second (0 the others of the
+    first half, 2 the second half); returns their number."""
+    n = b - a
+    half = n // 2
+    for i in range(a, b):
+        seg[order[i]] = id_l if i - a < half else id_r
+    n_s = 0
+    for i in range(a, a + half):
+        c = order[i]
+        sep = False
+        for s in range(2):
+            nb = low[c, s]
+            if nb >= 0 and seg[nb] == id_r:
+                sep = True
+            nb = up[c, s]
+            if nb >= 0 and seg[nb] == id_r:
+                sep = True
+        side[c] = 1 if sep else 0
+        n_s += side[c]
+    for i in range(a + half, b):
+        side[order[i]] = 2
+    return n_s
+
+
+@njit(cache=True)
+def _partition(a, b, order, side, buf):
+    """Stable partition of order[a:b] into the first half's crossings off the separator (side
+    0), the second half's (2), then the separator's (1)."""
+    k = 0
+    for group in (0, 2, 1):
+        for i in range(a, b):
+            if side[order[i]] == group:
+                buf[k] = order[i]
+                k += 1
+    for i in range(b - a):
+        order[a + i] = buf[i]
+
+
+@njit(cache=True)
+def band_dissection(m, low, up, u, v, leaf, perm):
+    """Fill-reducing order of a lattice of crossings on a band around an axis, by geometric
+    nested dissection: a set of crossings is split at the median of u (the angle around the
+    axis) or of v (the height along it), whichever gives the smaller separator: the crossings
+    of the first half with a lattice neighbour (``low``/``up``, (m, 2)) in the second; the order
+    is the first half's, then the second's, then the separator's (George 1973). Sets up to
+    ``leaf`` crossings keep their order. On the whole band the median of u cuts it into two
+    arcs at two seams, whose crossings are the first separator. The crossings are sorted by u
+    and by v once, and every split partitions both orders stably, so each set's crossings stay
+    sorted: O(m log m). perm (m,) receives the order (perm[i]: the crossing at position i)."""
+    seg = np.zeros(m, dtype=np.int64)
+    side = np.zeros(m, dtype=np.int8)
+    buf = np.empty(m, dtype=np.int64)
+    by_u = np.argsort(u)
+    by_v = np.argsort(v)
+    stack = np.empty((2 * m + 2, 2), dtype=np.int64)
+    stack[0, 0] = 0
+    stack[0, 1] = m
+    top = 1
+    next_id = 1
+    while top:
+        top -= 1
+        a, b = stack[top, 0], stack[top, 1]
+        n = b - a
+        if n <= leaf:
+            continue
+        id_l, id_r = next_id, next_id + 1
+        next_id += 2
+        s_v = _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
+        s_u = _split_separator(a, b, by_u, low, up, seg, id_l, id_r, side)
+        if s_v <= s_u:
+            _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
+        n_s = min(s_u, s_v)
+        for i in range(a, b):
+            if side[by_u[i]] == 1:
+                seg[by_u[i]] = -1
+        _partition(a, b, by_u, side, buf)
+        _partition(a, b, by_v, side, buf)
+        n_l = n // 2 - n_s
+        stack[top, 0] = a
+        stack[top, 1] = a + n_l
+        stack[top + 1, 0] = a + n_l
+        stack[top + 1, 1] = b - n_s
+        top += 2
+    for i in range(m):
+        perm[i] = by_u[i]
+
+
+@njit(cache=True)
+def tangent_part(m, force, plane, active, out):
+    """out (m, 3) = force, less its normal part at the crossings resting on the wall (active):
+    the right-hand side of the block update, whose resting crossings move in their planes."""
+    for c in range(m):
+        fx, fy, fz = force[c, 0], force[c, 1], force[c, 2]
+        if active[c]:
+            fn = fx * plane[c, 3] + fy * plane[c, 4] + fz * plane[c, 5]
+            fx -= fn * plane[c, 3]
+            fy -= fn * plane[c, 4]
+            fz -= fn * plane[c, 5]
+        out[c, 0] = fx
+        out[c, 1] = fy
+        out[c, 2] = fz
+
+
+@njit(cache=True)
+def cap_moves(m, low, l_below, cap, lmin, delta):
+    """Scale the update delta (m, 3) down, all of it, so that no crossing moves further than
+    cap times its shortest segment between crossings or to the fell point (lmin (m,) scratch);
+    returns the factor (1: none)."""
+    for c in range(m):
+        lmin[c] = np.inf
+    for c in range(m):
+        for side in range(2):
+            l = l_below[c, side]
+            lmin[c] = min(lmin[c], l)
+            lo = low[c, side]
+            if lo >= 0:
+                lmin[lo] = min(lmin[lo], l)
+    scale = 1.0
+    for c in range(m):
+        size = math.sqrt(delta[c, 0] ** 2 + delta[c, 1] ** 2 + delta[c, 2] ** 2)
+        if size * scale > cap * lmin[c]:
+            scale = cap * lmin[c] / size
+    if scale < 1.0:
+        for c in range(m):
+            for i in range(3):
+                delta[c, i] *= scale
+    return scale
+
+
+@njit(cache=True)
+def anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b):
+    """One pass of Anderson mixing (``interaction/relax._Anderson``) over x, gx (n,), r = gx - x:
+    with a previous iterate (have_prev) the new differences x - x_prev, r - r_prev into column j
+    of DX, DR (n, depth) and row and column j of the Gram matrix G (depth, depth) over the k
+    columns held (j among them); b (depth,) receives DR[:, :k]^T r; x_prev, r_prev become x, r."""
+    col = np.zeros(max(k, 1))
+    for i in range(k):
+        b[i] = 0.0
+    for e in range(n):
+        r = gx[e] - x[e]
+        if have_prev:
+            DX[e, j] = x[e] - x_prev[e]
+            dr = r - r_prev[e]
+            DR[e, j] = dr
+            for i in range(k):
+                col[i] += DR[e, i] * dr
+        for i in range(k):
+            b[i] += DR[e, i] * r
+        x_prev[e] = x[e]
+        r_prev[e] = r
+    if have_prev:
+        for i in range(k):
+            G[j, i] = col[i]
+            G[i, j] = col[i]
+
+
+@njit(cache=True)
+def anderson_combine(n, gx, DX, DR, gamma, k, out):
+    """out (n,) = gx - (DX[:, :k] + DR[:, :k]) gamma."""
+    for e in range(n):
+        v = gx[e]
+        for i in range(k):
+            v -= gamma[i] * (DX[e, i] + DR[e, i])
+        out[e] = v

@@ -14,33 +14,46 @@ stiff tows ``f = EA (l - q) / q`` of material length ``q``; thickness offsets of
 tangent plane, a non-negative wall force), where Newton has a penalty of 1e7 N/m (its crossings
 sit up to f / 1e7 m behind the plane: ~1 um).
 
-How (one iteration, O(crossings))
----------------------------------
+How (one iteration)
+-------------------
 1. *Material sweep* (``_kernels.relax.material_sweep``): for the current positions, every yarn's
    material coordinates solve its friction law exactly (a convex chain problem in the material
    alone: tridiagonal Newton, O(crossings of the yarn)); a sticking yarn keeps its material at the
    crossing within the friction creep, a slipping one sits on its discrete Capstan bound. This
-   gives the tensions.
-2. *Force densities* (Schek 1974): with ``w = f / l`` per segment, node balance ``sum_j w_cj (P_j -
-   P_c) = 0`` is linear in the positions, one scalar weighted Laplacian ``L`` of the crossing
-   lattice shared by x, y and z. The update is ``C <- C + L^-1 F(C)`` with ``F`` the net force: for
-   ``w`` the exact force densities this is the force-density solve itself; where a segment is
-   nearly slack or jammed ``w`` is floored and the jamming stiffness added (``forces``), which
-   keeps ``L`` positive definite and changes the iteration, not its fixed point ``F = 0``. ``L`` is
-   factorised every ``refactor_every`` iterations (LDL^T, QDLDL: Apache-2.0; the symbolic
-   analysis once per solve); in between the last factor serves.
-3. *Wall active set*: a crossing resting on its tangent plane is a Dirichlet row of ``L``; after
-   the free crossings moved it goes where its own balance puts it, projected onto the plane
-   (``wall_update``, a block Gauss-Seidel step), the wall taking the normal force. It leaves the
-   set when that point lies more than ``wall_release`` in front; a free crossing that lands more
-   than that behind its plane is projected onto it and joins.
-4. *Block-Jacobi corrections* (``block_jacobi``, ``smoothing`` of them): each crossing moves by
-   ``H_c^-1 F_c`` with its own 3 x 3 stiffness (the yarns' geometric stiffness ``(f/l)(I - d
-   d^T)`` and the jamming's ``k d d^T``), after a new material sweep: the scalar ``L`` gives a
-   segment the stiffness ``f / l`` along itself too, where a yarn has none, and the corrections
-   take the crossings along the soft directions ``L`` holds back. They vanish where ``F = 0``;
-   they stop for the rest of a solve that makes no progress with them (``stall_iterations``).
-5. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
+   gives the tensions and the net force ``F(C)`` on every crossing.
+2. *Position update* ``C <- C + K^-1 F(C)`` with a preconditioner ``K`` (``preconditioner``; the
+   fixed point ``F = 0`` does not depend on it):
+
+   - ``"block"`` (the default): the lattice's geometric stiffness in 3 x 3 blocks per pair of
+     crossings, ``sum_seg (f/l) (I - d d^T)`` (a taut yarn resists a crossing moving across
+     it, not along it) plus jamming's ``k d d^T`` and ``block_reg f / l I`` that keeps ``K``
+     definite (``block_values``). It is factorised once per solve at the start tensions (block
+     LDL^T, ``ldl_numeric``, in a nested-dissection order of the band of crossings around the
+     axis, ``band_dissection``; O(m^1.5) work for the factor, O(m log m) fill, so per
+     iteration the solve is nearly linear), and anew, with Anderson's history cleared, where
+     the set of jammed segments changed (the jamming stiffness enters or leaves ``K``). A
+     crossing resting on the wall moves in its tangent plane (its rows projected, ``P K P + n
+     n^T``).
+   - ``"scalar"``: the force-density Laplacian (Schek 1974): with ``w = f / l`` per segment,
+     node balance ``sum_j w_cj (P_j - P_c) = 0`` is linear in the positions, one scalar weighted
+     Laplacian ``L`` shared by x, y and z (``w`` floored where a segment is nearly slack, the
+     jamming stiffness added), factorised every ``refactor_every`` iterations (QDLDL,
+     Apache-2.0); then ``smoothing`` block-Jacobi corrections (``block_jacobi``), each after a
+     new material sweep: each crossing moves by ``H_c^-1 F_c`` with its own 3 x 3 stiffness,
+     because ``L`` gives a segment the stiffness ``f / l`` along itself too. The corrections stop
+     for the rest of a solve that makes no progress with them (``stall_iterations``).
+
+   ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
+   sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
+   with friction 0.5 and jammed crossings, the first rows of a run) the step is not converged
+   (``solve_zone`` gives it to Newton) or, with ``scalar_retry``, solved again from its start
+   with ``"scalar"``.
+3. *Wall active set*: a crossing resting on its tangent plane moves in it (block) or is a
+   Dirichlet row of ``L`` (scalar); its own balance, ``wall_update`` (the point its segments'
+   force densities put it at), decides whether it stays: it leaves the set when that point lies
+   more than ``wall_release`` in front, the wall taking the normal force otherwise; a free
+   crossing that lands more than that behind its plane is projected onto it and joins.
+4. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
    eq. 17 (the minimum-residual combination of two iterates) in its general form. History is
    cleared when the active set changes (the map changes).
 
@@ -85,18 +98,19 @@ class RelaxSettings:
     #: largest relative imbalance at convergence: Newton's BALANCE_TOLERANCE (1e4 below the 1e-3
     #: the snapshots must meet)
     tol: float = 1e-7
-    #: iterations before the step is declared failed (a case A step takes 15-45; one that has
-    #: not converged by then stalls)
+    #: iterations before the step is declared failed (a case A step takes 10-17 with the block
+    #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
     max_iter: int = 200
     #: a step the relaxation does not converge on is solved by the Newton reference
     #: (``solve_zone``; counted in ``FALLBACKS``) instead of stopping the run
     newton_fallback: bool = True
     #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
     anderson_depth: int = 10
-    #: iterations between factorisations of the Laplacian: in between, the last factor
-    #: preconditions the update C <- C + L^-1 F(C) (same fixed point; ``bench_relax.py``)
+    #: iterations between factorisations of the Laplacian (scalar preconditioner): in between,
+    #: the last factor preconditions the update C <- C + L^-1 F(C) (same fixed point)
     refactor_every: int = 3
-    #: block-Jacobi corrections per iteration after the force-density solve (0: none)
+    #: block-Jacobi corrections per iteration after the force-density solve (scalar
+    #: preconditioner; 0: none)
     smoothing: int = 2
     #: their weight (damping) and the isotropic share of f / l added to each 3 x 3 block
     smoothing_weight: float = 1.0
@@ -125,10 +139,44 @@ class RelaxSettings:
     #: relative residual of the per-yarn material problems: 1e3 below the balance tolerance;
     #: 1e-12 is below what the round-off of stiff tows (EA / q ~ 5e5 N/m) lets Newton reach
     material_tol: float = 1e-10
+    #: with the block preconditioner, each material sweep starts from the material that keeps
+    #: the segments' strains of the last one at the new lengths (a slipping yarn's material
+    #: follows its lengths), not from the last material itself: 3.4x fewer Newton steps and no
+    #: line search on case A steps (the block update moves crossings by millimetres); not with
+    #: the scalar one, on whose friction-0.5 steps it costs iterations (48 carriers: 322
+    #: against 241)
+    material_predict: bool = True
     #: Newton steps of one material sweep at most
     material_newton: int = 60
     #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
     floor: float = 1e-3
+    #: the position update's preconditioner: "block", the lattice's geometric stiffness with
+    #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself), or
+    #: "scalar", the force-density Laplacian shared by x, y, z with ``smoothing`` block-Jacobi
+    #: corrections (``docs/decisions.md``: 10-17 iterations of one material sweep on case A
+    #: steps with "block", 33-44 of three with "scalar")
+    preconditioner: str = "block"
+    #: isotropic share of f / l in the block preconditioner: keeps it definite where the
+    #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
+    #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
+    block_reg: float = 1e-3
+    #: iterations between factorisations of the block preconditioner (0: once per solve, and
+    #: when the wall's active set or the set of jammed segments changes): a preconditioner
+    #: that changes within a solve changes Anderson's map under it (144 carriers: 12-15
+    #: iterations factorising once, 25-35 every 3 iterations)
+    block_refactor_every: int = 0
+    #: iterations without a new lowest residual after which the block preconditioner gives
+    #: the step to the scalar one (from the same start); case A steps converge in 10-17
+    block_stall: int = 20
+    #: a step the block preconditioner stalls on is solved again with the scalar one (off: it
+    #: is not converged, and ``solve_zone`` gives it to Newton, which is cheaper than the
+    #: scalar iteration there: 218-241 iterations on the friction-0.5 steps of 16 and 48
+    #: carriers, and the start-up steps of a case A run it does not converge on at all)
+    scalar_retry: bool = False
+    #: largest move of a crossing in one block update, as a fraction of its shortest segment
+    #: (the whole update is scaled down to it: the stiffness holds for moves small against
+    #: the segments)
+    block_cap: float = 2.0
 
 
 @dataclass
@@ -161,7 +209,10 @@ class RelaxResult:
     iteration), bound_change (last relative change of the bounds; consistent bounds only),
     set_changes (changes of the wall's active set), sweep_stats (Newton steps and energy
     evaluations of the yarns' material problems, summed over yarns),
-    times (s per part: sweep, forces, factor, solve, wall, mix)."""
+    times (s per part: setup (order, pattern, symbolic analysis), sweep (segments and material
+    sweep), forces (net forces, residual, friction bounds), factor, solve, wall, smooth
+    (block-Jacobi corrections), mix (Anderson)); fallback_scalar: the block preconditioner
+    stalled and the scalar one solved the step."""
 
     pos: np.ndarray
     s: np.ndarray
@@ -179,6 +230,10 @@ class RelaxResult:
     times: dict = field(default_factory=dict)
     set_changes: int = 0
     sweep_stats: tuple = (0, 0)
+    #: the block preconditioner stalled and the scalar one solved the step
+    fallback_scalar: bool = False
+    #: factorisations of the preconditioner
+    factorisations: int = 0
 
 
 class _Laplacian:
@@ -226,52 +281,117 @@ class _Laplacian:
             out[:, i] = self.solver.solve(np.ascontiguousarray(rhs[:, i]))
 
 
+class _BlockStiffness:
+    """The block preconditioner K (``_kernels.relax.block_values``) of a lattice: its pattern of
+    3 x 3 blocks in a nested-dissection order of the band of crossings around the machine axis
+    (``band_dissection``: the order keeps the factor's fill per crossing nearly flat as the zone
+    grows), the symbolic analysis of its block LDL^T once per solve, the factorisation
+    (``ldl_numeric``) and solves (``ldl_solve``)."""
+
+    def __init__(self, lat: Lattice, pos):
+        m = lat.m
+        self.m = m
+        r = np.hypot(pos[:, 0], pos[:, 1])
+        u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
+        perm = np.empty(m, dtype=np.int64)
+        RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
+        pinv = np.empty(m, dtype=np.int64)
+        pinv[perm] = np.arange(m)
+        self.perm = perm
+        lo = lat.low
+        link = lo >= 0
+        pc = np.broadcast_to(pinv[:, None], lo.shape)
+        plo = np.where(link, pinv[np.maximum(lo, 0)], -1)
+        rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
+        cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
+        key = cols * m + rows
+        uniq, inv = np.unique(key, return_inverse=True)
+        self.nslots = uniq.size
+        self.slot_diag = np.ascontiguousarray(inv[:m], dtype=np.int64)
+        self.slot_below = np.full(lo.shape, -1, dtype=np.int64)
+        self.slot_below[link] = inv[m:]
+        self.below_first = np.ascontiguousarray(link & (plo < pc))
+        self.Ai = (uniq % m).astype(np.int64)
+        col = uniq // m
+        self.Ap = np.zeros(m + 1, dtype=np.int64)
+        np.add.at(self.Ap, col + 1, 1)
+        self.Ap = np.cumsum(self.Ap)
+        self.vals = np.zeros((self.nslots, 3, 3))
+        self.Dg = np.empty((m, 3, 3))
+        self.etree = np.empty(m, dtype=np.int64)
+        self.Lnz = np.empty(m, dtype=np.int64)
+        nnz = RK.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
+                              self.etree)
+        self.Lp = np.empty(m + 1, dtype=np.int64)
+        self.Li = np.empty(max(nnz, 1), dtype=np.int64)
+        self.Lx = np.empty((max(nnz, 1), 3, 3))
+        self.Dinv = np.empty((m, 3, 3))
+        self._marker = np.zeros(m, dtype=np.bool_)
+        self._iw = np.empty((3, m), dtype=np.int64)
+        self._y = np.zeros((m, 3, 3))
+        self._D = np.empty((3, 3))
+        self._x = np.empty((m, 3))
+
+    def factor(self):
+        """Factorise the current ``vals``; False if a pivot is not positive definite."""
+        return RK.ldl_numeric(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx,
+                              self.Dinv, self.etree, self.Lnz, self._marker, self._iw[0],
+                              self._iw[1], self._iw[2], self._y, self._D)
+
+    def solve(self, rhs, out):
+        RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out, self._x)
+
+
 class _Anderson:
     """Type-II Anderson mixing of a fixed-point map x -> G(x) (residual r = G(x) - x) over the
     last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
     paper's eq. 17 is the case of one difference). The least-squares problem goes through the
-    Gram matrix dR^T dR, kept up to date one column per iteration: O(N depth) a call."""
+    Gram matrix dR^T dR, kept up to date one column per iteration: two passes over the
+    differences a call (``_kernels.relax.anderson_gram``, ``anderson_combine``)."""
 
     def __init__(self, depth):
         self.depth = depth
+        self.n = -1
         self.reset()
 
     def reset(self):
         self.k = 0            # differences stored
         self.head = 0         # next ring slot
-        self.x_prev = self.r_prev = None
-        self.DX = self.DR = None
-        self.G = np.zeros((self.depth, self.depth))
+        self.have_prev = False
+        self.G = np.zeros((max(self.depth, 1), max(self.depth, 1)))
 
     def __call__(self, x, gx):
-        r = gx - x
         if self.depth <= 0:
             return gx
-        if self.DX is None or self.DX.shape[1] != x.size:
-            self.DX = np.empty((self.depth, x.size))
-            self.DR = np.empty((self.depth, x.size))
-        if self.x_prev is not None:
-            j = self.head
-            np.subtract(x, self.x_prev, out=self.DX[j])
-            np.subtract(r, self.r_prev, out=self.DR[j])
+        n = x.size
+        if n != self.n:
+            self.n = n
+            self.DX = np.empty((n, self.depth))
+            self.DR = np.empty((n, self.depth))
+            self.x_prev = np.empty(n)
+            self.r_prev = np.empty(n)
+            self.b = np.empty(self.depth)
+            self.out = np.empty(n)
+            self.reset()
+        j = self.head
+        if self.have_prev:
             self.head = (j + 1) % self.depth
             self.k = min(self.k + 1, self.depth)
-            col = self.DR[: self.k] @ self.DR[j]
-            self.G[j, : self.k] = col
-            self.G[: self.k, j] = col
-        self.x_prev, self.r_prev = x.copy(), r.copy()
+        RK.anderson_gram(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G, self.k,
+                         j, self.have_prev, self.b)
+        self.have_prev = True
         k = self.k
         if k == 0:
             return gx
         G = self.G[:k, :k]
-        b = self.DR[:k] @ r
         reg = 1e-12 * np.trace(G) + 1e-300
         try:
-            gamma = np.linalg.solve(G + reg * np.eye(k), b)
+            gamma = np.linalg.solve(G + reg * np.eye(k), self.b[:k])
         except np.linalg.LinAlgError:
             self.reset()
             return gx
-        return gx - gamma @ self.DX[:k] - gamma @ self.DR[:k]
+        RK.anderson_combine(n, gx, self.DX, self.DR, gamma, k, self.out)
+        return self.out
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
@@ -291,8 +411,9 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
     from its converged geometry and tensions, and the step is solved again from there until they
     change by less than ``friction_tol`` relative to the tensions."""
-    res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, f_spool=f_spool,
-                      mu=mu, h=h, width=width, plane=plane, settings=settings, model=model)
+    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
+                              f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                              settings=settings, model=model)
     if not settings.consistent_bounds or not res.converged:
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
@@ -307,9 +428,9 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
         if change < settings.friction_tol:
             break
         bounds = res.bounds
-        res = _relax_held(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
-                          f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                          settings=settings, model=model)
+        res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+                                  f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                                  settings=settings, model=model)
         iterations += res.iterations
         history.append(res.history)
         for key, v in res.times.items():
@@ -320,6 +441,29 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res.bound_change = change
     res.converged = res.converged and change < settings.friction_tol
     return res
+
+
+def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
+                        **kw):
+    """``_relax_held``; where the block preconditioner stalls (no new lowest residual in
+    ``block_stall`` iterations: steps with friction 0.5 and jammed crossings, where it moves
+    the crossings too far) and ``scalar_retry``, the step again from the same start with the
+    scalar one, the iterations and times of both counted."""
+    res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, settings=settings,
+                      **kw)
+    if res.converged or settings.preconditioner != "block" or not settings.scalar_retry:
+        return res
+    again = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
+                        settings=dataclasses.replace(settings, preconditioner="scalar"), **kw)
+    again.iterations += res.iterations
+    again.history = np.concatenate([res.history, again.history])
+    for key, v in res.times.items():
+        again.times[key] += v
+    again.set_changes += res.set_changes
+    again.factorisations += res.factorisations
+    again.sweep_stats = tuple(a + b for a, b in zip(again.sweep_stats, res.sweep_stats))
+    again.fallback_scalar = True
+    return again
 
 
 def _bound_change(lat, new, old, tension, f_top):
@@ -346,7 +490,9 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     compression = e.compression
     l_jam = float(width)
     k_jam = e.jam_force * f_spool / max(l_jam, 1e-300)
-    times = dict(sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0, mix=0.0)
+    times = dict(setup=0.0, sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0,
+                 mix=0.0)
+    t_setup = time.perf_counter()
     pos = np.array(pos, dtype=float)
     s = np.array(s, dtype=float)
     f_top = np.array(f_top, dtype=float)
@@ -390,7 +536,14 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         active[:] = dist < st.wall_contact
         behind = active & (dist < 0.0)
         pos[behind] -= dist[behind, None] * plane[behind, 3:]
-    lap = _Laplacian(lat) if m else None
+    block = st.preconditioner == "block"
+    if st.preconditioner not in ("block", "scalar"):
+        raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
+                         "'block' or 'scalar'")
+    lap = _Laplacian(lat) if m and not block else None
+    blk = _BlockStiffness(lat, pos) if m and block else None
+    rhs = np.empty((m, 3))
+    times["setup"] = time.perf_counter() - t_setup
     mixer = _Anderson(st.anderson_depth)
     history = []
     residual = np.inf
@@ -399,22 +552,29 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     factored_active = None
     set_changes = 0
     stats = np.zeros(2, dtype=np.int64)
-    smoothing = st.smoothing
+    smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
+    l_prev = np.empty((m, 2))
+    factorisations = 0
+    inner = lat.low >= 0
+    factored_jam = None
+    predict = False
+    predict_on = st.material_predict and block
     while True:
         t0 = time.perf_counter()
         RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
                            fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
         RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g, f_top,
                           EA, compression, eps_f, kappa0, st.material_tol, st.material_newton,
-                          tension, chain, work, stats)
+                          tension, chain, work, stats, l_prev if predict else None)
+        if predict_on:
+            l_prev[:] = l_below
+            predict = True
         t1 = time.perf_counter()
         RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
                   f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
         residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
                     if m else 0.0)
-        RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
-                           float(mu), g_new, psi)
         history.append(residual)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
@@ -432,24 +592,63 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             smoothing = 0
             mixer.reset()
             best_it = it
-        if it >= st.max_iter:
+        if it >= st.max_iter or (block and it - best_it > st.block_stall):
             break
         it += 1
-        if (it - 1) % st.refactor_every == 0 or factored_active is None or not np.array_equal(
-                active, factored_active):
-            RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
-                                lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
-            lap.factor()
+        if block:
+            due = bool(st.block_refactor_every) and (it - 1) % st.block_refactor_every == 0
+            # the jamming stiffness k_jam d d^T enters K where a segment is shorter than a
+            # width: where that set changed since the factorisation, K is factorised anew and
+            # Anderson's history (of the old map) cleared
+            jammed = (l_below < l_jam) & inner
+            if factored_jam is not None and not np.array_equal(jammed, factored_jam):
+                due = True
+                mixer.reset()
+        else:
+            due = (it - 1) % st.refactor_every == 0
+        if due or factored_active is None or not np.array_equal(active, factored_active):
+            factorisations += 1
+            if block:
+                factored_jam = jammed
+                reg = st.block_reg
+                while True:
+                    RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
+                                    tension, f_top, l_jam, k_jam, st.floor, reg, plane, active,
+                                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
+                                    blk.Dg)
+                    if blk.factor():
+                        break
+                    reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
+            else:
+                RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
+                                    lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
+                lap.factor()
             factored_active = active.copy()
         t3 = time.perf_counter()
-        rhs = np.where(active[:, None], 0.0, force)
-        lap.solve(rhs, delta)
+        if block:
+            RK.tangent_part(m, force, plane, active, rhs)
+            blk.solve(rhs, delta)
+            RK.cap_moves(m, lat.low, l_below, st.block_cap, lmin, delta)
+        else:
+            rhs = np.where(active[:, None], 0.0, force)
+            lap.solve(rhs, delta)
         t4 = time.perf_counter()
         changed = False
         if has_wall:
-            delta[active] = 0.0
-            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane, active,
-                           st.wall_release, wall_force)
+            if block:
+                # the block update moved the resting crossings in their planes; the local
+                # balance decides who leaves
+                moved = delta.copy()
+                delta[active] = 0.0
+                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
+                               active, st.wall_release, wall_force)
+                RK.wall_distance(m, pos + delta, plane, dist)
+                stay = active & (dist <= st.wall_release)
+                delta[stay] = moved[stay]
+            else:
+                delta[active] = 0.0
+                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
+                               active, st.wall_release, wall_force)
             new = pos + delta
             RK.wall_distance(m, new, plane, dist)
             join = ~active & (dist < -st.wall_release)
@@ -472,7 +671,11 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                                d_top, l_top)
             RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
                               f_top, EA, compression, eps_f, kappa0, st.material_tol,
-                              st.material_newton, tension, chain, work, stats)
+                              st.material_newton, tension, chain, work, stats,
+                              l_prev if predict else None)
+            if predict_on:
+                l_prev[:] = l_below
+                predict = True
             RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
                       tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
             RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
@@ -499,6 +702,9 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
+    # the friction bounds of the last (converged) geometry, for the next step
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
+                       float(mu), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
@@ -506,6 +712,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                        f_top=f_top, wall_force=wall_force, active=active.copy(), iterations=it,
                        residual=float(residual), history=np.array(history),
                        converged=converged, times=times, set_changes=set_changes,
+                       factorisations=factorisations,
                        sweep_stats=(int(stats[0]), int(stats[1])))
 
 
@@ -578,7 +785,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     into ``state.bound`` for the next step. A call that asks for the frontal iteration of the
     bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
     to 1e-3) is Newton's (``frontal.solve_zone_inplace``), as is a step the relaxation does not
-    converge on within ``relax_settings.max_iter`` (``newton_fallback``, counted in
+    converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
+    the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``, counted in
     ``FALLBACKS``). ``tol``: the balance tolerance (default ``relax_settings.tol``).
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
@@ -601,8 +809,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 top_tensions=ring_top_tensions(state, bc))
     if not res.converged:
         if rs.newton_fallback:
-            # the relaxation stalls on some steps where new crossings slide far (16 carriers,
-            # friction 0.25: 1 step in 80): the Newton reference solves that step instead
+            # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
+            # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
                                                 centre=centres)
             FALLBACKS[0] += 1
