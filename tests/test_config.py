@@ -460,10 +460,10 @@ def test_rtm_material_and_section(tmp_path):
 
 
 def test_model_solver_key(tmp_path):
-    """``[model] solver``: "newton" by default, "relax" accepted and echoed, anything else refused
-    with the key, the value and the choices named."""
-    assert load_config(make_case(tmp_path)).model.solver == "newton"
-    cfg = load_config(make_case(tmp_path, model={"kind": "interaction", "solver": "relax"}))
-    assert cfg.model.solver == "relax" and dump_config(cfg)["model"]["solver"] == "relax"
+    """``[model] solver``: "relax" by default, "newton" (the reference) accepted and echoed,
+    anything else refused with the key, the value and the choices named."""
+    assert load_config(make_case(tmp_path)).model.solver == "relax"
+    cfg = load_config(make_case(tmp_path, model={"kind": "interaction", "solver": "newton"}))
+    assert cfg.model.solver == "newton" and dump_config(cfg)["model"]["solver"] == "newton"
     config_error(tmp_path, "solver", "cholesky", '"newton"', '"relax"',
                  model={"solver": "cholesky"})

@@ -102,9 +102,10 @@ class ModelConfig:
     time_step: float | None = None  # s; None: automatic step control
     start: str = "tip"              # "tip" | "random": initial fell points
     seed: int = 0                   # for start = "random"
-    #: the interaction model's zone solver: "newton" (the validated reference) | "relax"
-    #: (force-density relaxation, ``interaction/relax.py``)
-    solver: str = "newton"
+    #: the interaction model's zone solver: "relax" (force-density relaxation,
+    #: ``interaction/relax.py``: Newton's equations, ~10x faster at 144 carriers) | "newton"
+    #: (the reference: damped Newton on the step's energy)
+    solver: str = "relax"
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,7 @@ def make_zone(config, machine, mandrel):
                           f"{', '.join(map(repr, ZONES))}") from None
     if cls is not InteractionZone:
         return cls(config, machine, mandrel)
-    solver = getattr(config.model, "solver", "newton")
+    solver = config.model.solver
     if solver not in SOLVERS:
         raise ConfigError(f"[model] solver = {solver!r}: expected one of "
                           f"{', '.join(map(repr, SOLVERS))}")
