@@ -95,3 +95,22 @@ def write_cylinder_case(folder, *, name="case", length=0.3, kind="kinematic", fr
         kind=kind, model_extra=model_extra, out_line="" if out is None else f'dir = "{out}"',
         snapshots=snapshots, output_extra=output_extra, extra=extra))
     return path
+
+
+def case_b_like_config(folder, ring_friction):
+    """An interaction-model config on a case-B-like mandrel (rounded square blending into a
+    circle, 0.6 m) with case B's ring (0.17 m) and spool (0.85 m) radii, 16 carriers, 18 deg/s,
+    26.3 mm/s, 0.3 m braided, no snapshots; files in ``folder``."""
+    import dataclasses
+
+    from preform.geometry import shapes
+
+    folder = Path(folder)
+    v, f = shapes.case_b(length=0.6, blend=(0.35, 0.45), n_around=96)
+    stl = write_stl(folder / "b.stl", v, f)
+    cl = write_centerline(folder / "b.csv", [[0, 0, 0], [0, 0, 0.6]])
+    cfg = make_config(stl, cl, carriers=16, spool_radius=0.85, friction=0.25,
+                      ring_friction=ring_friction, guide_ring=(0.17, 0.0), braid_length=0.3,
+                      initial_position=0.2, angular_speed=np.radians(18.0), take_up_speed=0.0263,
+                      eccentricity=(0.02, 0.0), snapshots=0)
+    return dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"))

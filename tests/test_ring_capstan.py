@@ -10,26 +10,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from preform.geometry import shapes
 from preform.interaction.model import InteractionZone
 from preform.interaction.settings import DEFAULT
 from preform.machine import Machine
 from preform.simulation import load_geometry
 from preform.stepping import Stepper, take_up_speed
-from simcase import make_config, write_centerline, write_stl
+from simcase import case_b_like_config
 
 MU_R = 0.2
 
 
 def _stepper(tmp_path, capstan):
-    v, f = shapes.case_b(length=0.6, blend=(0.35, 0.45), n_around=96)
-    stl = write_stl(tmp_path / "b.stl", v, f)
-    cl = write_centerline(tmp_path / "b.csv", [[0, 0, 0], [0, 0, 0.6]])
-    cfg = make_config(stl, cl, carriers=16, spool_radius=0.85, friction=0.25, ring_friction=MU_R,
-                      guide_ring=(0.17, 0.0), braid_length=0.3, initial_position=0.2,
-                      angular_speed=np.radians(18.0), take_up_speed=0.0263,
-                      eccentricity=(0.02, 0.0), snapshots=0)
-    cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"))
+    cfg = case_b_like_config(tmp_path, MU_R)
     mandrel, cl_ = load_geometry(cfg)
     settings = dataclasses.replace(DEFAULT, ring=dataclasses.replace(DEFAULT.ring,
                                                                      capstan=capstan))

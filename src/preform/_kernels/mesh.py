@@ -78,7 +78,7 @@ def project_to_polyline(points, P, S, out_s, out_d):
     trying every segment for every point (``tests/naive_kinematic.project_to_polyline``), but
     with the segments in runs of about sqrt(n) under bounding spheres: a run whose sphere is
     farther than the best distance so far cannot hold the nearest segment and is skipped. The
-    previous point's run is tried first (points come in spatial order along yarns or faces).
+    previous point's run is searched first (points come in spatial order along yarns or faces).
     The sphere bound ``|p - c| - r`` is lowered by ``1e-9 (|p - c| + r) + 1e-12 max|P|``, far
     more than the rounding of the distances it is compared with (1e-16 relative to the
     coordinates), so no run that could hold the nearest segment or an equal one is skipped. Writes the arc length of the closest point into
