@@ -33,6 +33,14 @@ def _offset(over, c, side, h):
 
 
 @njit(cache=True)
+def _jam_push(l, l_jam, k_jam, lo):
+    """N, the jamming push ``k_jam (l_jam - l)`` of a segment between two crossings (``lo >= 0``)
+    shorter than the width ``l_jam``; 0 otherwise (docs/jamming.md)."""
+    gap = l_jam - l
+    return k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
+
+
+@njit(cache=True)
 def segment_vectors(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, h, eps2, eps2_top,
                     d_below, l_below, d_top, l_top):
     """Vectors (upper yarn point less lower) and smoothed lengths of every segment: below every
@@ -267,8 +275,7 @@ def forces(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tensi
             lo = low[c, side]
             l = l_below[c, side]
             f = tension[c, side]
-            gap = l_jam - l
-            fj = k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
+            fj = _jam_push(l, l_jam, k_jam, lo)
             kj = k_jam if fj > 0.0 else 0.0
             a = (f - fj) / l
             for i in range(3):
@@ -461,8 +468,7 @@ def block_jacobi(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
         for side in range(2):
             lo = low[c, side]
             l = l_below[c, side]
-            gap = l_jam - l
-            fj = k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
+            fj = _jam_push(l, l_jam, k_jam, lo)
             kj = k_jam if fj > 0.0 else 0.0
             wp = max(tension[c, side] - fj, floor) / l
             lmin[c] = min(lmin[c], l)
@@ -595,8 +601,7 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
             lo = low[c, side]
             l = l_below[c, side]
             f = tension[c, side]
-            gap = l_jam - l
-            fj = k_jam * gap if (gap > 0.0 and lo >= 0) else 0.0
+            fj = _jam_push(l, l_jam, k_jam, lo)
             kj = k_jam if fj > 0.0 else 0.0
             _segment_block(d_below[c, side, 0] / l, d_below[c, side, 1] / l,
                            d_below[c, side, 2] / l, max(f - fj, floor) / l, kj,
