@@ -7,6 +7,7 @@ import pytest
 
 from preform import fields as F
 from preform._kernels import fields as K
+from naive_geometry import point_triangle_distance
 from test_helpers_fields import cylinder, helices
 
 
@@ -24,26 +25,6 @@ def naive_face_lengths(points, offsets, group, vertices, faces, pieces=400):
             nearest = np.argmin(point_triangle_distance(mids, tri), axis=1)
             np.add.at(out[:, group[k]], nearest, np.linalg.norm(b - a) / pieces)
     return out
-
-
-def point_triangle_distance(p, tri):
-    """(n, nf) distance from points p (n, 3) to triangles tri (nf, 3, 3): nearest of the plane
-    projection (if inside) and the three edges."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1)[:, None]
-    d = p[:, None, :] - a[None]
-    h = np.einsum("pfi,fi->pf", d, n)
-    q = p[:, None, :] - h[..., None] * n[None]
-    inside = np.ones(h.shape, bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("pfi,fi->pf", np.cross(v - u, q - u[None]), n) >= 0
-    best = np.where(inside, np.abs(h), np.inf)
-    for u, v in ((a, b), (b, c), (c, a)):
-        e = v - u
-        s = np.clip(np.einsum("pfi,fi->pf", p[:, None] - u[None], e) / np.einsum("fi,fi->f", e, e), 0, 1)
-        best = np.minimum(best, np.linalg.norm(p[:, None] - (u[None] + s[..., None] * e[None]), axis=2))
-    return best
 
 
 def test_clip_matches_sampled_reference_and_conserves_length():

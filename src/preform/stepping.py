@@ -118,7 +118,8 @@ class Stepper:
         clearance = max(s.catch_clearance_thickness * config.yarn.thickness,
                         s.catch_clearance_diagonal * mandrel.diagonal)
         self.depositor = Depositor(mandrel, clearance=clearance,
-                                   h_max=s.walk_piece_widths * config.yarn.width)
+                                   h_max=s.walk_piece_widths * config.yarn.width,
+                                   bridge_depth=s.bridge_depth_thickness * config.yarn.thickness)
         self.ecc = np.asarray(config.process.eccentricity, dtype=float)
         self.lead = config.process.pose_lead
         # travel counts from the spool plane; initial_position from the supply plane (the guide

@@ -38,6 +38,10 @@ class Tolerances:
     catch_clearance_thickness: float = 0.5
     #: ... and at least this fraction of the mandrel's diagonal off it, clear of ray round-off
     catch_clearance_diagonal: float = 1e-5
+    #: a concave stretch is flagged ``bridge`` only where the straight span stands off the surface
+    #: by more than this many yarn thicknesses: the micrometre dips of a faceted (e.g. offset)
+    #: mesh lie within the yarn's own thickness, the yarn lies on them
+    bridge_depth_thickness: float = 0.1
     #: longest straight piece (in yarn widths) of a fell point's walk over the surface: the walk
     #: follows the smooth normals, a piece this short keeps it on a curved surface
     walk_piece_widths: float = 0.5
