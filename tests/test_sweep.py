@@ -163,3 +163,38 @@ def test_an_unreachable_scheduler_is_said_so(tmp_path):
     with pytest.raises(PreformError, match="no Dask scheduler answers there"):
         sweep(tmp_path / "sweep.toml", scheduler=f"tcp://127.0.0.1:{_free_port()}", progress=False,
               cluster=ClusterSettings(connect_timeout_s=1.0))
+
+
+def test_a_sweep_key_addresses_one_layer(tmp_path):
+    """"layer.K.section.key" sets a key of the K-th [[layer]] (counted from 1, as preform names
+    the layers); the other layer and the top-level sections keep theirs."""
+    import numpy as np
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    (tmp_path / "s.toml").write_text(
+        f'base = "{(ex / "two_layers.toml").as_posix()}"\n'
+        '[grid]\n"layer.2.machine.angular_speed" = [12.0, 20.0]\n'
+        '[set]\n"layer.1.yarn.friction" = 0.3\n')
+    spec = load_sweep(tmp_path / "s.toml")
+    assert [p.name for p in spec.points] == ["000_layer2-angular_speed=12",
+                                            "001_layer2-angular_speed=20"]
+    for point, deg in zip(spec.points, (12.0, 20.0)):
+        cfg = spec.configs[point.index]
+        assert cfg.layer_config(1).machine.angular_speed == pytest.approx(np.radians(deg))
+        assert cfg.layer_config(0).machine.angular_speed == pytest.approx(np.radians(9.55))
+        assert cfg.layer_config(0).yarn.friction == 0.3
+        assert cfg.layer_config(1).yarn.friction == 0.25
+        assert cfg.layers[1].direction == "backward"
+
+
+@pytest.mark.parametrize("key, says", [
+    ("layer.3.machine.angular_speed", "has 2 \\[\\[layer\\]\\] table\\(s\\); expected a number from 1 to 2"),
+    ("layer.machine.angular_speed", "name one by its number"),
+    ("layer", 'expected "section.key"'),
+])
+def test_a_layer_key_that_names_no_layer_is_refused(tmp_path, key, says):
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    (tmp_path / "s.toml").write_text(f'base = "{(ex / "two_layers.toml").as_posix()}"\n'
+                                     f'[grid]\n"{key}" = [12.0]\n')
+    with pytest.raises(ConfigError, match=says):
+        load_sweep(tmp_path / "s.toml")

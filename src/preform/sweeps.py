@@ -99,22 +99,55 @@ def _read_toml(path: Path, what: str) -> dict:
 
 
 def _set(data: dict, dotted: str, value, where: str) -> None:
-    """data[a][b]... = value for ``dotted`` = "a.b...", creating tables on the way."""
+    """data[a][b]... = value for ``dotted`` = "a.b...", creating tables on the way; a number
+    after an array of tables picks one of them, counted from 1 as ``preform`` names the layers:
+    "layer.2.machine.angular_speed" is ``angular_speed`` in ``[layer.machine]`` of the second
+    ``[[layer]]``."""
     parts = dotted.split(".")
     if len(parts) < 2 or not all(parts):
-        raise ConfigError(f'{where}: key "{dotted}": expected "section.key" (e.g. "yarn.friction")')
+        raise ConfigError(f'{where}: key "{dotted}": expected "section.key" (e.g. "yarn.friction"'
+                          ', or "layer.2.machine.angular_speed" for the second [[layer]])')
     table = data
-    for part in parts[:-1]:
+    rest = parts[:-1]
+    i = 0
+    while i < len(rest):
+        part = rest[i]
+        below = table.get(part)
+        if isinstance(below, list):
+            if i + 1 == len(parts) - 1 or not parts[i + 1].isdigit():
+                raise ConfigError(f'{where}: key "{dotted}": [[{part}]] is a list of {len(below)} '
+                                  f'tables: name one by its number, e.g. "{part}.1.'
+                                  f'{".".join(parts[i + 1:]) or "section.key"}"')
+            k = int(parts[i + 1])
+            if not 1 <= k <= len(below) or not isinstance(below[k - 1], dict):
+                raise ConfigError(f'{where}: key "{dotted}": the base config has {len(below)} '
+                                  f'[[{part}]] table(s); expected a number from 1 to {len(below)}')
+            table = below[k - 1]
+            i += 2
+            continue
         table = table.setdefault(part, {})
         if not isinstance(table, dict):
             raise ConfigError(f'{where}: key "{dotted}": "{part}" is a value, not a table')
+        i += 1
+    if isinstance(table.get(parts[-1]), list) and table[parts[-1]] and \
+            all(isinstance(t, dict) for t in table[parts[-1]]):
+        raise ConfigError(f'{where}: key "{dotted}": [[{parts[-1]}]] is a list of tables; set a '
+                          f'key inside one of them, e.g. "{dotted}.1.machine.angular_speed"')
     table[parts[-1]] = value
 
 
 def _folder_name(index: int, values: dict) -> str:
-    parts = [f"{k.split('.')[-1]}={_text(v)}" for k, v in values.items()]
+    parts = [f"{_short(k)}={_text(v)}" for k, v in values.items()]
     name = f"{index:03d}" + ("_" + "_".join(parts) if parts else "")
     return "".join(c if c.isalnum() or c in "=._-" else "-" for c in name)[:120]
+
+
+def _short(dotted: str) -> str:
+    """The folder-name part of a key: its last name, after the layer it addresses if any
+    ("layer.2.machine.angular_speed" -> "layer2-angular_speed")."""
+    parts = dotted.split(".")
+    where = [f"{a}{b}" for a, b in zip(parts, parts[1:]) if b.isdigit()]
+    return "-".join(where + [parts[-1]])
 
 
 def _text(value) -> str:
