@@ -8,6 +8,10 @@ same captured step (the problem ``InteractionZone.step`` poses its solver) of ca
 its start and from starts shaken by 0.1 and 0.3 mm: the solutions lie within 1e-6 m of each other
 with the same slip states, and on the plain (unmixed) frontal iteration's fixed point. With the
 default lagged bounds the same starts land millimetres to centimetres apart.
+
+Not claimed: whole runs. In a 48-carrier run with consistent bounds a quarter of the steps do not
+reach the tolerance in ``consistent_iterations`` (the consistent equations have a nearly neutral
+direction there) and keep a start-dependent iterate (``docs/decisions.md``).
 """
 
 from __future__ import annotations

@@ -57,7 +57,12 @@ tensions on the ring deflections: an outer fixed point (the frontal iteration) r
 from the balanced geometry and solves again until they change by less than
 ``friction_tolerance`` relative to the tensions; the residual history of a solve is that change per
 iteration. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
-snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``. Then every crossing is in balance
+snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``. With ``consistent_bounds`` a
+time step iterates to ``consistent_tolerance`` instead, from the bounds of its start geometry,
+Anderson-mixing the bounds and top tensions once they change by less than ``mixing_start``
+(``_BoundMixing``): the plain iteration converges linearly at ~0.965 an iteration, the mixed
+one in 18-29 iterations on 48-carrier steps; the step is then the fixed point of the equations
+with consistent bounds, whatever its start. Then every crossing is in balance
 to ``balance_tolerance`` and ``Psi <=`` the last change times ``(f_int + f_ext)``. The friction
 state (stick or slip, the sliding direction) and the material coordinates carry over from one step
 to the next: that history is what makes the model differ from a frictionless one.

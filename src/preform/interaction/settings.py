@@ -115,9 +115,9 @@ class FrontalSettings:
 
     #: iterate every time step's bounds and top tensions to those of its own converged geometry
     #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
-    #: start (issue 14 item 3); off by default: 41-95 Newton steps a step against 7 lagged (48
-    #: carriers), and the relaxation cannot solve such steps, so they go to Newton
-    #: (docs/decisions.md)
+    #: start (issue 14 item 3); off by default: such steps go to Newton (the relaxation does not
+    #: converge where crossings stick), 110x the default's time a step at 144 carriers, and in
+    #: whole runs a quarter of the steps do not reach the tolerance (docs/decisions.md)
     consistent_bounds: bool = False
     #: convergence of that iteration: a change of the bounds below 1e-9 of f_int + f_ext leaves two
     #: starts 1e-7 m apart on 48-carrier steps (1e-8: 1.2e-6 m)
