@@ -57,7 +57,12 @@ tensions on the ring deflections: an outer fixed point (the frontal iteration) r
 from the balanced geometry and solves again until they change by less than
 ``friction_tolerance`` relative to the tensions; the residual history of a solve is that change per
 iteration. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
-snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``. Then every crossing is in balance
+snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``. With ``consistent_bounds`` a
+time step iterates to ``consistent_tolerance`` instead, from the bounds of its start geometry,
+Anderson-mixing the bounds and top tensions once they change by less than ``mixing_start``
+(``_BoundMixing``): the plain iteration converges linearly at ~0.965 an iteration, the mixed
+one in 18-29 iterations on 48-carrier steps; the step is then the fixed point of the equations
+with consistent bounds, whatever its start. Then every crossing is in balance
 to ``balance_tolerance`` and ``Psi <=`` the last change times ``(f_int + f_ext)``. The friction
 state (stick or slip, the sliding direction) and the material coordinates carry over from one step
 to the next: that history is what makes the model differ from a frictionless one.
@@ -363,21 +368,30 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     ``balance_tolerance``, ``friction_tolerance``, ``max_iterations``). ``where`` names the step
     and time in the error message; :class:`SimulationError` if the residual stays above the
     tolerances."""
+    fr = settings.frontal
+    # a time step with consistent bounds: the frontal iteration to convergence, mixed
+    consistent = fr.consistent_bounds and max_iter is None and friction_tol is None
     tol = settings.newton.balance_tolerance if tol is None else tol
-    friction_tol = settings.frontal.friction_tolerance if friction_tol is None else friction_tol
-    max_iter = settings.frontal.max_iterations if max_iter is None else max_iter
+    if consistent:
+        friction_tol, max_iter = fr.consistent_tolerance, fr.consistent_iterations
+    friction_tol = fr.friction_tolerance if friction_tol is None else friction_tol
+    max_iter = fr.max_iterations if max_iter is None else max_iter
     m = state.m
     net = _Network(state, bc, settings)
     net.centre = np.array((friction_centres(state) if centre is None else centre)[:m],
                           dtype=float)
     if m == 0:
         return SolveReport(0, 0.0, np.zeros(0), net.bounds()[2])
-    # start: the bounds of the last step (new crossings: of the start geometry)
+    # start: the bounds of the last step (new crossings: of the start geometry); with consistent
+    # bounds those of the start geometry for all (the step's boundary moved since the last
+    # step: near the fell and top points they are closer to the step's own, and the
+    # iteration needs 18-29 iterations instead of 31-33 on 48-carrier steps)
     net.tension[:] = state.tension[:m]
     bound0, _, f_top0 = net.bounds()
-    fresh = ~np.isfinite(state.bound[:m])
+    fresh = ~np.isfinite(state.bound[:m]) | consistent
     net.bound = np.where(fresh, bound0, state.bound[:m])
     net.f_top = f_top0
+    mixer = _BoundMixing(fr.bound_mixing if consistent else 0, fr.mixing_start)
     history = []
     newton = 0
     residual = np.inf
@@ -408,11 +422,40 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
             state.bound[:m] = bound1
             return SolveReport(it, max(float(residual), change), np.array(history),
                                net.f_top.copy(), newton, lagged=True, **_trace(net))
-        net.bound, net.f_top = bound1, f_top1
+        net.bound, net.f_top = mixer(net.bound, net.f_top, bound1, f_top1, change)
     raise SimulationError(
         f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
         f"force imbalance (residual) {residual:.3g} after {newton} Newton steps (tolerance "
         f"{tol:.3g}, {m} crossings)")
+
+
+class _BoundMixing:
+    """Anderson (type II) mixing of the frontal iteration's map (bounds, top tensions) -> the
+    bounds and top tensions of the balanced geometry, over the last ``depth`` iterates, once the
+    change is below ``start``: x+ = G(x) - dG gamma, gamma = argmin |r - dR gamma| (r = G(x) - x).
+    Above ``start`` (crossings still switching between stick and slip, the map not smooth) and
+    with depth 0 it is the plain iteration x+ = G(x), and the history is cleared."""
+
+    def __init__(self, depth, start):
+        self.depth, self.start = depth, start
+        self.x, self.g = [], []
+
+    def __call__(self, bound, f_top, bound1, f_top1, change):
+        if self.depth <= 0 or not change < self.start:
+            self.x, self.g = [], []
+            return bound1, f_top1
+        m = bound.shape[0]
+        self.x.append(np.concatenate([bound.ravel(), f_top]))
+        self.g.append(np.concatenate([bound1.ravel(), f_top1]))
+        del self.x[:-(self.depth + 1)], self.g[:-(self.depth + 1)]
+        new = self.g[-1]
+        if len(self.x) > 1:
+            G = np.array(self.g)
+            R = G - np.array(self.x)
+            gamma = np.linalg.lstsq(np.diff(R, axis=0).T, R[-1], rcond=None)[0]
+            new = G[-1] - np.diff(G, axis=0).T @ gamma
+        # a combination may reach below zero where a yarn runs straight (bound 0): no bound is
+        return np.maximum(new[:2 * m], 0.0).reshape(m, 2), new[2 * m:]
 
 
 def _trace(net):

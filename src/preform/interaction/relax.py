@@ -791,7 +791,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
-    if max_iter is not None or friction_tol is not None:
+    if max_iter is not None or friction_tol is not None or settings.frontal.consistent_bounds:
+        # consistent bounds: the relaxation does not converge on steps whose crossings stick
+        # (docs/decisions.md), Newton's frontal iteration solves them
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
                                           where=where, centre=centre)

@@ -113,6 +113,27 @@ class FrontalSettings:
     #: reported as slipping (it uses more than 99.5 % of its bound)
     slip_report_creeps: float = 10.0
 
+    #: iterate every time step's bounds and top tensions to those of its own converged geometry
+    #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
+    #: start (issue 14 item 3); off by default: such steps go to Newton (the relaxation does not
+    #: converge where crossings stick), 110x the default's time a step at 144 carriers, and in
+    #: whole runs a quarter of the steps do not reach the tolerance (docs/decisions.md)
+    consistent_bounds: bool = False
+    #: convergence of that iteration: a change of the bounds below 1e-9 of f_int + f_ext leaves two
+    #: starts 1e-7 m apart on 48-carrier steps (1e-8: 1.2e-6 m)
+    consistent_tolerance: float = 1e-9
+    #: its frontal iterations at most (48-carrier case A steps take 18-29 with friction 0.25,
+    #: 260 with friction 0.5, where the bounds tail off more slowly)
+    consistent_iterations: int = 400
+    #: Anderson depth of the mixing of the bounds and top tensions in that iteration: plain
+    #: iteration tails off linearly at a factor 0.965 an iteration (174 to 1e-7), with
+    #: Anderson(5) 18-29 iterations to 1e-9
+    bound_mixing: int = 5
+    #: change of the bounds (relative to f_int + f_ext) below which the mixing starts: above it
+    #: crossings switch between stick and slip from one iteration to the next and Anderson
+    #: diverges (the bounds jump with the states)
+    mixing_start: float = 1e-3
+
     @property
     def slip_report(self) -> float:
         """m of yarn: the slide above which a yarn is reported as slipping."""
