@@ -642,3 +642,81 @@ def any_side_longer(V, F, h):
             if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
                 return True
     return False
+
+
+@njit(cache=True)
+def long_side_faces(V, F, h, out):
+    """Faces of F with a side ``|p_k - p_(k-1)|`` longer than h into out (m,) bool: the mask
+    ``(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)`` with the norm
+    summed as np.linalg.norm does, ``(dx^2 + dy^2) + dz^2``."""
+    for f in range(F.shape[0]):
+        out[f] = False
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 2) % 3]
+            dx = V[a, 0] - V[b, 0]
+            dy = V[a, 1] - V[b, 1]
+            dz = V[a, 2] - V[b, 2]
+            if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
+                out[f] = True
+                break
+
+
+@njit(cache=True)
+def triangle_moments(V, F, area, centroid, second):
+    """Area, centroid and second moment of every face of F (m, 3) on V (n, 3), into area (m,),
+    centroid (m, 3) and second (m, 3, 3): with corners a, b, c, ``A = |(b - a) x (c - a)| / 2``,
+    ``s = a + b + c``, centroid ``s / 3`` and ``A / 12 (a a^T + b b^T + c c^T + s s^T)``, each
+    sum in the order of the NumPy form in ``geometry.centerline.surface_moments``'s docstring
+    (corner by corner, the norm as np.linalg.norm), so the arrays are bit-identical to it."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        ux = V[i1, 0] - V[i0, 0]
+        uy = V[i1, 1] - V[i0, 1]
+        uz = V[i1, 2] - V[i0, 2]
+        wx = V[i2, 0] - V[i0, 0]
+        wy = V[i2, 1] - V[i0, 1]
+        wz = V[i2, 2] - V[i0, 2]
+        cx = uy * wz - uz * wy
+        cy = uz * wx - ux * wz
+        cz = ux * wy - uy * wx
+        a = 0.5 * np.sqrt((cx * cx + cy * cy) + cz * cz)
+        area[f] = a
+        w = a / 12.0
+        for i in range(3):
+            si = (V[i0, i] + V[i1, i]) + V[i2, i]
+            centroid[f, i] = si / 3.0
+            for j in range(3):
+                sj = (V[i0, j] + V[i1, j]) + V[i2, j]
+                corners = (V[i0, i] * V[i0, j] + V[i1, i] * V[i1, j]) + V[i2, i] * V[i2, j]
+                second[f, i, j] = (corners + si * sj) * w
+
+
+@njit(cache=True)
+def vertex_bounds(V, F, lo, hi):
+    """Least and greatest coordinates (3,) into lo, hi of the finite vertices V (n, 3): of all of
+    them when F has no rows, else of those F (m, 3) uses (``V[np.unique(F)].min(axis=0)`` and
+    ``.max(axis=0)``; min and max are exact, so the order of the pass does not matter)."""
+    for c in range(3):
+        lo[c] = np.inf
+        hi[c] = -np.inf
+    if F.shape[0] == 0:
+        for i in range(V.shape[0]):
+            for c in range(3):
+                x = V[i, c]
+                if x < lo[c]:
+                    lo[c] = x
+                if x > hi[c]:
+                    hi[c] = x
+        return
+    for f in range(F.shape[0]):
+        for k in range(3):
+            i = F[f, k]
+            for c in range(3):
+                x = V[i, c]
+                if x < lo[c]:
+                    lo[c] = x
+                if x > hi[c]:
+                    hi[c] = x
