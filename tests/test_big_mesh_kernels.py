@@ -270,3 +270,43 @@ def test_vertex_bounds_are_numpy_min_and_max():
             vertex_bounds(V, faces, lo, hi)
             np.testing.assert_array_equal(lo, used.min(axis=0))
             np.testing.assert_array_equal(hi, used.max(axis=0))
+
+
+def test_face_cross_normals_are_the_numpy_form():
+    from preform._kernels.mesh import face_cross_normals
+
+    for m in meshes():
+        V, F = arrays(m)
+        F = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])             # a zero-area face
+        cross, normals = np.empty((len(F), 3)), np.empty((len(F), 3))
+        face_cross_normals(V, F, cross, normals)
+        ref = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        area2 = np.linalg.norm(ref, axis=1)
+        np.testing.assert_array_equal(cross, ref)
+        np.testing.assert_array_equal(normals, ref / np.where(area2 > 0, area2, 1.0)[:, None])
+
+
+def test_edge_ray_geometry_is_the_numpy_form():
+    from preform._kernels.mesh import edge_ray_geometry
+
+    for m in meshes():
+        V, F = arrays(m)
+        e = np.unique(np.sort(np.vstack([F[:, :2], F[:, 1:], [[0, 0]]]), axis=1), axis=0)  # one of length 0
+        k = len(e)
+        ok = np.empty(k, dtype=bool)
+        a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+        length, eps = np.empty(k), np.empty(k)
+        n = edge_ray_geometry(V, e, ok, a, u, length, eps, origin)
+        ra = V[e[:, 0]]
+        d = V[e[:, 1]] - ra
+        L = np.linalg.norm(d, axis=1)
+        keep = L > 0
+        assert not keep.all() and n == keep.sum()
+        ra, d, L = ra[keep], d[keep], L[keep]
+        ru = d / L[:, None]
+        np.testing.assert_array_equal(ok, keep)
+        np.testing.assert_array_equal(a[:n], ra)
+        np.testing.assert_array_equal(u[:n], ru)
+        np.testing.assert_array_equal(length[:n], L)
+        np.testing.assert_array_equal(eps[:n], 1e-6 * L)
+        np.testing.assert_array_equal(origin[:n], ra + ru * (1e-6 * L)[:, None])

@@ -720,3 +720,62 @@ def vertex_bounds(V, F, lo, hi):
                     lo[c] = x
                 if x > hi[c]:
                     hi[c] = x
+
+
+@njit(cache=True)
+def face_cross_normals(V, F, cross, normals):
+    """Per face of F (m, 3): ``c = (p1 - p0) x (p2 - p0)`` into cross (m, 3) and the unit normal
+    ``c / |c|`` (``c`` itself where ``|c| = 0``) into normals (m, 3), in the operations of
+    ``np.cross`` and ``np.linalg.norm`` (bit-identical to ``c / np.where(a > 0, a, 1)``)."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        ux = V[i1, 0] - V[i0, 0]
+        uy = V[i1, 1] - V[i0, 1]
+        uz = V[i1, 2] - V[i0, 2]
+        wx = V[i2, 0] - V[i0, 0]
+        wy = V[i2, 1] - V[i0, 1]
+        wz = V[i2, 2] - V[i0, 2]
+        cx = uy * wz - uz * wy
+        cy = uz * wx - ux * wz
+        cz = ux * wy - uy * wx
+        cross[f, 0] = cx
+        cross[f, 1] = cy
+        cross[f, 2] = cz
+        a = np.sqrt((cx * cx + cy * cy) + cz * cz)
+        if not a > 0:
+            a = 1.0
+        normals[f, 0] = cx / a
+        normals[f, 1] = cy / a
+        normals[f, 2] = cz / a
+
+
+@njit(cache=True)
+def edge_ray_geometry(V, e, keep, a, u, length, eps, origin):
+    """The rays of ``repair.self_intersections``: for each edge (p, q) of e (k, 2) of nonzero
+    length ``L = |V[q] - V[p]|``, in order, its start ``a = V[p]``, unit direction ``u``, L, the
+    hair ``eps = 1e-6 L`` and the ray origin ``a + eps u``, into the first rows of a, u (k, 3),
+    length, eps (k,) and origin (k, 3); keep (k,) marks those edges. Returns their number.
+    The operations of the NumPy form (``d / L``, norms as np.linalg.norm)."""
+    m = 0
+    for i in range(e.shape[0]):
+        p = e[i, 0]
+        q = e[i, 1]
+        dx = V[q, 0] - V[p, 0]
+        dy = V[q, 1] - V[p, 1]
+        dz = V[q, 2] - V[p, 2]
+        L = np.sqrt((dx * dx + dy * dy) + dz * dz)
+        keep[i] = L > 0
+        if not L > 0:
+            continue
+        h = 1e-6 * L
+        length[m] = L
+        eps[m] = h
+        for c, dc in ((0, dx), (1, dy), (2, dz)):
+            uc = dc / L
+            a[m, c] = V[p, c]
+            u[m, c] = uc
+            origin[m, c] = V[p, c] + uc * h
+        m += 1
+    return m

@@ -271,9 +271,12 @@ def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bo
         raise MandrelError(f"{name}: expected a triangle mesh, got vertices {vertices.shape} and faces {faces.shape}")
     if not np.all(np.isfinite(vertices)):
         raise MandrelError(f"{name}: the STL has non-finite vertex coordinates")
-    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    area2 = np.linalg.norm(cross, axis=1)
-    normals = cross / np.where(area2 > 0, area2, 1.0)[:, None]
+    from .._kernels.mesh import face_cross_normals
+
+    cross = np.empty((len(faces), 3))
+    normals = np.empty((len(faces), 3))
+    # cross = (p1 - p0) x (p2 - p0), normals = cross / |cross| (cross where |cross| = 0)
+    face_cross_normals(vertices, faces, cross, normals)
     neighbors = face_neighbors(faces)
     if check:
         _check_closed(name, vertices, faces, neighbors, cross)

@@ -127,11 +127,16 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     _refuse_non_manifold(V, edges, say)
     _refuse_unwelded(V, edges, radius, say)
     flipped, component = _orientation(F, edges, V, say)
-    F = np.where(flipped[:, None], F[:, ::-1], F)
+    if flipped.any():
+        F = np.where(flipped[:, None], F[:, ::-1], F)
     keep, counts["bodies"] = _choose_body(V, F, component, body, say)
-    F, flipped = F[keep], flipped[keep]
+    if not keep.all():
+        F, flipped = F[keep], flipped[keep]
 
-    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say)
+    # every edge of a body lies in that body's faces only (two-face edges join faces of one body,
+    # and no edge has more), so with no open edge now no kept body has a hole
+    closed = not np.any(edges.count == 1)
+    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say, closed)
     volume = _signed_volume(V, F)
     if volume < 0:
         F = F[:, ::-1]
@@ -487,13 +492,14 @@ def _simple_loops(walk):
     return [loop for loop in out if len(loop) >= 3]
 
 
-def _fill_small_holes(V, F, say):
+def _fill_small_holes(V, F, say, closed=False):
     """Fill the small boundary loops (module docstring, step 7); refuse if any is large.
 
+    closed : True when F is known to have no open edge (the loops are not searched for).
     Returns (faces, holes filled, largest span m).
     """
     say.mark_holes()
-    loops = _boundary_loops(F)
+    loops = [] if closed else _boundary_loops(F)
     if not loops:
         return F, 0, 0.0
     spans = np.array([np.inf if loop is None else _diagonal(V[loop]) for loop in loops])
@@ -629,7 +635,7 @@ def self_intersections(vertices, faces, mesh=None):
     """
     import trimesh
 
-    from .._kernels.mesh import edge_ray_batch, edge_ray_hits
+    from .._kernels.mesh import edge_ray_batch, edge_ray_geometry, edge_ray_hits, face_cross_normals
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
@@ -642,13 +648,12 @@ def self_intersections(vertices, faces, mesh=None):
     key, _ = edge_table(faces, int(n), np.empty(3 * len(faces), dtype=np.int64),
                         np.empty(3 * len(faces), dtype=np.int64))
     e = np.stack([key // n, key % n], axis=1)
-    a = vertices[e[:, 0]]
-    d = vertices[e[:, 1]] - a
-    length = np.linalg.norm(d, axis=1)
-    ok = length > 0
-    e, a, d, length = e[ok], a[ok], d[ok], length[ok]
-    u = d / length[:, None]
-    eps = 1e-6 * length
+    k = len(e)
+    ok = np.empty(k, dtype=bool)
+    a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+    length, eps = np.empty(k), np.empty(k)
+    k = edge_ray_geometry(vertices, e, ok, a, u, length, eps, origin)   # origin = a + eps u
+    e, a, u, length, eps, origin = e[ok], a[:k], u[:k], length[:k], eps[:k], origin[:k]
     intersector = mesh.ray
     scene = getattr(intersector, "_scene", None)
     if scene is None or not hasattr(scene, "scene"):        # no embree: trimesh's own rays
@@ -658,11 +663,8 @@ def self_intersections(vertices, faces, mesh=None):
         own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
         return e[_unique(ray[inside & ~own])]
     base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(vertices, axis=0))))
-    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    area2 = np.linalg.norm(cross, axis=1)
-    normals = np.ascontiguousarray(cross / np.where(area2 > 0, area2, 1.0)[:, None])
-    origin = a + u * eps[:, None]
-    k = len(e)
+    normals = np.empty((len(faces), 3))
+    face_cross_normals(vertices, faces, np.empty((len(faces), 3)), normals)
     offset = np.full(k, base)
     last = np.full(k, -1, dtype=np.int64)
     bad = np.zeros(k, dtype=bool)
