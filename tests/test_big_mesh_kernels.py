@@ -310,3 +310,28 @@ def test_edge_ray_geometry_is_the_numpy_form():
         np.testing.assert_array_equal(length[:n], L)
         np.testing.assert_array_equal(eps[:n], 1e-6 * L)
         np.testing.assert_array_equal(origin[:n], ra + ru * (1e-6 * L)[:, None])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_merge_clusters_are_the_components_form(seed):
+    from preform._kernels.edges import merge_clusters
+
+    rng = np.random.default_rng(seed)
+    n_exact = 300
+    inverse = rng.integers(0, n_exact, size=900)
+    inverse[:n_exact] = rng.permutation(n_exact)          # every exact vertex used
+    pairs = rng.integers(0, n_exact, size=(40 * seed, 2)).reshape(-1, 2)
+    survivors, new_index = np.empty(900, dtype=np.int64), np.empty(900, dtype=np.int64)
+    n = merge_clusters(inverse, pairs, n_exact, survivors, new_index)
+    # the NumPy form of geometry.repair._merge_vertices
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_exact, n_exact))
+    _, cluster = connected_components(graph, directed=False)
+    cluster = cluster[inverse]
+    n_clusters = int(cluster.max()) + 1
+    keeper = np.full(n_clusters, len(inverse), dtype=np.int64)
+    np.minimum.at(keeper, cluster, np.arange(len(inverse)))
+    ref_index = np.empty(n_clusters, dtype=np.int64)
+    ref_index[np.argsort(keeper)] = np.arange(n_clusters)
+    assert n == n_clusters
+    np.testing.assert_array_equal(survivors[:n], np.sort(keeper))
+    np.testing.assert_array_equal(new_index, ref_index[cluster])

@@ -220,3 +220,39 @@ def orient_bodies(F, pairs, flipped, component):
         component[f] = label[r]
         flipped[f] = p != lowest_parity[r]
     return first_bad
+
+
+@njit(cache=True)
+def merge_clusters(inverse, pairs, n_exact, survivors, new_index):
+    """Vertex clusters of ``geometry.repair._merge_vertices``: the exact-distinct vertices
+    (``inverse`` (n,): each input vertex's one) joined by the near pairs (k, 2) (a union-find,
+    the partition of the pairs graph's connected components). The lowest input vertex of each
+    cluster survives: their indices, ascending, into the first rows of survivors (n,), and each
+    input vertex's survivor's rank into new_index (n,). Returns the number of clusters."""
+    parent = np.arange(n_exact)
+    for i in range(pairs.shape[0]):
+        a = pairs[i, 0]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        b = pairs[i, 1]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            if a < b:
+                parent[b] = a
+            else:
+                parent[a] = b
+    rank = np.full(n_exact, -1, dtype=np.int64)       # per root: its cluster's survivor's rank
+    n = 0
+    for i in range(inverse.shape[0]):
+        r = inverse[i]
+        while parent[r] != r:
+            r = parent[r]
+        if rank[r] < 0:
+            rank[r] = n
+            survivors[n] = i
+            n += 1
+        new_index[i] = rank[r]
+    return n

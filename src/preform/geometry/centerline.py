@@ -337,19 +337,27 @@ def _section_loops(mesh, origin, normal):
     local = _faces_near_plane(mesh, normal, level)
     if len(local) == 0:
         return []
-    # mesh_plane reads the dots of the local faces' vertices only: fill just those
-    dots = mesh.metadata.get("_preform_dots")
+    # mesh_plane classifies every vertex of the mesh it is given: give it the local faces' corners
+    # only (a patch of 3 k vertices, each face its own three), with their dots; the segments are
+    # the same, computed from the same coordinates and dots in the same face order
     V = mesh.vertices.view(np.ndarray)
-    if dots is None or len(dots) != len(V):
-        dots = mesh.metadata["_preform_dots"] = np.zeros(len(V))
     used = mesh.faces.view(np.ndarray)[local].reshape(-1)
-    dots[used] = V[used] @ normal - level
+    corners = V[used]
+    patch = _Patch(corners, np.arange(len(used), dtype=np.int64).reshape(-1, 3))
     try:
-        segments = mesh_plane(mesh, plane_normal=normal, plane_origin=origin, local_faces=local,
-                              cached_dots=dots)
+        segments = mesh_plane(patch, plane_normal=normal, plane_origin=origin,
+                              cached_dots=corners @ normal - level)
     except Exception:
         return []
     return chain_segments(np.asarray(segments))
+
+
+@dataclass(frozen=True)
+class _Patch:
+    """The vertices (k, 3) and faces (m, 3) that ``trimesh.intersections.mesh_plane`` reads."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
 
 
 def chain_segments(segments, rel_tol=1e-9):

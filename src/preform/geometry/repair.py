@@ -33,8 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import MandrelError
@@ -237,22 +235,22 @@ def _merge_vertices(V, F, radius):
     Returns (vertices, faces, merged) where ``merged`` leaves out the corners shared by an STL
     soup's triangles when the input is a soup (exact copies, ``3 * len(F)`` vertices).
     """
+    from .._kernels.edges import merge_clusters
+
     exact, inverse = _weld_exact(V)
     pairs = cKDTree(exact).query_pairs(radius, output_type="ndarray")
     n_exact = len(exact)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_exact, n_exact))
-    _, cluster = connected_components(graph, directed=False)
-    cluster = cluster[inverse.reshape(-1)]                 # per input vertex
-    n_clusters = int(cluster.max()) + 1
-    keeper = np.full(n_clusters, len(V), dtype=np.int64)
-    np.minimum.at(keeper, cluster, np.arange(len(V)))
-    survivors = np.sort(keeper)
-    new_index = np.empty(n_clusters, dtype=np.int64)
-    new_index[np.argsort(keeper)] = np.arange(n_clusters)
+    # clusters: connected components of the pairs on the exact vertices; survivors: the lowest
+    # input vertex of each, ascending; new_index: each input vertex's survivor's rank (one
+    # union-find pass, _kernels.edges.merge_clusters)
+    survivors = np.empty(len(V), dtype=np.int64)
+    new_index = np.empty(len(V), dtype=np.int64)
+    n_clusters = merge_clusters(inverse, np.ascontiguousarray(pairs.reshape(-1, 2), dtype=np.int64), n_exact,
+                                survivors, new_index)
     merged = len(V) - n_clusters
     if len(V) == 3 * len(F):
         merged = n_exact - n_clusters                      # a soup: only near-duplicates are repairs
-    return V[survivors], new_index[cluster[F]], merged
+    return V[survivors[:n_clusters]], new_index[F], merged
 
 
 def _weld_exact(V):
