@@ -414,7 +414,8 @@ def load_mandrel(path, unit: str = "m", body=None) -> Mandrel:
     if unit not in UNITS:
         raise MandrelError(f'[mandrel] stl_unit = "{unit}": expected "m" or "mm"')
     vertices, faces = read_stl(path)
-    vertices = vertices * UNITS[unit]
+    if UNITS[unit] != 1.0:          # x * 1.0 is x: no copy of the soup's 3 n corners for metres
+        vertices = vertices * UNITS[unit]
     from .repair import repair_mesh   # repair imports this module: imported here, not at the top
 
     vertices, faces, report = repair_mesh(vertices, faces, source=str(path), unit_scale=UNITS[unit],
