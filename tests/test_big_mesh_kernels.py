@@ -335,3 +335,42 @@ def test_merge_clusters_are_the_components_form(seed):
     assert n == n_clusters
     np.testing.assert_array_equal(survivors[:n], np.sort(keeper))
     np.testing.assert_array_equal(new_index, ref_index[cluster])
+
+
+def test_near_pairs_are_the_kd_tree_pairs():
+    """The grid shortcut gives the tree's pairs: none when the points are apart, and the tree's
+    own where some lie within or near the radius (clusters at 0.5, 1 and 1.5 radii)."""
+    from scipy.spatial import cKDTree
+
+    from preform._kernels.mesh import grid_neighbours_exist
+    from preform.geometry.repair import _near_pairs
+
+    rng = np.random.default_rng(11)
+    base = rng.uniform(-1, 1, size=(3000, 3)) * 1e3 + 5e3
+    r = 1e-6
+    assert not grid_neighbours_exist(base, 2 * r)
+    assert len(_near_pairs(base, r)) == 0 and len(cKDTree(base).query_pairs(r)) == 0
+    for gap in (0.5, 1.0, 1.5, 2.5):
+        step = rng.normal(size=(50, 3))
+        near = base[:50] + gap * r * step / np.linalg.norm(step, axis=1)[:, None]
+        P = np.vstack([base, near])
+        got = np.sort(_near_pairs(P, r), axis=0)
+        ref = np.sort(cKDTree(P).query_pairs(r, output_type="ndarray"), axis=0)
+        np.testing.assert_array_equal(got.reshape(-1, 2), ref.reshape(-1, 2))
+        if gap <= 1.5:
+            assert grid_neighbours_exist(P, 2 * r)
+
+
+def test_binary_stl_corners_are_the_records_as_float64(tmp_path):
+    from preform.geometry.mandrel import _STL_RECORD, read_stl
+
+    m = trimesh.creation.icosphere(subdivisions=2)
+    m.vertices = m.vertices * 0.1 + 0.3                  # values that are not float32-exact
+    path = tmp_path / "s.stl"
+    m.export(path)
+    V, F = read_stl(path)
+    rec = np.frombuffer(path.read_bytes()[84:], dtype=_STL_RECORD)
+    ref = rec["corners"].reshape(-1, 3).astype(np.float64)
+    assert V.dtype == np.float64 and V.flags.c_contiguous
+    np.testing.assert_array_equal(V, ref)
+    np.testing.assert_array_equal(F, np.arange(len(ref)).reshape(-1, 3))

@@ -779,3 +779,51 @@ def edge_ray_geometry(V, e, keep, a, u, length, eps, origin):
             origin[m, c] = V[p, c] + uc * h
         m += 1
     return m
+
+
+@njit(cache=True)
+def grid_neighbours_exist(P, cell):
+    """False when no two rows of P (n, 3) lie in the same or in adjacent cubes of a grid of edge
+    ``cell`` (index ``floor(x / cell)`` per axis), True otherwise. Two points closer than
+    ``cell / 2`` in every axis lie in the same or adjacent cubes, so False proves that no pair is
+    within ``cell / 2`` of each other. The cubes are kept in an open-addressing hash table; the
+    caller keeps ``|x| / cell`` far below 2^52 so that the division rounds by far less than a cube.
+    """
+    n = P.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    table = np.full(size, -1, dtype=np.int64)
+    cube = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        for c in range(3):
+            cube[i, c] = np.int64(np.floor(P[i, c] / cell))
+    for i in range(n):
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    qx = cube[i, 0] + dx
+                    qy = cube[i, 1] + dy
+                    qz = cube[i, 2] + dz
+                    h = np.uint64(1469598103934665603)
+                    for q in (qx, qy, qz):
+                        h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
+                        h ^= h >> np.uint64(29)
+                    slot = np.int64(h & np.uint64(size - 1))
+                    while True:
+                        j = table[slot]
+                        if j < 0:
+                            break
+                        if cube[j, 0] == qx and cube[j, 1] == qy and cube[j, 2] == qz:
+                            return True
+                        slot = (slot + 1) & (size - 1)
+        # then enter the point's own cube (a second point in it is found by the lookups above)
+        h = np.uint64(1469598103934665603)
+        for q in (cube[i, 0], cube[i, 1], cube[i, 2]):
+            h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
+            h ^= h >> np.uint64(29)
+        slot = np.int64(h & np.uint64(size - 1))
+        while table[slot] >= 0:
+            slot = (slot + 1) & (size - 1)
+        table[slot] = i
+    return False

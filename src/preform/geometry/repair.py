@@ -238,7 +238,7 @@ def _merge_vertices(V, F, radius):
     from .._kernels.edges import merge_clusters
 
     exact, inverse = _weld_exact(V)
-    pairs = cKDTree(exact).query_pairs(radius, output_type="ndarray")
+    pairs = _near_pairs(exact, radius)
     n_exact = len(exact)
     # clusters: connected components of the pairs on the exact vertices; survivors: the lowest
     # input vertex of each, ascending; new_index: each input vertex's survivor's rank (one
@@ -251,6 +251,26 @@ def _merge_vertices(V, F, radius):
     if len(V) == 3 * len(F):
         merged = n_exact - n_clusters                      # a soup: only near-duplicates are repairs
     return V[survivors[:n_clusters]], new_index[F], merged
+
+
+#: _near_pairs's grid test applies while coordinates stay below this many grid cubes (the
+#: division x / cube then rounds by less than 1e-4 of a cube)
+GRID_REACH = 1e12
+
+
+def _near_pairs(P, radius):
+    """``cKDTree(P).query_pairs(radius, output_type="ndarray")``: the pairs of rows of P (n, 3)
+    within ``radius`` (m). A grid of cubes of edge ``2 radius`` comes first
+    (``_kernels.mesh.grid_neighbours_exist``): when no two points share a cube or touch cubes,
+    no pair is that close and the tree (0.45 s on 500 k points) is not built; else the tree."""
+    from .._kernels.mesh import grid_neighbours_exist
+
+    cube = 2.0 * radius
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    if (len(P) and cube > 0 and np.isfinite(cube) and float(np.abs(P).max()) < GRID_REACH * cube
+            and not grid_neighbours_exist(P, cube)):
+        return np.zeros((0, 2), dtype=np.int64)
+    return cKDTree(P).query_pairs(radius, output_type="ndarray")
 
 
 def _weld_exact(V):
