@@ -197,7 +197,7 @@ def _validated(vertices, faces, say):
                    "export the mandrel as a triangulated STL")
     if not np.issubdtype(F.dtype, np.integer):
         say.refuse(f"face indices of type {F.dtype} are not integers", "pass faces as int64 indices")
-    F = F.astype(np.int64)
+    F = F.astype(np.int64, copy=False)          # F is a copy already (np.array above)
     if F.min() < 0 or F.max() >= len(V):
         say.refuse(f"face indices run from {F.min()} to {F.max()} but there are {len(V)} vertices",
                    "check the mesh export")
