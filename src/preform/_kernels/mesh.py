@@ -642,3 +642,188 @@ def any_side_longer(V, F, h):
             if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
                 return True
     return False
+
+
+@njit(cache=True)
+def long_side_faces(V, F, h, out):
+    """Faces of F with a side ``|p_k - p_(k-1)|`` longer than h into out (m,) bool: the mask
+    ``(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)`` with the norm
+    summed as np.linalg.norm does, ``(dx^2 + dy^2) + dz^2``."""
+    for f in range(F.shape[0]):
+        out[f] = False
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 2) % 3]
+            dx = V[a, 0] - V[b, 0]
+            dy = V[a, 1] - V[b, 1]
+            dz = V[a, 2] - V[b, 2]
+            if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
+                out[f] = True
+                break
+
+
+@njit(cache=True)
+def triangle_moments(V, F, area, centroid, second):
+    """Area, centroid and second moment of every face of F (m, 3) on V (n, 3), into area (m,),
+    centroid (m, 3) and second (m, 3, 3): with corners a, b, c, ``A = |(b - a) x (c - a)| / 2``,
+    ``s = a + b + c``, centroid ``s / 3`` and ``A / 12 (a a^T + b b^T + c c^T + s s^T)``, each
+    sum in the order of the NumPy form in ``geometry.centerline.surface_moments``'s docstring
+    (corner by corner, the norm as np.linalg.norm), so the arrays are bit-identical to it."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        ux = V[i1, 0] - V[i0, 0]
+        uy = V[i1, 1] - V[i0, 1]
+        uz = V[i1, 2] - V[i0, 2]
+        wx = V[i2, 0] - V[i0, 0]
+        wy = V[i2, 1] - V[i0, 1]
+        wz = V[i2, 2] - V[i0, 2]
+        cx = uy * wz - uz * wy
+        cy = uz * wx - ux * wz
+        cz = ux * wy - uy * wx
+        a = 0.5 * np.sqrt((cx * cx + cy * cy) + cz * cz)
+        area[f] = a
+        w = a / 12.0
+        for i in range(3):
+            si = (V[i0, i] + V[i1, i]) + V[i2, i]
+            centroid[f, i] = si / 3.0
+            for j in range(3):
+                sj = (V[i0, j] + V[i1, j]) + V[i2, j]
+                corners = (V[i0, i] * V[i0, j] + V[i1, i] * V[i1, j]) + V[i2, i] * V[i2, j]
+                second[f, i, j] = (corners + si * sj) * w
+
+
+@njit(cache=True)
+def vertex_bounds(V, F, lo, hi):
+    """Least and greatest coordinates (3,) into lo, hi of the finite vertices V (n, 3): of all of
+    them when F has no rows, else of those F (m, 3) uses (``V[np.unique(F)].min(axis=0)`` and
+    ``.max(axis=0)``; min and max are exact, so the order of the pass does not matter)."""
+    for c in range(3):
+        lo[c] = np.inf
+        hi[c] = -np.inf
+    if F.shape[0] == 0:
+        for i in range(V.shape[0]):
+            for c in range(3):
+                x = V[i, c]
+                if x < lo[c]:
+                    lo[c] = x
+                if x > hi[c]:
+                    hi[c] = x
+        return
+    for f in range(F.shape[0]):
+        for k in range(3):
+            i = F[f, k]
+            for c in range(3):
+                x = V[i, c]
+                if x < lo[c]:
+                    lo[c] = x
+                if x > hi[c]:
+                    hi[c] = x
+
+
+@njit(cache=True)
+def face_cross_normals(V, F, cross, normals):
+    """Per face of F (m, 3): ``c = (p1 - p0) x (p2 - p0)`` into cross (m, 3) and the unit normal
+    ``c / |c|`` (``c`` itself where ``|c| = 0``) into normals (m, 3), in the operations of
+    ``np.cross`` and ``np.linalg.norm`` (bit-identical to ``c / np.where(a > 0, a, 1)``)."""
+    for f in range(F.shape[0]):
+        i0 = F[f, 0]
+        i1 = F[f, 1]
+        i2 = F[f, 2]
+        ux = V[i1, 0] - V[i0, 0]
+        uy = V[i1, 1] - V[i0, 1]
+        uz = V[i1, 2] - V[i0, 2]
+        wx = V[i2, 0] - V[i0, 0]
+        wy = V[i2, 1] - V[i0, 1]
+        wz = V[i2, 2] - V[i0, 2]
+        cx = uy * wz - uz * wy
+        cy = uz * wx - ux * wz
+        cz = ux * wy - uy * wx
+        cross[f, 0] = cx
+        cross[f, 1] = cy
+        cross[f, 2] = cz
+        a = np.sqrt((cx * cx + cy * cy) + cz * cz)
+        if not a > 0:
+            a = 1.0
+        normals[f, 0] = cx / a
+        normals[f, 1] = cy / a
+        normals[f, 2] = cz / a
+
+
+@njit(cache=True)
+def edge_ray_geometry(V, e, keep, a, u, length, eps, origin):
+    """The rays of ``repair.self_intersections``: for each edge (p, q) of e (k, 2) of nonzero
+    length ``L = |V[q] - V[p]|``, in order, its start ``a = V[p]``, unit direction ``u``, L, the
+    hair ``eps = 1e-6 L`` and the ray origin ``a + eps u``, into the first rows of a, u (k, 3),
+    length, eps (k,) and origin (k, 3); keep (k,) marks those edges. Returns their number.
+    The operations of the NumPy form (``d / L``, norms as np.linalg.norm)."""
+    m = 0
+    for i in range(e.shape[0]):
+        p = e[i, 0]
+        q = e[i, 1]
+        dx = V[q, 0] - V[p, 0]
+        dy = V[q, 1] - V[p, 1]
+        dz = V[q, 2] - V[p, 2]
+        L = np.sqrt((dx * dx + dy * dy) + dz * dz)
+        keep[i] = L > 0
+        if not L > 0:
+            continue
+        h = 1e-6 * L
+        length[m] = L
+        eps[m] = h
+        for c, dc in ((0, dx), (1, dy), (2, dz)):
+            uc = dc / L
+            a[m, c] = V[p, c]
+            u[m, c] = uc
+            origin[m, c] = V[p, c] + uc * h
+        m += 1
+    return m
+
+
+@njit(cache=True)
+def grid_neighbours_exist(P, cell):
+    """False when no two rows of P (n, 3) lie in the same or in adjacent cubes of a grid of edge
+    ``cell`` (index ``floor(x / cell)`` per axis), True otherwise. Two points closer than
+    ``cell / 2`` in every axis lie in the same or adjacent cubes, so False proves that no pair is
+    within ``cell / 2`` of each other. The cubes are kept in an open-addressing hash table; the
+    caller keeps ``|x| / cell`` far below 2^52 so that the division rounds by far less than a cube.
+    """
+    n = P.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    table = np.full(size, -1, dtype=np.int64)
+    cube = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        for c in range(3):
+            cube[i, c] = np.int64(np.floor(P[i, c] / cell))
+    for i in range(n):
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    qx = cube[i, 0] + dx
+                    qy = cube[i, 1] + dy
+                    qz = cube[i, 2] + dz
+                    h = np.uint64(1469598103934665603)
+                    for q in (qx, qy, qz):
+                        h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
+                        h ^= h >> np.uint64(29)
+                    slot = np.int64(h & np.uint64(size - 1))
+                    while True:
+                        j = table[slot]
+                        if j < 0:
+                            break
+                        if cube[j, 0] == qx and cube[j, 1] == qy and cube[j, 2] == qz:
+                            return True
+                        slot = (slot + 1) & (size - 1)
+        # then enter the point's own cube (a second point in it is found by the lookups above)
+        h = np.uint64(1469598103934665603)
+        for q in (cube[i, 0], cube[i, 1], cube[i, 2]):
+            h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
+            h ^= h >> np.uint64(29)
+        slot = np.int64(h & np.uint64(size - 1))
+        while table[slot] >= 0:
+            slot = (slot + 1) & (size - 1)
+        table[slot] = i
+    return False

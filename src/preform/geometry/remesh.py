@@ -72,10 +72,12 @@ def subdivide_long_edges(vertices, faces, h):
     returns : vertices (nv', 3) (the first nv unchanged), faces (nf', 3) int64 (winding kept),
         source (nf',) int64: the input face each new face lies in.
     """
+    from .._kernels.mesh import long_side_faces
+
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
-    tri = V[F]
-    long_face = (np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)
+    long_face = np.empty(len(F), dtype=bool)
+    long_side_faces(np.ascontiguousarray(V), np.ascontiguousarray(F), float(h), long_face)
     if not long_face.any():
         return V, F, np.arange(len(F), dtype=np.int64)          # nothing to cut
     # only faces with a long edge change; a long edge's two faces are both among them, and their
@@ -101,11 +103,12 @@ def subdivide_long_edges(vertices, faces, h):
             inner.reverse()
         return [u, *inner, v]
 
-    corner_len = np.linalg.norm(V[np.roll(F, -1, axis=1)] - V[F], axis=2)
+    F_cut = F[cut_ids]
+    corner_len = np.linalg.norm(V[np.roll(F_cut, -1, axis=1)] - V[F_cut], axis=2)
     tris, src = [], []
     for i, f in enumerate(cut_ids):
         c = F[f]
-        s = int(np.argmin(corner_len[f]))          # shortest edge: corners s -> s+1
+        s = int(np.argmin(corner_len[i]))          # shortest edge: corners s -> s+1
         apex, ca, cb = c[(s + 2) % 3], c[s], c[(s + 1) % 3]
         A = chain(apex, ca, face_edges[i, (s + 2) % 3])   # edge s+2 runs from corner s+2 to s
         B = chain(apex, cb, face_edges[i, (s + 1) % 3])   # edge s+1 runs from corner s+1 to s+2
@@ -206,7 +209,7 @@ def decimate(vertices, faces, target_faces, aggressiveness):
     return np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
 
 
-def locate_faces(vertices, faces, points, normals, reach):
+def locate_faces(vertices, faces, points, normals, reach, mesh=None):
     """The input face under each point: (m,) int64 (-1 where none was found).
 
     A ray from ``point + reach * normal`` along ``-normal`` (embree through trimesh when
@@ -214,11 +217,14 @@ def locate_faces(vertices, faces, points, normals, reach):
     ``reach`` of a surface whose normal is within 90 deg of ``normal``; where no ray hits
     (numerically grazing) the nearest surface point decides.
     points, normals : (m, 3) float64 (normals unit);  reach : float, m
+    mesh : a trimesh.Trimesh of exactly (vertices, faces) to cast on (its ray scene is reused:
+        a mandrel's), or None to build one
     """
     import trimesh
 
-    mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64),
-                           process=False)
+    if mesh is None:
+        mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64),
+                               np.asarray(faces, dtype=np.int64), process=False)
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     origins = points + reach * normals
