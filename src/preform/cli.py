@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from ._version import __version__
@@ -16,6 +17,28 @@ from .errors import MandrelError, PreformError
 from .pipeline import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: ``time.perf_counter()`` when this module was imported (the fallback of :func:`process_started`)
+_IMPORTED = time.perf_counter()
+
+
+def process_started() -> float:
+    """``time.perf_counter()`` at the start of this process, so that a summary's wall time is the
+    command's, the interpreter's start and the imports included: on Linux from ``/proc`` (the
+    process's start in clock ticks since boot against the time since boot), elsewhere, or where
+    ``/proc`` cannot be read, when this module was imported."""
+    import os
+
+    try:
+        with open("/proc/self/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+        start_ticks = int(fields[19])          # field 22 of stat(5), counted after "pid (comm)"
+        with open("/proc/uptime", encoding="ascii") as fh:
+            uptime = float(fh.read().split()[0])
+        age = uptime - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return _IMPORTED
+    now = time.perf_counter()
+    return now - age if 0.0 <= age <= now - _IMPORTED + 60.0 else _IMPORTED
 
 
 # ---------------------------------------------------------------- preform run
@@ -86,15 +109,17 @@ def cmd_run(args) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
-    import time
-
     started = time.perf_counter()
+    # the interpreter's start and the imports count when this process is the command itself
+    # (``main()`` from the entry point); a caller's ``main(argv)`` (tests) times from here
+    startup = max(0.0, started - process_started()) if args.whole_process else None
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
     mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                       force=args.force, geometry=(mandrel, centerline, []), started=started)
+                       force=args.force, geometry=(mandrel, centerline, []), started=started,
+                       background_pictures=True, startup_s=startup)
     _print_notes(outcome.notes)
     result = outcome.result
     summary = written_summary(out_dir)
@@ -369,6 +394,7 @@ def _run_command(argv):
         args = parser.parse_args(argv)
     except SystemExit as stop:  # --help, --version, usage errors (argparse exits 2)
         return stop.code if isinstance(stop.code, int) else EXIT_BAD_INPUT
+    args.whole_process = argv is None   # the command line of this process (the entry point)
     try:
         return args.func(args)
     except PreformError as err:

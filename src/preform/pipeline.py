@@ -119,12 +119,16 @@ def with_rtm_fields(result, fields):
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
     started : ``time.perf_counter()`` when the command began (before loading the geometry), so
         the summary's wall time is the command's; None: from this call.
+    background_pictures : render the 3-D pictures in a worker process while the data files are
+        written (``io.write_results(background=True)``; ``preform run`` does)
+    startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
+        listed as the stage ``start`` when given
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
@@ -139,7 +143,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     t0 = time.perf_counter() if started is None else started
     if config.layers:
         return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
-                          geometry=geometry, started=t0)
+                          geometry=geometry, started=t0, background_pictures=background_pictures,
+                          startup_s=startup_s)
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
     work = estimate(config, mandrel, centerline, force=force)
@@ -147,7 +152,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     check_results_folder(out_dir, work.result_bytes)
     checkpoint = out_dir / CHECKPOINT
     with RunLock(out_dir):
-        stages = {"load_and_check": time.perf_counter() - t0}
+        stages = {} if startup_s is None else {"start": float(startup_s)}
+        stages["load_and_check"] = time.perf_counter() - t0
         t = time.perf_counter()
         result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
                           checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
@@ -156,7 +162,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         fields = with_rtm_fields(result, fields)
         stages["map"] = time.perf_counter() - t
         try:
-            written = write_results(result, fields, out_dir, stages=stages)
+            written = write_results(result, fields, out_dir, stages=stages, background=background_pictures)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "
@@ -259,7 +265,8 @@ def check_layers(config, mandrel, centerline, notes=(), *, force=False):
 
 
 def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-               started=None, offset_settings=None) -> CaseOutcome:
+               started=None, offset_settings=None, background_pictures=False,
+               startup_s=None) -> CaseOutcome:
     """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
     from the mandrel outwards, on the mandrel offset by the thickness of the layers below.
 
@@ -294,7 +301,8 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force)
     check_results_folder(out_dir, result_bytes)
     settings = offset_settings or OffsetSettings()
-    stages = {"load_and_check": time.perf_counter() - t0}
+    stages = {} if startup_s is None else {"start": float(startup_s)}
+    stages["load_and_check"] = time.perf_counter() - t0
     with RunLock(out_dir):
         results, layer_fields, offsets, stack, refused = [], [], [None], None, ""
         surface = mandrel
@@ -327,7 +335,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
                    in enumerate(zip(configs, results, [*layer_fields, None], offsets), start=1)]
         try:
             written = write_results(top, fields, out_dir, stages=stages, layers=entries,
-                                    layer_results=results[1:])
+                                    layer_results=results[1:], background=background_pictures)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulations "
