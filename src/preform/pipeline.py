@@ -63,13 +63,28 @@ def checked_geometry(config):
     quasi-static references (Ko, H_inf, whether the braid can settle) come back as notes.
     """
     from .checks import preflight
-    from .simulation import load_geometry
 
     mandrel, centerline = load_geometry(config)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
     return mandrel, centerline, notes
+
+
+def load_geometry(config):
+    """(Mandrel, Centerline) of a config (``preform.simulation.load_geometry``), the repaired
+    mandrel and an automatic centerline's input through the on-disk cache (``io.cache``)."""
+    from . import geometry
+    from .io.cache import cached_mandrel
+
+    mc = config.mandrel
+    mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
+    if isinstance(mc.centerline, str) and mc.centerline == "auto":
+        centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
+    else:
+        centerline = geometry.read_centerline_csv(mc.centerline, unit=mc.stl_unit,
+                                                  roll_reference=mc.roll_reference)
+    return mandrel, centerline
 
 
 def reference_lines(config, mandrel, centerline) -> list[str]:
@@ -135,6 +150,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     from .checkpoint import Checkpoint
     from .fields import map_to_surface
     from .io import write_results
+    from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
@@ -158,7 +174,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
                           checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
-        fields = map_to_surface(result) if len(result.yarns.points) else None
+        # the field mesh depends only on the mandrel and the settings: kept in the cache
+        fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
         fields = with_rtm_fields(result, fields)
         stages["map"] = time.perf_counter() - t
         try:
@@ -286,9 +303,10 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
 
     from .checks import preflight
     from .checkpoint import Checkpoint
-    from .fields import field_mesh, map_to_surface
+    from .fields import map_to_surface
     from .geometry.offset import OffsetSettings
     from .io import write_results
+    from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
@@ -326,7 +344,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             # every layer's angles are measured against the mandrel's centerline, forwards
             on_mandrel = dataclasses.replace(result, centerline=centerline)
             if stack is None:
-                stack = LayerStack.start(mandrel, field_mesh(on_mandrel), settings)
+                stack = LayerStack.start(mandrel, cached_field_mesh(on_mandrel), settings)
             layer_fields.append(map_to_surface(on_mandrel, mesh=stack.layer_mesh()))
             stages[f"map_layer{k}"] = time.perf_counter() - t
         fields = _stacked_fields(configs, layer_fields, centerline, config.rtm.cavity_thickness)
