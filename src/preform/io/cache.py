@@ -70,10 +70,14 @@ def make_key(*parts) -> str:
 
 
 def source_digest(*modules) -> str:
-    """SHA-256 of the source files of ``modules`` (a key part: an edited module gets new keys)."""
+    """SHA-256 of the source files of ``modules`` (dotted names, found without importing them):
+    a key part, so that an edited module gets new keys."""
+    from importlib.util import find_spec
+
     h = hashlib.sha256()
-    for module in modules:
-        h.update(Path(module.__file__).read_bytes())
+    for name in modules:
+        h.update(name.encode() + b"\0")
+        h.update(Path(find_spec(name).origin).read_bytes())
     return h.hexdigest()
 
 
@@ -164,9 +168,8 @@ def store(kind: str, key: str, arrays: dict) -> Path | None:
 
 def _field_mesh_key(mandrel, h, remesh) -> str:
     from .. import __version__, fields
-    from ..geometry import remesh as remesh_module
 
-    return make_key("field_mesh", __version__, source_digest(fields, remesh_module),
+    return make_key("field_mesh", __version__, source_digest("preform.fields", "preform.geometry.remesh"),
                     library_versions("numpy", "gpytoolbox", "pyfqmr", "trimesh", "embreex"),
                     np.asarray(mandrel.vertices, dtype=np.float64), np.asarray(mandrel.faces, dtype=np.int64),
                     float(h), repr(remesh), fields.LOCATE_REACH_EDGES)
@@ -205,13 +208,11 @@ def cached_field_mesh(result, edge_length=None, remesh=None):
 # --------------------------------------------------------------------------------------- mandrel
 
 def _mandrel_key(path: Path, data: bytes, unit, body) -> str:
-    from .. import __version__, tolerances
-    from .._kernels import mesh as mesh_kernels
-    from ..geometry import mandrel as mandrel_module
-    from ..geometry import repair as repair_module
+    from .. import __version__
 
     return make_key("mandrel", __version__,
-                    source_digest(mandrel_module, repair_module, mesh_kernels, tolerances),
+                    source_digest("preform.geometry.mandrel", "preform.geometry.repair",
+                                  "preform._kernels.mesh", "preform.tolerances"),
                     library_versions("numpy", "scipy", "trimesh", "embreex"),
                     str(path), unit, body, data)
 
