@@ -18,8 +18,10 @@ import numpy as np
 WINDOW_SIZE = (1600, 1000)
 COLOURS = {0: "#1f77b4", 1: "#d62728"}   # warp, weft: matplotlib's tab:blue, tab:red
 MANDREL_COLOUR = "#c8c8c8"
-#: the yarns' points drawn per yarn at most (every k-th beyond that)
-MAX_POINTS_PER_YARN = 4000
+#: the yarns' points drawn per yarn at most (every k-th beyond that): case A's 4 m yarns then
+#: have 4 mm segments, whose chord sag on its 0.1 m radius (l^2 / 8 r, 20 um) is a thirtieth of a
+#: pixel of the close-ups (0.6 mm), and the frame draws a quarter of the lines of 4000 points
+MAX_POINTS_PER_YARN = 1000
 #: multisampling of the render window: none. With 4 samples Mesa's software rasteriser (llvmpipe,
 #: the usual off-screen EGL) took 1.5 s for this frame of 3 x 576 k line points, 0.6 s without
 MULTI_SAMPLES = 0
