@@ -310,3 +310,24 @@ def test_mandrel_info_missing_centerline_csv(stubbed_geometry, tmp_path, capsys)
     stl, _, _ = stubbed_geometry
     assert main(["mandrel", "info", str(stl), "--centerline", str(tmp_path / "no.csv")]) == 2
     assert "no.csv" in capsys.readouterr().err
+
+
+def test_the_run_says_when_numba_compiles(capsys):
+    """The note comes once, at numba's first compilation (not for a call of compiled code)."""
+    import numba
+    import numpy as np
+
+    from preform.cli import COMPILING, _CompileNote
+
+    @numba.njit
+    def twice(x):
+        return 2 * x
+
+    twice(1)                            # compiled outside: no note
+    with _CompileNote():
+        twice(2)                        # already compiled: no note
+        assert COMPILING not in capsys.readouterr().err
+        twice(2.5)                      # a new signature compiles: the note, once
+        twice(np.float32(1.5))
+    err = capsys.readouterr().err
+    assert err.count(COMPILING) == 1

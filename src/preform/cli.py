@@ -105,7 +105,49 @@ def _with_model(config, model):
     return dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
 
 
+#: said once when numba compiles a kernel (not when it loads one from its cache)
+COMPILING = ("note: compiling the numba kernels (a first run in this environment, some seconds; "
+             "later runs load them from the cache)")
+
+
+class _CompileNote:
+    """Prints :data:`COMPILING` on stderr at numba's first compilation while registered (numba's
+    ``numba:compile`` event, raised for a compilation, not for a cache load)."""
+
+    def __enter__(self):
+        self.listener = None
+        try:
+            from numba.core import event
+        except ImportError:   # pragma: no cover - numba is a dependency
+            return self
+
+        class Note(event.Listener):
+            said = False
+
+            def on_start(self, ev):
+                if not self.said:
+                    self.said = True
+                    print(COMPILING, file=sys.stderr, flush=True)
+
+            def on_end(self, ev):
+                pass
+
+        self.event, self.listener = event, Note()
+        event.register("numba:compile", self.listener)
+        return self
+
+    def __exit__(self, *exc):
+        if self.listener is not None:
+            self.event.unregister("numba:compile", self.listener)
+        return False
+
+
 def cmd_run(args) -> int:
+    with _CompileNote():
+        return _cmd_run(args)
+
+
+def _cmd_run(args) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
@@ -159,6 +201,11 @@ def _quality_line(summary) -> str:
 # ---------------------------------------------------------------- preform check
 
 def cmd_check(args) -> int:
+    with _CompileNote():
+        return _cmd_check(args)
+
+
+def _cmd_check(args) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, estimate
 
