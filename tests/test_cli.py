@@ -195,9 +195,15 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
         simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
     monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
-    monkeypatch.setitem(sys.modules, "preform.fields", types.SimpleNamespace(map_to_surface=lambda r: None))
+    monkeypatch.setitem(sys.modules, "preform.fields",
+                        types.SimpleNamespace(map_to_surface=lambda r, mesh=None: None))
+    import preform.io.cache
     import preform.pipeline
     from preform.budget import WorkEstimate
+
+    # the pipeline loads the geometry and the field mesh through the cache (io.cache)
+    monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
+    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result: None)
 
     # the placeholder mandrel has no geometry to estimate the work or the references from
     monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))
