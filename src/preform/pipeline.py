@@ -120,6 +120,62 @@ def estimate(config, mandrel, centerline, *, force=False):
     return work
 
 
+def _kernels_cached(module) -> bool:
+    """Whether numba's on-disk cache holds every ``cache=True`` kernel of ``module`` (their index
+    files exist: numba then loads them instead of compiling)."""
+    import os
+
+    found = False
+    for value in vars(module).values():
+        cache = getattr(value, "_cache", None)
+        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+        if index is not None:
+            found = True
+            if not os.path.exists(index):
+                return False
+    return found
+
+
+def _compile_map_kernels(config):
+    """Map a few helices on a small cylinder with the run's settings: the field kernels get
+    compiled for the argument types of the run and written to numba's cache (``cache=True``)."""
+    import dataclasses
+
+    from .fields import map_to_surface
+    from .geometry import centerline_from_points, shapes
+    from .geometry.mandrel import mandrel_from_arrays
+    from .result import YarnPaths
+
+    r, length = 0.05, 0.1
+    mandrel = mandrel_from_arrays(*shapes.cylinder(r, length, n_around=24))
+    centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
+    z = np.linspace(0.0, length, 41)
+    points = [np.column_stack([r * np.cos(sign * 10 * z), r * np.sin(sign * 10 * z), z]) for sign in (-1, 1)]
+    m = 2 * len(z)
+    yarns = YarnPaths(points=np.vstack(points), offsets=np.array([0, len(z), m], dtype=np.int64),
+                      time_s=np.zeros(m), braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
+                      flags=np.zeros(m, np.uint8), group=np.array([0, 1], np.int8))
+    small = dataclasses.replace(config, output=dataclasses.replace(config.output, field_edge_length=0.02)) \
+        if config.output is not None else config
+    result = type("Small", (), {"config": small, "mandrel": mandrel, "centerline": centerline,
+                                "yarns": yarns})()
+    map_to_surface(result)
+    return []
+
+
+def start_kernel_warmup(config):
+    """On a first run (numba's cache lacks the field kernels): a forked worker compiles them
+    (:func:`_compile_map_kernels`) on the second core while this process simulates, so the map
+    loads them from the cache. Returns the worker (``finish()`` it after the map) or None."""
+    from ._kernels import fields as field_kernels
+    from .io.pictures import PictureJob, PictureWorker
+
+    if _kernels_cached(field_kernels):
+        return None
+    return PictureWorker([PictureJob(("numba cache of the field kernels",),
+                                     lambda: _compile_map_kernels(config))])
+
+
 def with_rtm_fields(result, fields):
     """``fields`` with the RTM arrays (``preform.rtm``) when the config has tow material data."""
     from .rtm import missing_material, rtm_fields
@@ -171,8 +227,16 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         stages = {} if startup_s is None else {"start": float(startup_s)}
         stages["load_and_check"] = time.perf_counter() - t0
         t = time.perf_counter()
-        result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
-                          checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        warmup = start_kernel_warmup(config) if background_pictures else None
+        try:
+            result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
+                              checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        except BaseException:
+            if warmup is not None:
+                warmup.stop()
+            raise
+        if warmup is not None:   # its failure only means the map compiles the kernels itself
+            warmup.finish()
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
         # the field mesh depends only on the mandrel and the settings: kept in the cache
         fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None

@@ -140,11 +140,11 @@ def _child(jobs, fd) -> None:
         for name in ("SIGTERM", "SIGHUP"):
             if hasattr(signal, name):
                 signal.signal(getattr(signal, name), signal.SIG_DFL)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with warnings.catch_warnings(record=True) as caught:   # the filters as they were
             written, failed = run_jobs(jobs)
-        report = {"written": [str(p) for p in written], "failed": failed,
-                  "warnings": [str(w.message) for w in caught]}
+        # what the user is told: the renderers' own warnings, not libraries' deprecations
+        said = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
+        report = {"written": [str(p) for p in written], "failed": failed, "warnings": said}
         data = json.dumps(report).encode("utf-8")
         while data:
             data = data[os.write(fd, data):]
