@@ -167,12 +167,13 @@ def store(kind: str, key: str, arrays: dict) -> Path | None:
 # ------------------------------------------------------------------------------------ field mesh
 
 def _field_mesh_key(mandrel, h, remesh) -> str:
-    from .. import __version__, fields
+    from .._version import __version__
+    from ..fields import LOCATE_REACH_EDGES
 
     return make_key("field_mesh", __version__, source_digest("preform.fields", "preform.geometry.remesh"),
                     library_versions("numpy", "gpytoolbox", "pyfqmr", "trimesh", "embreex"),
                     np.asarray(mandrel.vertices, dtype=np.float64), np.asarray(mandrel.faces, dtype=np.int64),
-                    float(h), repr(remesh), fields.LOCATE_REACH_EDGES)
+                    float(h), repr(remesh), LOCATE_REACH_EDGES)
 
 
 def cached_field_mesh(result, edge_length=None, remesh=None):
@@ -208,7 +209,7 @@ def cached_field_mesh(result, edge_length=None, remesh=None):
 # --------------------------------------------------------------------------------------- mandrel
 
 def _mandrel_key(path: Path, data: bytes, unit, body) -> str:
-    from .. import __version__
+    from .._version import __version__
 
     return make_key("mandrel", __version__,
                     source_digest("preform.geometry.mandrel", "preform.geometry.repair",

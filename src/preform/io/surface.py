@@ -66,8 +66,10 @@ def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> li
     mesh = surface_mesh(fields)
     tmp = Path(tempfile.mkdtemp(prefix=".surface-", dir=out_dir))
     try:
-        meshio.write(tmp / VTU, mesh, file_format="vtu")
-        meshio.write(tmp / XDMF, mesh, file_format="xdmf")
+        # uncompressed: meshio's zlib (.vtu) and gzip (.h5) took 0.3-0.5 s each on case A's 24 k
+        # faces for 2.4x smaller files (6.4 + 4.4 MB against 2.5 + 1.9 MB of about 75 MB)
+        meshio.write(tmp / VTU, mesh, file_format="vtu", compression=None)
+        meshio.write(tmp / XDMF, mesh, file_format="xdmf", compression=None)
         written = []
         for name in (VTU, H5, XDMF):  # the .h5 before the .xdmf that points to it
             os.replace(tmp / name, out_dir / name)
