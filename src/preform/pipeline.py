@@ -137,10 +137,10 @@ def _kernels_cached(module) -> bool:
 
 
 def _compile_map_kernels(config):
-    """Map a few helices on a small cylinder with the run's settings: the field kernels get
-    compiled for the argument types of the run and written to numba's cache (``cache=True``)."""
-    import dataclasses
-
+    """Map two helices onto a small cylinder with the run's yarn settings: the field kernels get
+    compiled for the argument types of the run and written to numba's cache (``cache=True``).
+    The cylinder's own triangles are the field mesh, so nothing here remeshes or casts rays
+    (embree's thread pool, started in the parent, is not to be used after a fork)."""
     from .fields import map_to_surface
     from .geometry import centerline_from_points, shapes
     from .geometry.mandrel import mandrel_from_arrays
@@ -155,11 +155,11 @@ def _compile_map_kernels(config):
     yarns = YarnPaths(points=np.vstack(points), offsets=np.array([0, len(z), m], dtype=np.int64),
                       time_s=np.zeros(m), braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
                       flags=np.zeros(m, np.uint8), group=np.array([0, 1], np.int8))
-    small = dataclasses.replace(config, output=dataclasses.replace(config.output, field_edge_length=0.02)) \
-        if config.output is not None else config
-    result = type("Small", (), {"config": small, "mandrel": mandrel, "centerline": centerline,
+    result = type("Small", (), {"config": config, "mandrel": mandrel, "centerline": centerline,
                                 "yarns": yarns})()
-    map_to_surface(result)
+    V = np.ascontiguousarray(mandrel.vertices, dtype=np.float64)
+    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
+    map_to_surface(result, mesh=(V, F, np.arange(len(F), dtype=np.int64), 0.02))
     return []
 
 
