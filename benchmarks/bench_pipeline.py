@@ -1,32 +1,43 @@
-"""The everyday run, stage by stage: ``examples/case_a.toml`` (kinematic) through the Python API.
+"""The everyday run, stage by stage: ``examples/case_a.toml`` (kinematic).
 
-Stages: load and repair the STL, centerline, JIT (a 2 cm run that compiles or loads the numba
-cache), simulate, map to the surface (field mesh + clipping + pooling), write the data files, render
-the pictures and plots. Prints each run's stage times and the median of each stage.
+Two ways:
 
-Run: ``python benchmarks/bench_pipeline.py [--repeat 3] [--toml examples/case_a.toml]
-[--stl other.stl --unit mm]`` (``--stl`` swaps the mandrel, e.g. a generated sliver cylinder).
+- ``--command`` (the figure the README quotes): ``preform run`` as a user runs it, ``--repeat``
+  times in fresh processes; prints each run's wall time (measured outside the process) and the
+  stages of its summary (start, load and check, simulate, map, write, pictures), and the medians.
+  ``--fresh`` makes every run a first run in a fresh environment: an empty numba cache
+  (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
+  compile and the mandrel and the field mesh are built again.
+- otherwise, through the Python API in this process: load and repair the STL (through the
+  cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
+  map (field mesh from the cache), write the data files, pictures (3-D renders in the worker
+  process beside the matplotlib plots, as ``preform run`` does).
+
+Run: ``python benchmarks/bench_pipeline.py [--command] [--fresh] [--repeat 5]
+[--toml examples/case_a.toml] [--stl other.stl --unit mm]`` (``--stl`` swaps the mandrel, API
+mode only, e.g. a generated sliver cylinder).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
+import os
 import resource
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
-
-import preform as pf
-from preform import geometry
-from preform.io import plots, surface
-from preform.io import write_convergence, write_history, write_summary, write_yarns_vtp
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def config(toml, stl=None, unit="m"):
+    import preform as pf
+
     cfg = pf.load_config(toml)
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="kinematic"))
     if stl is not None:
@@ -36,17 +47,31 @@ def config(toml, stl=None, unit="m"):
 
 
 def run_once(cfg, out_dir):
+    import preform as pf
+    from preform import pipeline
+    from preform.io import write_results
+    from preform.io.cache import cached_field_mesh, cached_mandrel
+
     t = {}
     t0 = time.perf_counter()
-    mandrel = geometry.load_mandrel(cfg.mandrel.stl, unit=cfg.mandrel.stl_unit)
+    mc = cfg.mandrel
+    mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
     t["load+repair"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mc = cfg.mandrel
+    from preform import geometry
+
     if isinstance(mc.centerline, str) and mc.centerline == "auto":
         cl = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
     else:
         cl = geometry.read_centerline_csv(mc.centerline, unit=mc.stl_unit, roll_reference=mc.roll_reference)
     t["centerline"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    from preform.checks import preflight
+
+    preflight(cfg, mandrel, cl)
+    pipeline.reference_lines(cfg, mandrel, cl)
+    pipeline.estimate(cfg, mandrel, cl)
+    t["checks"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     short = dataclasses.replace(cfg, process=dataclasses.replace(cfg.process, braid_length=0.02))
     pf.simulate(short, progress=False, mandrel=mandrel, centerline=cl)
@@ -55,34 +80,15 @@ def run_once(cfg, out_dir):
     result = pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=cl)
     t["simulate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    fields = pf.map_to_surface(result)
+    fields = pf.map_to_surface(result, mesh=cached_field_mesh(result))
     t["map"] = time.perf_counter() - t0
-    out = Path(out_dir)
-    t0 = time.perf_counter()
-    write_history(result, out / "history.csv")
-    write_yarns_vtp(result.yarns, out / "yarns.vtp")
-    write_convergence(result.snapshots, out)
-    mesh = surface.surface_mesh(fields)
-    import meshio
-    meshio.write(out / "surface.vtu", mesh, file_format="vtu")
-    meshio.write(out / "surface.xdmf", mesh, file_format="xdmf")
-    write_summary(result, out / "summary.json")
-    t["write"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    surface.write_surface_pictures(fields, out / "plots")
-    plots.plot_history(result, out / "plots")
-    plots.plot_yarns_3d(result, out / "plots" / "yarns.png")
-    t["render"] = time.perf_counter() - t0
+    write_results(result, fields, out_dir, stages={}, background=True)
+    stages = json.loads((Path(out_dir) / "summary.json").read_text())["stages_s"]
+    t["write"], t["pictures"] = stages["write"], stages["pictures"]
     return t, result, fields
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--toml", default=str(ROOT / "examples" / "case_a.toml"))
-    ap.add_argument("--stl", default=None)
-    ap.add_argument("--unit", default="m")
-    args = ap.parse_args(argv)
+def api(args):
     cfg = config(args.toml, args.stl, args.unit)
     rows = []
     for i in range(args.repeat):
@@ -95,6 +101,46 @@ def main(argv=None):
     print("median: " + ", ".join(f"{k} {statistics.median(r[k] for r in rows):.2f} s" for k in rows[0])
           + f" | total {statistics.median(sum(r.values()) for r in rows):.2f} s")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.2f} GB")
+
+
+def command(args):
+    walls, summaries = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(args.repeat):
+            env = dict(os.environ)
+            if args.fresh:
+                env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp, prefix="numba-")
+                env["PREFORM_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp, prefix="preform-")
+            out = Path(tmp) / f"run{i}"
+            t0 = time.perf_counter()
+            done = subprocess.run([sys.executable, "-m", "preform.cli", "run", args.toml, "--out", str(out),
+                                   "--no-progress"], env=env, capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            if done.returncode != 0:
+                sys.exit(f"run {i} failed ({done.returncode}):\n{done.stderr}")
+            summary = json.loads((out / "summary.json").read_text())
+            walls.append(wall)
+            summaries.append(summary)
+            stages = summary["stages_s"]
+            print(f"run {i}: {wall:.2f} s wall (summary {summary['wall_time_s']:.2f} s: "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()) + ")", flush=True)
+    keys = summaries[0]["stages_s"]
+    print(f"median of {args.repeat}{' fresh' if args.fresh else ''} runs: {statistics.median(walls):.2f} s wall "
+          f"(summary {statistics.median(s['wall_time_s'] for s in summaries):.2f} s: "
+          + ", ".join(f"{k} {statistics.median(s['stages_s'][k] for s in summaries):.2f}" for k in keys) + ")")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--toml", default=str(ROOT / "examples" / "case_a.toml"))
+    ap.add_argument("--stl", default=None)
+    ap.add_argument("--unit", default="m")
+    ap.add_argument("--command", action="store_true", help="time `preform run` in fresh processes")
+    ap.add_argument("--fresh", action="store_true",
+                    help="with --command: empty numba and preform caches for every run (a first run)")
+    args = ap.parse_args(argv)
+    (command if args.command else api)(args)
 
 
 if __name__ == "__main__":

@@ -195,9 +195,15 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
         simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
     monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
-    monkeypatch.setitem(sys.modules, "preform.fields", types.SimpleNamespace(map_to_surface=lambda r: None))
+    monkeypatch.setitem(sys.modules, "preform.fields",
+                        types.SimpleNamespace(map_to_surface=lambda r, mesh=None: None))
+    import preform.io.cache
     import preform.pipeline
     from preform.budget import WorkEstimate
+
+    # the pipeline loads the geometry and the field mesh through the cache (io.cache)
+    monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
+    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result: None)
 
     # the placeholder mandrel has no geometry to estimate the work or the references from
     monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))
@@ -310,3 +316,24 @@ def test_mandrel_info_missing_centerline_csv(stubbed_geometry, tmp_path, capsys)
     stl, _, _ = stubbed_geometry
     assert main(["mandrel", "info", str(stl), "--centerline", str(tmp_path / "no.csv")]) == 2
     assert "no.csv" in capsys.readouterr().err
+
+
+def test_the_run_says_when_numba_compiles(capsys):
+    """The note comes once, at numba's first compilation (not for a call of compiled code)."""
+    import numba
+    import numpy as np
+
+    from preform.cli import COMPILING, _CompileNote
+
+    @numba.njit
+    def twice(x):
+        return 2 * x
+
+    twice(1)                            # compiled outside: no note
+    with _CompileNote():
+        twice(2)                        # already compiled: no note
+        assert COMPILING not in capsys.readouterr().err
+        twice(2.5)                      # a new signature compiles: the note, once
+        twice(np.float32(1.5))
+    err = capsys.readouterr().err
+    assert err.count(COMPILING) == 1

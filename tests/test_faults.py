@@ -179,7 +179,7 @@ def test_the_summary_wall_time_is_the_commands_with_its_stages(reference):
     _, out, _ = reference
     summary = json.loads((out / "summary.json").read_text())
     stages = summary["stages_s"]
-    assert set(stages) == {"load_and_check", "simulate", "map", "write"}
+    assert set(stages) == {"load_and_check", "simulate", "map", "write", "pictures"}
     assert summary["wall_time_s"] == pytest.approx(sum(stages.values()))
     assert summary["wall_time_s"] > summary["simulation_wall_time_s"]
 

@@ -48,12 +48,15 @@ def test_colour_ranges_cover_the_braided_faces_only(tmp_path):
     V, F = tube()
     cl = centerline_from_points(np.array([[0, 0, z] for z in np.linspace(0, 0.4, 9)]))
     fig = surface_map_figure(fields_on(V, F), cl, "tube")
-    angle_ax = fig.axes[0]
-    coloured = [c for c in angle_ax.collections if c.get_array() is not None]
-    lo, hi = coloured[0].get_clim()
+    lo, hi = fig.colour_ranges[0]
     centroid_z = V[F].mean(axis=1)[:, 2]
     braided = centroid_z < 0.25
     assert lo == 40.0 + 20.0 * centroid_z[braided].min() and hi == 40.0 + 20.0 * centroid_z[braided].max()
+    # every pixel of the map lies on a face (the tube's side covers s x [-180, 180] deg), and the
+    # faces drawn in colour are the braided ones
+    pixels = fig.face_pixels[0]
+    assert (pixels >= 0).mean() > 0.99
+    assert np.array_equal(fig.shown[0], braided)
     path = write_surface_map(fields_on(V, F), cl, tmp_path / "surface_map.png", "tube")
     from PIL import Image
 
@@ -77,7 +80,60 @@ def test_a_layered_run_colours_the_stack_where_any_layer_reached():
     fields = SurfaceFields(vertices=V, faces=F, source_faces=np.arange(len(F)), cell_data=data)
     assert np.array_equal(fields.reached(), (one | two) > 0)
     fig = surface_map_figure(fields, cl, "two layers")
-    for ax, shown in ((fig.axes[0], one > 0), (fig.axes[2], (one | two) > 0)):
-        coloured = [c for c in ax.collections if c.get_array() is not None]
-        assert len(coloured[0].get_array()) == shown.sum()
+    from matplotlib.colors import to_rgba
+
+    from preform.io.maps import UNREACHED
+
+    panels = [ax for ax in fig.axes if ax.images]
+    for k, shown in ((0, one > 0), (2, (one | two) > 0)):
+        assert np.array_equal(fig.shown[k], shown)
+        # the picture itself: grey exactly on the pixels of faces not shown, colours elsewhere
+        rgba = np.asarray(panels[k].images[0].get_array())
+        face = fig.face_pixels[k]
+        grey = np.all(rgba == to_rgba(UNREACHED), axis=-1)
+        assert np.array_equal(grey[face >= 0], ~shown[face[face >= 0]])
+        assert shown[face[face >= 0]].any() and (~shown[face[face >= 0]]).any()
     assert fig.axes[0].get_title().startswith("braid angle of layer 1")
+
+
+def naive_face_raster(polys, extent, shape):
+    """Slow reference of ``face_raster``: every pixel centre against every triangle (barycentric
+    coordinates by a 2x2 solve), the highest face index holding it."""
+    H, W = shape
+    x0, x1, y0, y1 = extent
+    out = np.full((H, W), -1)
+    for i in range(H):
+        for j in range(W):
+            p = np.array([x0 + (j + 0.5) * (x1 - x0) / W, y1 - (i + 0.5) * (y1 - y0) / H])
+            for f, (a, b, c) in enumerate(polys):
+                m = np.column_stack([b - a, c - a])
+                if abs(np.linalg.det(m)) < 1e-300:
+                    continue
+                u, v = np.linalg.solve(m, p - a)
+                if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
+                    out[i, j] = f
+    return out
+
+
+def test_face_raster_matches_the_point_in_triangle_reference():
+    """Random triangles of both windings, some larger than the grid, some smaller than a pixel:
+    the same face under every pixel centre as the brute-force test, away from edges (a centre on
+    a shared edge may go to either face)."""
+    from preform.io.maps import face_raster
+
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(-0.2, 1.2, size=(40, 1, 2))
+    polys = centres + rng.normal(scale=rng.choice([0.01, 0.1, 0.4], size=(40, 1, 1)), size=(40, 3, 2))
+    extent, shape = (0.0, 1.0, 0.0, 1.0), (23, 31)
+    fast = face_raster(polys, extent, shape)
+    slow = naive_face_raster(polys, extent, shape)
+    # pixels whose centre is within 1e-9 of some triangle edge are ambiguous: left out
+    i, j = np.mgrid[0:shape[0], 0:shape[1]]
+    pts = np.stack([(j + 0.5) / shape[1], 1.0 - (i + 0.5) / shape[0]], axis=-1).reshape(-1, 1, 2)
+    a, b = polys, np.roll(polys, -1, axis=1)
+    t = np.clip(np.einsum("pfkd,fkd->pfk", pts[:, None] - a[None], b - a) / np.einsum("fkd,fkd->fk", b - a, b - a), 0, 1)
+    d = np.linalg.norm(pts[:, None] - (a[None] + t[..., None] * (b - a)[None]), axis=-1).min(axis=(1, 2))
+    clear = (d > 1e-9).reshape(shape)
+    assert clear.mean() > 0.95
+    np.testing.assert_array_equal(fast[clear], slow[clear])
+    assert (fast >= 0).any() and (fast < 0).any()

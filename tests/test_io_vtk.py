@@ -141,3 +141,31 @@ def test_tension_count_checked(small_result, tmp_path):
     with pytest.raises(SimulationError, match="tension_N"):
         write_convergence([broken], tmp_path)
     assert not (tmp_path / "convergence.pvd").exists()
+
+
+def test_vtp_without_cells_and_field_data_reads_back(tmp_path):
+    """A piece with points but no cells, and field data, read back by VTK's reader."""
+    from preform.io.vtk_yarns import PolyLines, write_vtp
+
+    points = np.arange(12, dtype=float).reshape(4, 3) / 7.0
+    poly = PolyLines(points, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                     point_data={"flags": np.array([0, 1, 2, 255], np.uint8),
+                                 "force": np.arange(12, dtype=float).reshape(4, 3)},
+                     field_data={"TimeValue": np.array([2.5])})
+    read = _read_vtp(write_vtp(poly, tmp_path / "p.vtp"))
+    assert read.GetNumberOfCells() == 0
+    np.testing.assert_array_equal(vtk_to_numpy(read.GetPoints().GetData()), points)
+    np.testing.assert_array_equal(_point(read, "flags"), [0, 1, 2, 255])
+    np.testing.assert_array_equal(_point(read, "force"), poly.point_data["force"])
+    np.testing.assert_array_equal(vtk_to_numpy(read.GetFieldData().GetArray("TimeValue")), [2.5])
+
+
+def test_vtp_mode_follows_umask(small_result, tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        path = write_yarns_vtp(small_result.yarns, tmp_path / "yarns.vtp")
+    finally:
+        os.umask(old)
+    assert (path.stat().st_mode & 0o777) == 0o644

@@ -46,18 +46,24 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
 
     calls = []
 
-    def write_surface(fields, out_dir, title=""):
-        calls.append((fields, out_dir))
-        assert "kinematic model" in title
+    def write_surface(fields, out_dir, title="", pictures=True):
+        calls.append((fields, out_dir, pictures))
         path = out_dir / "surface.vtu"
         path.write_text("stub")
         return [path]
 
+    def write_surface_pictures(fields, plots_dir, title=""):
+        calls.append((fields, plots_dir, title))
+        assert "kinematic model" in title
+        return []
+
     monkeypatch.setitem(sys.modules, "preform.io.surface",
-                        types.SimpleNamespace(write_surface=write_surface))
+                        types.SimpleNamespace(write_surface=write_surface, PICTURES=(),
+                                              write_surface_pictures=write_surface_pictures))
     fields = object()
     written = write_results(small_result, fields, tmp_path)
-    assert calls == [(fields, tmp_path)]
+    assert calls[0] == (fields, tmp_path, False)   # the data files, then the pictures
+    assert calls[1][:2] == (fields, tmp_path / "plots")
     names = [p.relative_to(tmp_path).as_posix() for p in written]
     assert "surface.vtu" in names and names[-1] == "summary.json"
     assert "surface.vtu" in json.loads((tmp_path / "summary.json").read_text())["files"]

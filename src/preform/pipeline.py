@@ -63,13 +63,28 @@ def checked_geometry(config):
     quasi-static references (Ko, H_inf, whether the braid can settle) come back as notes.
     """
     from .checks import preflight
-    from .simulation import load_geometry
 
     mandrel, centerline = load_geometry(config)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
     return mandrel, centerline, notes
+
+
+def load_geometry(config):
+    """(Mandrel, Centerline) of a config (``preform.simulation.load_geometry``), the repaired
+    mandrel and an automatic centerline's input through the on-disk cache (``io.cache``)."""
+    from . import geometry
+    from .io.cache import cached_mandrel
+
+    mc = config.mandrel
+    mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
+    if isinstance(mc.centerline, str) and mc.centerline == "auto":
+        centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
+    else:
+        centerline = geometry.read_centerline_csv(mc.centerline, unit=mc.stl_unit,
+                                                  roll_reference=mc.roll_reference)
+    return mandrel, centerline
 
 
 def reference_lines(config, mandrel, centerline) -> list[str]:
@@ -105,6 +120,62 @@ def estimate(config, mandrel, centerline, *, force=False):
     return work
 
 
+def _kernels_cached(module) -> bool:
+    """Whether numba's on-disk cache holds every ``cache=True`` kernel of ``module`` (their index
+    files exist: numba then loads them instead of compiling)."""
+    import os
+
+    found = False
+    for value in vars(module).values():
+        cache = getattr(value, "_cache", None)
+        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+        if index is not None:
+            found = True
+            if not os.path.exists(index):
+                return False
+    return found
+
+
+def _compile_map_kernels(config):
+    """Map two helices onto a small cylinder with the run's yarn settings: the field kernels get
+    compiled for the argument types of the run and written to numba's cache (``cache=True``).
+    The cylinder's own triangles are the field mesh, so nothing here remeshes or casts rays
+    (embree's thread pool, started in the parent, is not to be used after a fork)."""
+    from .fields import map_to_surface
+    from .geometry import centerline_from_points, shapes
+    from .geometry.mandrel import mandrel_from_arrays
+    from .result import YarnPaths
+
+    r, length = 0.05, 0.1
+    mandrel = mandrel_from_arrays(*shapes.cylinder(r, length, n_around=24))
+    centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
+    z = np.linspace(0.0, length, 41)
+    points = [np.column_stack([r * np.cos(sign * 10 * z), r * np.sin(sign * 10 * z), z]) for sign in (-1, 1)]
+    m = 2 * len(z)
+    yarns = YarnPaths(points=np.vstack(points), offsets=np.array([0, len(z), m], dtype=np.int64),
+                      time_s=np.zeros(m), braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
+                      flags=np.zeros(m, np.uint8), group=np.array([0, 1], np.int8))
+    result = type("Small", (), {"config": config, "mandrel": mandrel, "centerline": centerline,
+                                "yarns": yarns})()
+    V = np.ascontiguousarray(mandrel.vertices, dtype=np.float64)
+    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
+    map_to_surface(result, mesh=(V, F, np.arange(len(F), dtype=np.int64), 0.02))
+    return []
+
+
+def start_kernel_warmup(config):
+    """On a first run (numba's cache lacks the field kernels): a forked worker compiles them
+    (:func:`_compile_map_kernels`) on the second core while this process simulates, so the map
+    loads them from the cache. Returns the worker (``finish()`` it after the map) or None."""
+    from ._kernels import fields as field_kernels
+    from .io.pictures import PictureJob, PictureWorker
+
+    if _kernels_cached(field_kernels):
+        return None
+    return PictureWorker([PictureJob(("numba cache of the field kernels",),
+                                     lambda: _compile_map_kernels(config))])
+
+
 def with_rtm_fields(result, fields):
     """``fields`` with the RTM arrays (``preform.rtm``) when the config has tow material data."""
     from .rtm import missing_material, rtm_fields
@@ -119,18 +190,23 @@ def with_rtm_fields(result, fields):
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
     started : ``time.perf_counter()`` when the command began (before loading the geometry), so
         the summary's wall time is the command's; None: from this call.
+    background_pictures : render the 3-D pictures in a worker process while the data files are
+        written (``io.write_results(background=True)``; ``preform run`` does)
+    startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
+        listed as the stage ``start`` when given
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
     from .checkpoint import Checkpoint
     from .fields import map_to_surface
     from .io import write_results
+    from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
@@ -139,7 +215,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     t0 = time.perf_counter() if started is None else started
     if config.layers:
         return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
-                          geometry=geometry, started=t0)
+                          geometry=geometry, started=t0, background_pictures=background_pictures,
+                          startup_s=startup_s)
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
     work = estimate(config, mandrel, centerline, force=force)
@@ -147,16 +224,26 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     check_results_folder(out_dir, work.result_bytes)
     checkpoint = out_dir / CHECKPOINT
     with RunLock(out_dir):
-        stages = {"load_and_check": time.perf_counter() - t0}
+        stages = {} if startup_s is None else {"start": float(startup_s)}
+        stages["load_and_check"] = time.perf_counter() - t0
         t = time.perf_counter()
-        result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
-                          checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        warmup = start_kernel_warmup(config) if background_pictures else None
+        try:
+            result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
+                              checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+        except BaseException:
+            if warmup is not None:
+                warmup.stop()
+            raise
+        if warmup is not None:   # its failure only means the map compiles the kernels itself
+            warmup.finish()
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
-        fields = map_to_surface(result) if len(result.yarns.points) else None
+        # the field mesh depends only on the mandrel and the settings: kept in the cache
+        fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
         fields = with_rtm_fields(result, fields)
         stages["map"] = time.perf_counter() - t
         try:
-            written = write_results(result, fields, out_dir, stages=stages)
+            written = write_results(result, fields, out_dir, stages=stages, background=background_pictures)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "
@@ -259,7 +346,8 @@ def check_layers(config, mandrel, centerline, notes=(), *, force=False):
 
 
 def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-               started=None, offset_settings=None) -> CaseOutcome:
+               started=None, offset_settings=None, background_pictures=False,
+               startup_s=None) -> CaseOutcome:
     """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
     from the mandrel outwards, on the mandrel offset by the thickness of the layers below.
 
@@ -279,9 +367,10 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
 
     from .checks import preflight
     from .checkpoint import Checkpoint
-    from .fields import field_mesh, map_to_surface
+    from .fields import map_to_surface
     from .geometry.offset import OffsetSettings
     from .io import write_results
+    from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
@@ -294,7 +383,8 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force)
     check_results_folder(out_dir, result_bytes)
     settings = offset_settings or OffsetSettings()
-    stages = {"load_and_check": time.perf_counter() - t0}
+    stages = {} if startup_s is None else {"start": float(startup_s)}
+    stages["load_and_check"] = time.perf_counter() - t0
     with RunLock(out_dir):
         results, layer_fields, offsets, stack, refused = [], [], [None], None, ""
         surface = mandrel
@@ -318,7 +408,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             # every layer's angles are measured against the mandrel's centerline, forwards
             on_mandrel = dataclasses.replace(result, centerline=centerline)
             if stack is None:
-                stack = LayerStack.start(mandrel, field_mesh(on_mandrel), settings)
+                stack = LayerStack.start(mandrel, cached_field_mesh(on_mandrel), settings)
             layer_fields.append(map_to_surface(on_mandrel, mesh=stack.layer_mesh()))
             stages[f"map_layer{k}"] = time.perf_counter() - t
         fields = _stacked_fields(configs, layer_fields, centerline, config.rtm.cavity_thickness)
@@ -327,7 +417,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
                    in enumerate(zip(configs, results, [*layer_fields, None], offsets), start=1)]
         try:
             written = write_results(top, fields, out_dir, stages=stages, layers=entries,
-                                    layer_results=results[1:])
+                                    layer_results=results[1:], background=background_pictures)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulations "

@@ -2,6 +2,7 @@
 
 :func:`write_results` writes everything into one folder; ``summary.json`` comes last, so its
 presence marks a complete set of results. Every file is written atomically (``io.atomic``).
+The plotting modules (matplotlib, pyvista) are imported only when a picture is drawn.
 """
 
 from __future__ import annotations
@@ -9,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_folder
-from .plots import plot_history, plot_yarns_3d
 from .tables import write_history, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp
 
@@ -20,17 +20,51 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def _write_surface(fields, out_dir, title="") -> list[Path]:
-    """``preform.io.surface.write_surface`` when that module exists (surface.vtu/.xdmf/.h5, PNGs)."""
-    try:
-        from .surface import write_surface
-    except ModuleNotFoundError as err:  # tolerated only while io/surface.py does not exist yet
-        if err.name != f"{__name__}.surface":
-            raise
-        return []
+def plot_history(result, plots_dir, refs=None):
+    """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
+    from .plots import plot_history as plot
 
-    written = write_surface(fields, out_dir, title)
-    return [Path(p) for p in (written or [])]
+    return plot(result, plots_dir, refs)
+
+
+def plot_yarns_3d(result, path):
+    """``preform.io.plots.plot_yarns_3d`` (pyvista or matplotlib imported on the first call)."""
+    from .plots import plot_yarns_3d as plot
+
+    return plot(result, path)
+
+
+def _picture_jobs(result, fields, out_dir):
+    """(matplotlib jobs, 3-D render jobs) of the pictures of a run (``io.pictures.PictureJob``)."""
+    from .pictures import PictureJob
+    from .surface import PICTURES
+
+    plots = out_dir / PLOTS
+    drawn, rendered = [], []
+    if fields is not None and result.centerline is not None:
+        from .maps import MAP
+
+        def surface_map():
+            from .maps import write_surface_map
+            from .plots import run_title
+
+            return [write_surface_map(fields, result.centerline, plots / MAP,
+                                      run_title(result, "Surface fields, unrolled"))]
+
+        drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
+    if result.steps:
+        drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
+                                lambda: plot_history(result, plots)))
+    if fields is not None:
+        def surface_pictures():
+            from .plots import run_label
+            from .surface import write_surface_pictures
+
+            return write_surface_pictures(fields, plots, run_label(result))
+
+        rendered.append(PictureJob(tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES), surface_pictures))
+    rendered.append(PictureJob((f"{PLOTS}/{YARNS_PNG}",), lambda: [plot_yarns_3d(result, plots / YARNS_PNG)]))
+    return drawn, rendered
 
 
 def _relative(path, out_dir) -> str:
@@ -38,56 +72,72 @@ def _relative(path, out_dir) -> str:
     return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
 
 
-def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=()) -> list[Path]:
+def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=(),
+                  background=False) -> list[Path]:
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
     fields : preform.fields.SurfaceFields or None (no surface files then)
     out_dir : str or Path, created if missing
     stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
-        ``wall_time_s`` is then the whole command's, these stages and this writing included
+        ``wall_time_s`` is then the whole command's, these stages, the writing (``write``) and
+        the wait for the pictures after it (``pictures``) included
     layers : summary.json's ``layers`` entries of a run with [[layer]] tables, or None
     layer_results : the Results of layers 2, 3, ...: their ``history.csv`` and ``yarns.vtp`` go
         to ``layer2/``, ``layer3/``, ... (``result`` is the first layer's)
+    background : render the 3-D pictures in a worker process while the data files are written
+        (``io.pictures.PictureWorker``), else one after the other here
     returns : the paths written, summary.json last
+
+    The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
+    the summary's ``pictures.failed``) and never stops the rest.
     """
     import time
+    import warnings
+
+    from .pictures import PictureWorker, run_jobs
 
     t_write = time.perf_counter()
     out_dir = safe_folder(out_dir)
     safe_folder(out_dir, PLOTS)   # a symlink planted as plots/ is replaced, never followed
     summary = out_dir / SUMMARY
     summary.unlink(missing_ok=True)  # a summary from an earlier run would mark this one complete
-    written = [write_history(result, out_dir / HISTORY),
-               write_yarns_vtp(result.yarns, out_dir / YARNS),
-               *write_convergence(result.snapshots, out_dir)]
-    for k, layer in enumerate(layer_results, start=2):
-        folder = safe_folder(out_dir, f"layer{k}")
-        written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
-    if fields is not None:
-        from .plots import run_label
+    drawn, rendered = _picture_jobs(result, fields, out_dir)
+    worker = PictureWorker(rendered if background else [])
+    try:
+        written = [write_history(result, out_dir / HISTORY),
+                   write_yarns_vtp(result.yarns, out_dir / YARNS),
+                   *write_convergence(result.snapshots, out_dir)]
+        for k, layer in enumerate(layer_results, start=2):
+            folder = safe_folder(out_dir, f"layer{k}")
+            written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
+        if fields is not None:
+            from .surface import write_surface
 
-        written += _write_surface(fields, out_dir, run_label(result))
-        if result.centerline is not None:
-            from .maps import MAP, write_surface_map
-            from .plots import run_title
-
-            written.append(write_surface_map(fields, result.centerline, out_dir / PLOTS / MAP,
-                                             run_title(result, "Surface fields, unrolled")))
-    rtm = _write_rtm(result, fields, out_dir, written)
-    if result.steps:
-        written += plot_history(result, out_dir / PLOTS)
-    written.append(plot_yarns_3d(result, out_dir / PLOTS / YARNS_PNG))
+            written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
+        rtm = _write_rtm(result, fields, out_dir, written)
+    except BaseException:
+        worker.stop()
+        raise
+    t_pictures = time.perf_counter()
+    pictures, failed = run_jobs(drawn if background else drawn + rendered)
+    more, more_failed = worker.finish()
+    pictures, failed = pictures + more, failed + more_failed
+    for text in failed:
+        warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=2)
+    written += [p for p in pictures if Path(p).is_file()]
     files = [_relative(p, out_dir) for p in [*written, summary]]
     from ..quality import surface_reasons
 
-    extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields)}
+    extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields),
+             "pictures": {"failed": failed}}
     if layers is not None:   # the run is suspect when a layer above the first is
         extra["layers"] = layers
         extra["quality_reasons"] += [f"layer {e['layer']}: {reason}" for e in layers[1:]
                                      for reason in e["quality"]["reasons"]]
     if stages is not None:
-        stages = {**stages, "write": time.perf_counter() - t_write}
+        now = time.perf_counter()
+        stages = {**stages, "write": t_pictures - t_write, "pictures": now - t_pictures}
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
                      simulation_wall_time_s=float(result.wall_time_s))
     written.append(write_summary(result, summary, extra=extra))

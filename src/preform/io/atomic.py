@@ -91,14 +91,20 @@ def place(tmp, path) -> Path:
     return path
 
 
-def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (contents flushed to disk first); return ``Path(path)``."""
+def atomic_write_bytes(path, data: bytes, sync: bool = True) -> Path:
+    """Write ``data`` to ``path`` atomically; return ``Path(path)``.
+
+    sync : flush the contents to disk before the rename (True), or leave that to the operating
+        system (False: for large result files, like the VTK, meshio and matplotlib writers do; the
+        rename is atomic either way, so a stopped run never leaves a half-written file)
+    """
     with atomic_path(path) as tmp:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o666)
         with open(fd, "wb") as f:
             f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+            if sync:
+                f.flush()
+                os.fsync(f.fileno())
     return Path(path)
 
 

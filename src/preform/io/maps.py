@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import PolyCollection
+from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 
 from .atomic import atomic_path
@@ -56,43 +56,130 @@ def unrolled_coordinates(vertices, faces, centerline):
     return np.stack([s_v, phi], axis=2)
 
 
+def face_raster(polys, extent, shape) -> np.ndarray:
+    """(H, W) int64: the face whose triangle holds each pixel centre of a regular grid, -1 where
+    none does (the highest face index where triangles overlap).
+
+    polys : (nf, 3, 2) corners in the plane (:func:`unrolled_coordinates`);
+    extent : (x0, x1, y0, y1) covered by the grid, row 0 at y1 (the top, as images are stored);
+    shape : (H, W) pixels. Faces are grouped by the size of their pixel bounding box, and each
+    group tests its candidate pixel centres at once with the three edge functions (both windings).
+    """
+    H, W = shape
+    x0, x1, y0, y1 = extent
+    out = np.full((H, W), -1, dtype=np.int64)
+    if len(polys) == 0 or H <= 0 or W <= 0:
+        return out
+    u = (polys[..., 0] - x0) * (W / (x1 - x0)) - 0.5          # pixel column j has its centre at u = j
+    v = (y1 - polys[..., 1]) * (H / (y1 - y0)) - 0.5          # pixel row i at v = i
+    j0 = np.clip(np.ceil(u.min(axis=1)), 0, W).astype(np.int64)
+    j1 = np.clip(np.floor(u.max(axis=1)), -1, W - 1).astype(np.int64)
+    i0 = np.clip(np.ceil(v.min(axis=1)), 0, H).astype(np.int64)
+    i1 = np.clip(np.floor(v.max(axis=1)), -1, H - 1).astype(np.int64)
+    nj, ni = j1 - j0 + 1, i1 - i0 + 1
+    area = (u[:, 1] - u[:, 0]) * (v[:, 2] - v[:, 0]) - (u[:, 2] - u[:, 0]) * (v[:, 1] - v[:, 0])
+    live = (nj > 0) & (ni > 0) & (area != 0)
+    size = ni * (W + 1) + nj
+    for key in np.unique(size[live]):
+        f = np.flatnonzero(live & (size == key))
+        a, b = int(key // (W + 1)), int(key % (W + 1))
+        di, dj = (g.ravel() for g in np.meshgrid(np.arange(a), np.arange(b), indexing="ij"))
+        pi = i0[f, None] + di[None, :]                        # (g, a b) candidate pixels
+        pj = j0[f, None] + dj[None, :]
+        sign = np.sign(area[f])[:, None]
+        inside = np.ones(pi.shape, dtype=bool)
+        for k in range(3):                                    # edge k -> k+1, pixel on its inner side
+            ua, va = u[f, k, None], v[f, k, None]
+            ub, vb = u[f, (k + 1) % 3, None], v[f, (k + 1) % 3, None]
+            inside &= sign * ((ub - ua) * (pi - va) - (vb - va) * (pj - ua)) >= 0
+        np.maximum.at(out, (pi[inside], pj[inside]), np.broadcast_to(f[:, None], pi.shape)[inside])
+    return out
+
+
+#: the map's layout, inches: figure width, height per panel, and the margins around the panels
+#: (fixed, so the picture needs no layout pass: the constrained layout of three panels with
+#: their colour bars measured every tick label twice, half the time of drawing the map)
+WIDTH_IN, PANEL_IN = 10.0, 3.0
+LEFT_IN, RIGHT_IN, TOP_IN, BOTTOM_IN, TITLE_IN = 0.75, 1.25, 0.65, 0.55, 0.35
+BAR_GAP_IN, BAR_IN = 0.15, 0.15
+
+
+def _panel_rects(n):
+    """Figure-fraction rectangles (left, bottom, width, height) of the n panels and their bars."""
+    height = PANEL_IN * n
+    slot = (height - TOP_IN - BOTTOM_IN) / n
+    w = (WIDTH_IN - LEFT_IN - RIGHT_IN) / WIDTH_IN
+    rects = []
+    for k in range(n):
+        bottom = BOTTOM_IN + (n - 1 - k) * slot
+        ax = (LEFT_IN / WIDTH_IN, bottom / height, w, (slot - TITLE_IN) / height)
+        bar = ((WIDTH_IN - RIGHT_IN + BAR_GAP_IN) / WIDTH_IN, bottom / height, BAR_IN / WIDTH_IN,
+               (slot - TITLE_IN) / height)
+        rects.append((ax, bar))
+    return rects
+
+
 def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
-    """The unrolled panels (see module docstring); ``panels``: (cell array, label, scale) each."""
+    """The unrolled panels (see module docstring); ``panels``: (cell array, label, scale) each.
+
+    Each panel is an image at the picture's resolution (:func:`face_raster`: the face under each
+    pixel), coloured by the face's value where ``shown`` and grey where not, so the cost does not
+    grow with the number of faces drawn as polygons; the face of each pixel of panel k is kept
+    as ``fig.face_pixels[k]``, the faces coloured there as ``fig.shown[k]`` and the colour range
+    as ``fig.colour_ranges[k]`` ((lo, hi) in the shown unit, None where nothing is coloured).
+    """
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LogNorm, Normalize
+
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
     reached = fields.reached()
-    fig = Figure(figsize=(10.0, 3.0 * len(panels)), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
-    fig.suptitle(title)
-    for ax, (name, label, scale) in zip(axes, panels):
+    n = len(panels)
+    fig = Figure(figsize=(WIDTH_IN, PANEL_IN * n), dpi=DPI)
+    fig.suptitle(title, y=1.0 - 0.12 / (PANEL_IN * n), va="top")
+    s_all = polys[..., 0]
+    extent = (float(s_all.min()), float(s_all.max()), -180.0, 180.0)
+    grey = np.array(to_rgba(UNREACHED))
+    fig.face_pixels, fig.shown, fig.colour_ranges = [], [], []
+    axes = []
+    for k, ((name, label, scale), (rect, bar)) in enumerate(zip(panels, _panel_rects(n))):
+        ax = fig.add_axes(rect, sharex=axes[0] if axes else None)
+        axes.append(ax)
         values = np.asarray(data[name], dtype=float) * scale
         shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
         if name == "braid_angle_deg" and "layer2_braid_angle_deg" in data:
             label = "braid angle of layer 1 (deg)"     # the stack's totals in the other panels
-        if np.any(~shown):
-            ax.add_collection(PolyCollection(polys[~shown], facecolors=UNREACHED, edgecolors=UNREACHED,
-                                          linewidths=0.1))
+        pixels = face_raster(polys, extent, (max(1, round(rect[3] * PANEL_IN * n * DPI)),
+                                             max(1, round(rect[2] * WIDTH_IN * DPI))))
+        rgba = np.zeros((*pixels.shape, 4))                 # transparent where no face lies
+        on = pixels >= 0
+        rgba[on] = grey
+        colour_range = None
         if np.any(shown):
             lo, hi = float(values[shown].min()), float(values[shown].max())
             if hi - lo < 1e-9 * max(1.0, abs(hi)):   # a uniform field: a range around its value
                 pad = 0.5 if name == "braid_angle_deg" else max(0.01 * abs(hi), 1e-12)
                 lo, hi = lo - pad, hi + pad
-            coll = PolyCollection(polys[shown], array=values[shown], cmap="viridis", edgecolors="face",
-                                  linewidths=0.1)
-            if name.startswith("permeability") and lo > 0:
-                from matplotlib.colors import LogNorm   # permeability spans decades: log colours
-
-                coll.set_norm(LogNorm(lo, hi))
-            else:
-                coll.set_clim(lo, hi)
-            ax.add_collection(coll)
-            fig.colorbar(coll, ax=ax, label=label, pad=0.01)
+            # permeability spans decades: log colours
+            norm = LogNorm(lo, hi) if name.startswith("permeability") and lo > 0 else Normalize(lo, hi)
+            mappable = ScalarMappable(norm=norm, cmap="viridis")
+            coloured = np.zeros(pixels.shape, dtype=bool)
+            coloured[on] = shown[pixels[on]]
+            rgba[coloured] = mappable.to_rgba(values[pixels[coloured]])
+            fig.colorbar(mappable, cax=fig.add_axes(bar), label=label)
+            colour_range = (lo, hi)
+        ax.imshow(rgba, extent=extent, origin="upper", aspect="auto", interpolation="nearest",
+                  resample=False)
+        fig.face_pixels.append(pixels)
+        fig.shown.append(shown)
+        fig.colour_ranges.append(colour_range)
+        ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(-180.0, 180.0)
         ax.set_yticks([-180, -90, 0, 90, 180])
         ax.set_ylabel("around (deg)")
         ax.set_title(label + ("; grey: no yarn" if np.any(~shown) else ""), fontsize=10)
-    s_all = polys[..., 0]
-    axes[-1].set_xlim(float(s_all.min()), float(s_all.max()))
+        if k < n - 1:
+            ax.tick_params(labelbottom=False)
     axes[-1].set_xlabel("centerline arc length from the tip s (m)")
     return fig
 

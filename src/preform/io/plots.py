@@ -16,6 +16,10 @@ from matplotlib.figure import Figure
 from .atomic import atomic_path
 
 GROUP_COLOURS = {0: "tab:blue", 1: "tab:red"}   # warp, weft
+#: size (inches) and fixed margins (figure fractions) of the history figures: a fixed layout,
+#: as matplotlib's constrained layout measured every tick label again (0.3 s a figure)
+HISTORY_SIZE = (7.2, 4.4)
+HISTORY_MARGINS = dict(left=0.105, right=0.975, bottom=0.115, top=0.865)
 GROUP_NAMES = {0: "warp", 1: "weft"}
 DPI = 150
 #: the 3D picture draws at most this many points per yarn (every k-th point beyond that)
@@ -87,7 +91,8 @@ def _steady_mark(ax, steady):
 def braid_angle_figure(result, refs=None, steady=None) -> Figure:
     """Warp and weft braid angle (deg) against braided length (m), with Ko's angle (``refs``, a
     :class:`preform.reference.References`) and the start of steady state (``steady``)."""
-    fig = Figure(figsize=(7.2, 4.4), layout="constrained")
+    fig = Figure(figsize=HISTORY_SIZE)
+    fig.subplots_adjust(**HISTORY_MARGINS)
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
     warp, weft = _column(result, "braid_angle_warp_deg"), _column(result, "braid_angle_weft_deg")
@@ -119,7 +124,8 @@ def _finish(ax, result, length, columns, reference, steady, ylabel, title):
 def convergence_length_figure(result, refs=None, steady=None) -> Figure:
     """Mean convergence length (m) with its min-max band over yarns, against braided length (m),
     with the kinematic steady value H_inf (``refs``) and the start of steady state."""
-    fig = Figure(figsize=(7.2, 4.4), layout="constrained")
+    fig = Figure(figsize=HISTORY_SIZE)
+    fig.subplots_adjust(**HISTORY_MARGINS)
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
     lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")

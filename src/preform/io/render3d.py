@@ -18,8 +18,13 @@ import numpy as np
 WINDOW_SIZE = (1600, 1000)
 COLOURS = {0: "#1f77b4", 1: "#d62728"}   # warp, weft: matplotlib's tab:blue, tab:red
 MANDREL_COLOUR = "#c8c8c8"
-#: the yarns' points drawn per yarn at most (every k-th beyond that)
-MAX_POINTS_PER_YARN = 4000
+#: the yarns' points drawn per yarn at most (every k-th beyond that): case A's 4 m yarns then
+#: have 4 mm segments, whose chord sag on its 0.1 m radius (l^2 / 8 r, 20 um) is a thirtieth of a
+#: pixel of the close-ups (0.6 mm), and the frame draws a quarter of the lines of 4000 points
+MAX_POINTS_PER_YARN = 1000
+#: multisampling of the render window: none. With 4 samples Mesa's software rasteriser (llvmpipe,
+#: the usual off-screen EGL) took 1.5 s for this frame of 3 x 576 k line points, 0.6 s without
+MULTI_SAMPLES = 0
 
 
 def view_axes(points):
@@ -70,6 +75,24 @@ def _close_up(result, laid, centre, axis, across, third):
     return p, T, up, front, max(radius, 1e-4)
 
 
+def _sunk(mandrel, result):
+    """The mandrel's vertices moved inwards by half a yarn thickness along their mean face normal,
+    as the yarn centerlines lie above the surface: a yarn's straight segments between points on
+    the facets dip below the drawn surface on a convex part (chord sag), and where they did, the
+    surface hid one yarn family along half the part."""
+    V = np.asarray(mandrel.vertices, dtype=np.float64)
+    F = np.asarray(mandrel.faces, dtype=np.int64)
+    config = getattr(result, "config", None)
+    depth = 0.5 * float(config.yarn.thickness) if config is not None else 0.0
+    if not depth > 0:
+        return V
+    normals = np.zeros_like(V)
+    for k in range(3):
+        np.add.at(normals, F[:, k], np.asarray(mandrel.face_normals, dtype=np.float64))
+    norm = np.linalg.norm(normals, axis=1, keepdims=True)
+    return V - depth * np.divide(normals, norm, out=np.zeros_like(V), where=norm > 0)
+
+
 def _camera(plotter, centre, view, up, half_width, half_height, aspect):
     """Parallel projection looking at ``centre`` along ``-view``, fitting the given half extents."""
     plotter.camera_position = [tuple(centre + 10.0 * max(half_width, half_height) * view),
@@ -93,7 +116,7 @@ def render_braided_mandrel(result, path, title: str) -> None:
     mandrel = result.mandrel
     faces = np.asarray(mandrel.faces, dtype=np.int64)
     cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
-    surface = pv.PolyData(np.asarray(mandrel.vertices, dtype=np.float64), cells)
+    surface = pv.PolyData(_sunk(mandrel, result), cells)
     focus = laid if len(laid) >= 3 else np.asarray(mandrel.vertices, dtype=np.float64)
     centre, axis, across, third = view_axes(focus)
     along = (focus - centre) @ axis
@@ -108,6 +131,7 @@ def render_braided_mandrel(result, path, title: str) -> None:
     w, h = WINDOW_SIZE
     plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 2),
                          groups=[(0, np.s_[:])], border=False)
+    plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
     lines = [_yarn_lines(yarns, group) for group in (0, 1)]
     views = [((0, 0), whole_view, whole_up, whole_centre, 0.5 * (hi - lo) + 0.1 * spread,
               max(spread, depth), 2.0 * w / h, f"{title}: braided part"),
