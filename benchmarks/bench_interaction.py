@@ -208,7 +208,7 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
         process=dataclasses.replace(cfg.process, braid_length=length, initial_position=0.4),
         output=dataclasses.replace(cfg.output, snapshots=snapshots))
     T = _Timers()
-    solver = simulation.SOLVERS["relax"]
+    solver = simulation.solver_of("relax")
     newton = frontal.solve_zone_inplace
 
     def solve(state, bc, **k):
@@ -241,14 +241,14 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
             T.wrap(stepping.Stepper, "run", "loop"),
             T.wrap(InteractionZone, "step", "step", "step", inside="step"),
             T.wrap(InteractionZone, "snapshot", "snapshot", "snapshot", inside="snapshot")]
-    simulation.SOLVERS["relax"] = solve
+    simulation.solver_of("relax") = solve
     frontal.solve_zone_inplace = newton_timed
     try:
         t0 = time.perf_counter()
         outcome = run_case(cfg, out_dir)
         wall = time.perf_counter() - t0
     finally:
-        simulation.SOLVERS["relax"] = solver
+        simulation.solver_of("relax") = solver
         frontal.solve_zone_inplace = newton
         for u in undo:
             u()

@@ -5,6 +5,13 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the suite's disk cache (preform.io.cache) in a folder of its own, removed at the end: tests never
+# read a cache entry left by the user's runs, nor leave entries in the user's ~/.cache
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+
+_CACHE = tempfile.mkdtemp(prefix="preform-test-cache-")
+os.environ["PREFORM_CACHE_DIR"] = _CACHE
 
 from pathlib import Path  # noqa: E402
 
@@ -101,3 +108,7 @@ def small_tmpfs(tmp_path):
     yield mount
     for point in mounted:
         subprocess.run(["umount", "-l", str(point)], capture_output=True)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(_CACHE, ignore_errors=True)

@@ -20,20 +20,43 @@ from contextlib import contextmanager
 from . import geometry
 from .checkpoint import Checkpoint, CheckpointError
 from .errors import ConfigError, SimulationError
-from .interaction import relax
-from .interaction.model import InteractionZone
-from .kinematic import KinematicZone
 from .machine import Machine
 from .reference import resolve_pose_lead
 from .result import Result
 from .stepping import Stepper
 from .tolerances import Tolerances, tol
 
-#: ``[model] kind`` -> the zone class of that model, built as ``cls(config, machine, mandrel)``
-ZONES = {"kinematic": KinematicZone, "interaction": InteractionZone}
-#: ``[model] solver`` -> the interaction zone's solver of a step (``InteractionZone(solve_zone=)``;
-#: None: the zone's default, Newton's ``frontal.solve_zone_inplace``)
-SOLVERS = {"newton": None, "relax": relax.solve_zone}
+#: ``[model] kind`` -> (module, class) of that model's zone, built as ``cls(config, machine,
+#: mandrel)``; imported on first use, so that a kinematic run does not load the interaction model
+ZONES = {"kinematic": ("preform.kinematic", "KinematicZone"),
+         "interaction": ("preform.interaction.model", "InteractionZone")}
+#: ``[model] solver`` -> (module, function) of the interaction zone's solver of a step
+#: (``InteractionZone(solve_zone=)``); None: the zone's default, Newton's
+#: ``frontal.solve_zone_inplace``
+SOLVERS = {"newton": None, "relax": ("preform.interaction.relax", "solve_zone")}
+
+
+def _named(where):
+    import importlib
+
+    return None if where is None else getattr(importlib.import_module(where[0]), where[1])
+
+
+def zone_class(kind):
+    """The zone class of ``[model] kind`` (``ZONES``)."""
+    try:
+        return _named(ZONES[kind])
+    except KeyError:
+        raise ConfigError(f"[model] kind = {kind!r}: expected one of "
+                          f"{', '.join(map(repr, ZONES))}") from None
+
+
+def solver_of(name):
+    """The step solver of ``[model] solver`` (``SOLVERS``; None: the zone's default)."""
+    if name not in SOLVERS:
+        raise ConfigError(f"[model] solver = {name!r}: expected one of "
+                          f"{', '.join(map(repr, SOLVERS))}")
+    return _named(SOLVERS[name])
 
 
 def load_geometry(config):
@@ -52,18 +75,10 @@ def make_zone(config, machine, mandrel):
     """A fresh zone of ``[model] kind`` (``ZONES``), the interaction zone with the solver of
     ``[model] solver`` (``SOLVERS``); ``mandrel`` (mandrel frame) for its contact and deposition
     tests."""
-    try:
-        cls = ZONES[config.model.kind]
-    except KeyError:
-        raise ConfigError(f"[model] kind = {config.model.kind!r}: expected one of "
-                          f"{', '.join(map(repr, ZONES))}") from None
-    if cls is not InteractionZone:
+    cls = zone_class(config.model.kind)
+    if config.model.kind != "interaction":
         return cls(config, machine, mandrel)
-    solver = config.model.solver
-    if solver not in SOLVERS:
-        raise ConfigError(f"[model] solver = {solver!r}: expected one of "
-                          f"{', '.join(map(repr, SOLVERS))}")
-    return cls(config, machine, mandrel, solve_zone=SOLVERS[solver])
+    return cls(config, machine, mandrel, solve_zone=solver_of(config.model.solver))
 
 
 def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:
