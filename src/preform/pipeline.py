@@ -73,18 +73,11 @@ def checked_geometry(config):
 
 def load_geometry(config):
     """(Mandrel, Centerline) of a config (``preform.simulation.load_geometry``), the repaired
-    mandrel and an automatic centerline's input through the on-disk cache (``io.cache``)."""
-    from . import geometry
+    mandrel through the on-disk cache (``io.cache``)."""
     from .io.cache import cached_mandrel
+    from .simulation import load_geometry as load
 
-    mc = config.mandrel
-    mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
-    if isinstance(mc.centerline, str) and mc.centerline == "auto":
-        centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
-    else:
-        centerline = geometry.read_centerline_csv(mc.centerline, unit=mc.stl_unit,
-                                                  roll_reference=mc.roll_reference)
-    return mandrel, centerline
+    return load(config, load_mandrel=cached_mandrel)
 
 
 def reference_lines(config, mandrel, centerline) -> list[str]:

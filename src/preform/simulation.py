@@ -59,10 +59,13 @@ def solver_of(name):
     return _named(SOLVERS[name])
 
 
-def load_geometry(config):
-    """(Mandrel, Centerline) of a config, in metres, mandrel frame."""
+def load_geometry(config, load_mandrel=None):
+    """(Mandrel, Centerline) of a config, in metres, mandrel frame; ``load_mandrel(path, unit=,
+    body=)`` reads the STL (None: ``geometry.load_mandrel``; ``preform run`` passes the on-disk
+    cache's ``io.cache.cached_mandrel``)."""
     mc = config.mandrel
-    mandrel = geometry.load_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
+    load = geometry.load_mandrel if load_mandrel is None else load_mandrel
+    mandrel = load(mc.stl, unit=mc.stl_unit, body=mc.body)
     if isinstance(mc.centerline, str) and mc.centerline == "auto":
         centerline = geometry.auto_centerline(mandrel, roll_reference=mc.roll_reference)
     else:
