@@ -73,7 +73,10 @@ def test_a_badly_posed_curved_mandrel_is_called_suspect(runs):
     q = assess(runs["bad"])
     assert q["verdict"] == "suspect"
     text = " ".join(q["reasons"])
-    assert "bridged" in text and "check the pose" in text
+    # 2.5 % of the points are caught; the walk's 9.9 % "concave" jumps here run along flat facets
+    # (stand-off 1e-10 m), which are not bridges (Tolerances.bridge_depth_thickness)
+    assert "caught" in text and "check the pose" in text
+    assert "behind the supply plane" in text
 
 
 def test_the_automatic_pose_lead_makes_the_run_sane(runs):
