@@ -101,6 +101,10 @@ except ImportError:     # pragma: no cover - qdldl is a dependency
 
 #: steps solved by the Newton fallback since import (``solve_zone``), for benchmarks and tests
 FALLBACKS = [0]
+#: relaxation iterations of every step ``solve_zone`` gave the relaxation since import
+#: (converged or not), for benchmarks: the median a step and, with FALLBACKS, the share of
+#: steps Newton solved
+ITERATIONS: list[int] = []
 
 
 @dataclass(frozen=True)
@@ -863,6 +867,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
+    ITERATIONS.append(res.iterations)
     if not res.converged:
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
