@@ -273,7 +273,7 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
     ref = st.copy()
     frontal.solve_zone_inplace(ref, bc, centre=s_old, tol=TIGHT)
     b0, f0 = R.start_bounds(st, bc)
-    rs = R.RelaxSettings(tol=TIGHT, max_iter=300, block_stall=60)
+    rs = R.RelaxSettings(tol=TIGHT, max_iter=300, ring_stall=60)
     res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old[:m],
                   bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                   width=bc.width, plane=bc.plane,
