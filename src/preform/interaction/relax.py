@@ -56,7 +56,9 @@ How (one iteration)
      there), and hold their yarns along themselves at ~1e4 N/m against a geometric stiffness
      of ~1e2 N/m, where the yarns cross at low angles; the block iteration's linearised map
      has a spectral radius of 15 there (``docs/decisions-ring14.md``). Factorised as the
-     block one (and anew where the jammed set changes), 4-5x its cost.
+     block one, anew where a segment newly jams (one that left the jam keeps its k_jam in
+     K: stiffer than the map there, the update falls short rather than beyond), 4-5x its
+     cost; a step without a new lowest residual in ``ring_stall`` iterations is Newton's.
 
    ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
    sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
