@@ -1,20 +1,30 @@
-"""Force-density relaxation against the Newton reference on captured case A steps (issue 14).
+"""Force-density relaxation against the Newton reference on captured steps (issue 14).
 
 ``python benchmarks/bench_relax.py [--carriers 48 96 144] [--mu 0.25] [--steps 3] [--repeat 3]
-[--preconditioner block scalar] [--warm-solver relax|newton] [--warm N]``
+[--preconditioner block full scalar] [--warm-solver relax|newton] [--warm N] [--case FILE]``
 
-For each carrier count a case A run (``examples/case_a.toml``, interaction model, the
-``--warm-solver``) is advanced to a zone of full size (``--warm``: 250 steps; 300 with 144 carriers), then
-``--steps`` consecutive steps are captured (the problem ``InteractionZone.step`` poses its
-solver: fell points anchored, crossings created, wall planes) and each is solved by
-``frontal.solve_zone_inplace`` and by ``relax.relax`` with each ``--preconditioner``
-(``--repeat`` times, medians). Printed per step: crossings, Newton ms and Newton steps,
-relaxation ms, iterations, microseconds per crossing per iteration, the breakdown per part in ms
-per step (set-up: order, pattern and symbolic analysis; material sweeps with the segments;
-forces, residual and friction bounds; factorisation; solves; wall; block-Jacobi corrections;
-Anderson mixing), material Newton steps per sweep and yarn, and the largest position difference
-to Newton's solution. Then per carrier count and preconditioner the medians over the steps, and
-the spread of the microseconds per crossing per iteration between the carrier counts.
+``python benchmarks/bench_relax.py --run examples/case_b.toml [--out DIR]``: one run end to end
+through ``preform run`` with the interaction model (fields and files included), then its wall
+time, the share of steps the relaxation gave to the Newton fallback and the median relaxation
+iterations a step (``relax.FALLBACKS``, ``relax.ITERATIONS``).
+
+``--case FILE``: capture the steps from that example (its own carriers unless ``--carriers``
+is given; behind a guide ring ``solve_zone`` uses ``RelaxSettings.ring_preconditioner``,
+``"full"``) instead of case A.
+
+For each carrier count a case A run (``examples/case_a.toml``, or ``--case``; interaction
+model, the ``--warm-solver``) is advanced to a zone of full size (``--warm``: 250 steps; 300
+with 144 carriers), then ``--steps`` consecutive steps are captured (the problem
+``InteractionZone.step`` poses its solver: fell points anchored, crossings created, wall
+planes) and each is solved by ``frontal.solve_zone_inplace`` and by ``relax.relax`` with each
+``--preconditioner`` (``--repeat`` times, medians). Printed per step: crossings, Newton ms and
+Newton steps, relaxation ms, iterations (NOT CONVERGED where it stalls), microseconds per
+crossing per iteration, the breakdown per part in ms per step (set-up: order, pattern and
+symbolic analysis; material sweeps with the segments; forces, residual and friction bounds;
+factorisation; solves; wall; block-Jacobi corrections; Anderson mixing), material Newton steps
+per sweep and yarn, and the largest position difference to Newton's solution. Then per carrier
+count and preconditioner the steps converged and the medians over the steps, and the spread of
+the microseconds per crossing per iteration between the carrier counts.
 """
 
 from __future__ import annotations
@@ -30,13 +40,32 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 
-def _stepper(carriers, mu, steps, solver):
+def _case_config(path, carriers, mu, solver):
+    """The example at ``path`` with the interaction model and ``solver``, no snapshots; its
+    carriers and friction unless given."""
+    import dataclasses
+
+    import preform as pf
+
+    cfg = pf.load_config(path)
+    cfg = dataclasses.replace(
+        cfg, model=dataclasses.replace(cfg.model, kind="interaction", solver=solver),
+        output=dataclasses.replace(cfg.output, snapshots=0),
+        yarn=dataclasses.replace(cfg.yarn, friction=cfg.yarn.friction if mu is None else mu))
+    if carriers is not None:
+        cfg = dataclasses.replace(cfg, machine=dataclasses.replace(cfg.machine,
+                                                                   carriers=carriers))
+    return cfg
+
+
+def _stepper(carriers, mu, steps, solver, case=None):
     from test_relax import _config
     from preform.reference import resolve_pose_lead
     from preform.simulation import load_geometry, make_stepper
     from preform.stepping import take_up_speed
 
-    cfg = _config(carriers, mu, solver)
+    cfg = (_config(carriers, 0.25 if mu is None else mu, solver) if case is None
+           else _case_config(case, carriers, mu, solver))
     mandrel, cl = load_geometry(cfg)
     cfg = resolve_pose_lead(cfg, mandrel, cl)
     s = make_stepper(cfg, mandrel, cl)
@@ -46,27 +75,65 @@ def _stepper(carriers, mu, steps, solver):
     return s, speed
 
 
+def run_end_to_end(config, out):
+    """``preform run config --model interaction`` in this process; prints the wall time, the
+    share of steps solved by the Newton fallback and the median relaxation iterations a
+    step."""
+    from preform import cli
+    from preform.interaction import relax as R
+
+    f0, i0 = R.FALLBACKS[0], len(R.ITERATIONS)
+    t0 = time.perf_counter()
+    code = cli.main(["run", str(config), "--model", "interaction", "--out", str(out),
+                     "--no-progress"])
+    wall = time.perf_counter() - t0
+    its = R.ITERATIONS[i0:]
+    fallbacks = R.FALLBACKS[0] - f0
+    print(f"{config}: exit {code}, {wall:.1f} s end to end; {len(its)} steps given to the "
+          f"relaxation, {fallbacks} ({fallbacks / max(len(its), 1):.1%}) solved by the Newton "
+          f"fallback; median {np.median(its) if its else float('nan'):.0f} relaxation "
+          "iterations a step")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--carriers", type=int, nargs="+", default=[48, 96, 144])
-    ap.add_argument("--mu", type=float, default=0.25)
+    ap.add_argument("--run", default=None, help="an example to run end to end instead")
+    ap.add_argument("--out", default=None, help="result folder of --run (default: a temporary "
+                                                "folder)")
+    ap.add_argument("--case", default=None, help="the example to capture steps from (default "
+                                                 "case A)")
+    ap.add_argument("--carriers", type=int, nargs="+", default=None,
+                    help="default 48 96 144 (case A), the example's own with --case")
+    ap.add_argument("--mu", type=float, default=None, help="default 0.25 (case A), the "
+                                                           "example's own with --case")
     ap.add_argument("--steps", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--preconditioner", nargs="+", default=["block", "scalar"],
-                    choices=["block", "scalar"])
+    ap.add_argument("--preconditioner", nargs="+", default=None,
+                    choices=["block", "full", "scalar"],
+                    help="default block scalar (case A), full block with a guide ring")
     ap.add_argument("--warm-solver", default="relax", choices=["relax", "newton"],
                     help="solver of the run that brings the zone to full size")
     ap.add_argument("--warm", type=int, default=None,
                     help="steps before the captured ones (default 250, 300 with 144 carriers; "
                          "from about 420 at 144 carriers a fifth of the segments jam)")
     args = ap.parse_args(argv)
+    if args.run is not None:
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            run_end_to_end(args.run, args.out or tmp)
+        return
     from test_relax import _capture
     from preform.interaction import frontal, relax as R
 
     summary = {}
-    for n in args.carriers:
-        warm = args.warm if args.warm is not None else (300 if n >= 144 else 250)
-        s, speed = _stepper(n, args.mu, warm, args.warm_solver)
+    carriers = args.carriers or ([None] if args.case else [48, 96, 144])
+    if args.preconditioner is None:
+        ring = args.case is not None and _case_config(args.case, None, None,
+                                                      "relax").machine.guide_ring is not None
+        args.preconditioner = ["full", "block"] if ring else ["block", "scalar"]
+    for n in carriers:
+        warm = args.warm if args.warm is not None else (300 if (n or 0) >= 144 else 250)
+        s, speed = _stepper(n, args.mu, warm, args.warm_solver, args.case)
         for k in range(args.steps):
             st, bc, f_top, s_old = _capture(s, speed)
             m = st.m
@@ -94,11 +161,12 @@ def main(argv=None):
                 sweeps = it * (1 + (settings.smoothing if pre == "scalar" else 0)) + 1
                 newton_per = res.sweep_stats[0] / (sweeps * st.n_yarns)
                 us = 1e6 * np.median(tr) / (it * m)
-                summary.setdefault((n, pre), []).append((1e3 * np.median(tr), it, us, part))
+                summary.setdefault((n, pre), []).append((1e3 * np.median(tr), it, us, part,
+                                                         res.converged))
                 per = ", ".join(f"{key} {v:.1f}" for key, v in part.items())
                 note = "" if res.converged else " (NOT CONVERGED)"
                 note += " (scalar after a block stall)" if res.fallback_scalar else ""
-                print(f"{n} carriers, mu {args.mu}, step {k}, {pre}: {m} crossings; Newton "
+                print(f"{st.n_yarns} carriers, mu {bc.mu}, step {k}, {pre}: {m} crossings; Newton "
                       f"{1e3 * np.median(tn):.1f} ms ({newton} Newton steps); relax "
                       f"{1e3 * np.median(tr):.1f} ms, {res.iterations} iterations{note}, "
                       f"{res.factorisations} factorisations, "
@@ -111,12 +179,14 @@ def main(argv=None):
     print("medians over the steps:")
     for pre in args.preconditioner:
         per_n = {}
-        for n in args.carriers:
+        for n in carriers:
             rows = summary[(n, pre)]
             ms, its, us = (float(np.median([r[i] for r in rows])) for i in range(3))
             per_n[n] = us
             part = {key: float(np.median([r[3][key] for r in rows])) for key in rows[0][3]}
-            print(f"  {pre}, {n} carriers: {ms:.1f} ms a step, {its:.0f} iterations, {us:.3f} us "
+            done = sum(r[4] for r in rows)
+            print(f"  {pre}, {n or 'the example'} carriers: {done} of {len(rows)} steps "
+                  f"converged; {ms:.1f} ms a step, {its:.0f} iterations, {us:.3f} us "
                   "per crossing per iteration; " + ", ".join(f"{k} {v:.1f}" for k, v in
                                                               part.items()) + " ms")
         if len(per_n) > 1:

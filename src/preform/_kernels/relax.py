@@ -984,3 +984,304 @@ def anderson_combine(n, gx, DX, DR, gamma, k, out):
         for i in range(k):
             v -= gamma[i] * (DX[e, i] + DR[e, i])
         out[e] = v
+
+
+# -- the full preconditioner: positions and materials, 5 unknowns a crossing --------------------
+
+@njit(cache=True)
+def _projected(A, pa, na, pb, nb, out):
+    """out (4, 4) = the segment block A (4, 4: a yarn point's 3 coordinates and the material)
+    with its position rows projected by P_a and columns by P_b (``_project_block``; P = I off
+    the wall)."""
+    for i in range(4):
+        for j in range(4):
+            out[i, j] = A[i, j]
+    if pa:
+        for j in range(4):
+            t = na[0] * out[0, j] + na[1] * out[1, j] + na[2] * out[2, j]
+            for i in range(3):
+                out[i, j] -= na[i] * t
+    if pb:
+        for i in range(4):
+            t = out[i, 0] * nb[0] + out[i, 1] * nb[1] + out[i, 2] * nb[2]
+            for j in range(3):
+                out[i, j] -= t * nb[j]
+
+
+@njit(cache=True)
+def full_values(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top, s,
+                s_fell, s_old, g, EA, compression, eps_f, kappa0, l_jam, k_jam, floor, reg, plane,
+                active, slot_diag, slot_below, below_first, vals, Dg):
+    """Blocks of the Hessian of the zone's energy in the positions and materials together, 5 x 5
+    per pair of crossings (unknowns of a crossing: its position, then its material on the warp
+    and on the weft), into vals (nslots, 5, 5) at the slots of ``block_values``' pattern (the
+    same pairs (c, low[c, side]) couple positions and materials). Per segment (c, side), in its
+    length l and material length q with ``W = k (l - q)^2 / (2 q)``: ``W_ll = k / q`` (plus
+    jamming's k_jam), ``W_lq = -k l / q^2``, ``W_qq = k l^2 / q^3``; the yarn points see
+    ``W_ll u u^T + w (I - u u^T) + reg max(f, floor) / l I`` with the geometric ``w = max(f -
+    f_jam, floor) / l`` as in ``block_values``, the coupling to the material ``W_lq u``, added
+    to both ends' diagonal blocks and subtracted from their coupling (the fell point and
+    ``s_fell`` are fixed). The friction term ``g sqrt(x^2 + eps_f^2) + kappa0 x^2 / 2`` adds
+    ``g eps_f^2 / r^3 + kappa0`` to its material's diagonal; the top segment adds its geometric
+    block (its tension f_top is held: no axial term). A crossing resting on the wall (active)
+    moves in its tangent plane: its position rows and columns projected, ``P H P + n n^T``.
+    Dg (m, 5, 5) is scratch."""
+    A = np.empty((4, 4))
+    T = np.empty((4, 4))
+    B = np.empty((3, 3))
+    for i in range(vals.shape[0]):
+        for a in range(5):
+            for b in range(5):
+                vals[i, a, b] = 0.0
+    for c in range(m):
+        for a in range(5):
+            for b in range(5):
+                Dg[c, a, b] = 0.0
+    for c in range(m):
+        for side in range(2):
+            lo = low[c, side]
+            l = l_below[c, side]
+            f = tension[c, side]
+            below = s[lo, side] if lo >= 0 else s_fell[yarn[c, side]]
+            q = s[c, side] - below
+            ka = EA if l >= q else compression * EA
+            fj = _jam_push(l, l_jam, k_jam, lo)
+            kj = k_jam if fj > 0.0 else 0.0
+            u0, u1, u2 = d_below[c, side, 0] / l, d_below[c, side, 1] / l, d_below[c, side, 2] / l
+            _segment_block(u0, u1, u2, max(f - fj, floor) / l, ka / q + kj,
+                           reg * max(f, floor) / l, B)
+            for a in range(3):
+                for b in range(3):
+                    A[a, b] = B[a, b]
+            c_lq = -ka * l / (q * q)
+            A[0, 3] = A[3, 0] = c_lq * u0
+            A[1, 3] = A[3, 1] = c_lq * u1
+            A[2, 3] = A[3, 2] = c_lq * u2
+            A[3, 3] = ka * l * l / (q * q * q)
+            ms = 3 + side
+            _projected(A, active[c], plane[c, 3:], active[c], plane[c, 3:], T)
+            _add_local(Dg[c], T, ms, ms, 1.0)
+            if lo >= 0:
+                _projected(A, active[lo], plane[lo, 3:], active[lo], plane[lo, 3:], T)
+                _add_local(Dg[lo], T, ms, ms, 1.0)
+                slot = slot_below[c, side]
+                if below_first[c, side]:
+                    _projected(A, active[lo], plane[lo, 3:], active[c], plane[c, 3:], T)
+                else:
+                    _projected(A, active[c], plane[c, 3:], active[lo], plane[lo, 3:], T)
+                _add_local(vals[slot], T, ms, ms, -1.0)
+            x = s[c, side] - s_old[c, side]
+            r = math.sqrt(x * x + eps_f * eps_f)
+            Dg[c, ms, ms] += g[c, side] * eps_f * eps_f / (r * r * r) + kappa0
+    for k in range(n_yarns):
+        c = highest[k]
+        if c < 0:
+            continue
+        l = l_top[k]
+        w = max(f_top[k], floor) / l
+        _segment_block(d_top[k, 0] / l, d_top[k, 1] / l, d_top[k, 2] / l, w, 0.0, reg * w, B)
+        for a in range(3):
+            for b in range(3):
+                A[a, b] = B[a, b]
+            A[a, 3] = A[3, a] = 0.0
+        A[3, 3] = 0.0
+        _projected(A, active[c], plane[c, 3:], active[c], plane[c, 3:], T)
+        _add_local(Dg[c], T, 3, 3, 1.0)
+    for c in range(m):
+        slot = slot_diag[c]
+        for a in range(5):
+            for b in range(5):
+                vals[slot, a, b] += Dg[c, a, b]
+        if active[c]:
+            for a in range(3):
+                for b in range(3):
+                    vals[slot, a, b] += plane[c, 3 + a] * plane[c, 3 + b]
+
+
+@njit(cache=True)
+def _add_local(out, T, ra, rb, scale):
+    """out (5, 5) += scale T (4, 4), T's index 3 (the material) at ra in the rows and rb in the
+    columns of out, 0-2 (the position) at 0-2."""
+    for i in range(4):
+        oi = i if i < 3 else ra
+        for j in range(4):
+            oj = j if j < 3 else rb
+            out[oi, oj] += scale * T[i, j]
+
+
+@njit(cache=True)
+def _inverse_spd(A, nb, out, L):
+    """out = A^-1 of a symmetric nb x nb block by its Cholesky factor (L (nb, nb) scratch);
+    False if A is not positive definite."""
+    for j in range(nb):
+        d = A[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, nb):
+            v = A[i, j]
+            for k in range(j):
+                v -= L[i, k] * L[j, k]
+            L[i, j] = v / d
+    # out = L^-T L^-1, column by column of the identity
+    for col in range(nb):
+        for i in range(nb):
+            v = 1.0 if i == col else 0.0
+            for k in range(i):
+                v -= L[i, k] * out[k, col]
+            out[i, col] = v / L[i, i]
+        for i in range(nb - 1, -1, -1):
+            v = out[i, col]
+            for k in range(i + 1, nb):
+                v -= L[k, i] * out[k, col]
+            out[i, col] = v / L[i, i]
+    return True
+
+
+#: the block size of the full preconditioner (positions and the two materials)
+_NB5 = 5
+
+
+@njit(cache=True, fastmath=True)
+def ldl_numeric5(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
+                  y, D):
+    """``ldl_numeric`` for 5 x 5 blocks (the ``"full"`` preconditioner): the same up-looking
+    block LDL^T, the block products as loops of a fixed length (the compiler unrolls them),
+    the pivots inverted by their Cholesky factors. Returns False if a pivot block is not
+    positive definite."""
+    nb = _NB5
+    T = np.empty((nb, nb))
+    Lc = np.empty((nb, nb))
+    Lp[0] = 0
+    for i in range(n):
+        marker[i] = False
+        for a in range(nb):
+            for b in range(nb):
+                y[i, a, b] = 0.0
+        Lp[i + 1] = Lp[i] + Lnz[i]
+        next_space[i] = Lp[i]
+    for k in range(n):
+        nnz_y = 0
+        for a in range(nb):
+            for b in range(nb):
+                D[a, b] = 0.0
+        for p in range(Ap[k], Ap[k + 1]):
+            i = Ai[p]
+            if i == k:
+                for a in range(nb):
+                    for b in range(nb):
+                        D[a, b] = Ax[p, a, b]
+                continue
+            for a in range(nb):
+                for b in range(nb):
+                    y[i, a, b] = Ax[p, a, b]
+            if not marker[i]:
+                marker[i] = True
+                elim[0] = i
+                ne = 1
+                j = etree[i]
+                while j != -1 and j < k:
+                    if marker[j]:
+                        break
+                    marker[j] = True
+                    elim[ne] = j
+                    ne += 1
+                    j = etree[j]
+                while ne:
+                    ne -= 1
+                    y_idx[nnz_y] = elim[ne]
+                    nnz_y += 1
+        for t in range(nnz_y - 1, -1, -1):
+            ci = y_idx[t]
+            end = next_space[ci]
+            # y_ci in locals (written out as in ``ldl_numeric``: kept in registers)
+            y00, y01, y02 = y[ci, 0, 0], y[ci, 0, 1], y[ci, 0, 2]
+            y03, y04 = y[ci, 0, 3], y[ci, 0, 4]
+            y10, y11, y12 = y[ci, 1, 0], y[ci, 1, 1], y[ci, 1, 2]
+            y13, y14 = y[ci, 1, 3], y[ci, 1, 4]
+            y20, y21, y22 = y[ci, 2, 0], y[ci, 2, 1], y[ci, 2, 2]
+            y23, y24 = y[ci, 2, 3], y[ci, 2, 4]
+            y30, y31, y32 = y[ci, 3, 0], y[ci, 3, 1], y[ci, 3, 2]
+            y33, y34 = y[ci, 3, 3], y[ci, 3, 4]
+            y40, y41, y42 = y[ci, 4, 0], y[ci, 4, 1], y[ci, 4, 2]
+            y43, y44 = y[ci, 4, 3], y[ci, 4, 4]
+            for q in range(Lp[ci], end):
+                r = Li[q]
+                # y_r -= L_{r, ci} y_ci
+                for a in range(5):
+                    l0, l1, l2 = Lx[q, a, 0], Lx[q, a, 1], Lx[q, a, 2]
+                    l3, l4 = Lx[q, a, 3], Lx[q, a, 4]
+                    y[r, a, 0] -= l0 * y00 + l1 * y10 + l2 * y20 + l3 * y30 + l4 * y40
+                    y[r, a, 1] -= l0 * y01 + l1 * y11 + l2 * y21 + l3 * y31 + l4 * y41
+                    y[r, a, 2] -= l0 * y02 + l1 * y12 + l2 * y22 + l3 * y32 + l4 * y42
+                    y[r, a, 3] -= l0 * y03 + l1 * y13 + l2 * y23 + l3 * y33 + l4 * y43
+                    y[r, a, 4] -= l0 * y04 + l1 * y14 + l2 * y24 + l3 * y34 + l4 * y44
+            Li[end] = k
+            # L_{k, ci} = y_ci^T Dinv_ci ; D_k -= L_{k, ci} y_ci
+            for a in range(5):
+                for b in range(5):
+                    Lx[end, a, b] = (y[ci, 0, a] * Dinv[ci, 0, b] + y[ci, 1, a] * Dinv[ci, 1, b]
+                                     + y[ci, 2, a] * Dinv[ci, 2, b] + y[ci, 3, a] * Dinv[ci, 3, b]
+                                     + y[ci, 4, a] * Dinv[ci, 4, b])
+            for a in range(5):
+                l0, l1, l2 = Lx[end, a, 0], Lx[end, a, 1], Lx[end, a, 2]
+                l3, l4 = Lx[end, a, 3], Lx[end, a, 4]
+                D[a, 0] -= l0 * y00 + l1 * y10 + l2 * y20 + l3 * y30 + l4 * y40
+                D[a, 1] -= l0 * y01 + l1 * y11 + l2 * y21 + l3 * y31 + l4 * y41
+                D[a, 2] -= l0 * y02 + l1 * y12 + l2 * y22 + l3 * y32 + l4 * y42
+                D[a, 3] -= l0 * y03 + l1 * y13 + l2 * y23 + l3 * y33 + l4 * y43
+                D[a, 4] -= l0 * y04 + l1 * y14 + l2 * y24 + l3 * y34 + l4 * y44
+            next_space[ci] = end + 1
+            for a in range(nb):
+                for b in range(nb):
+                    y[ci, a, b] = 0.0
+            marker[ci] = False
+        for a in range(nb):
+            for b in range(a + 1, nb):
+                D[a, b] = D[b, a] = 0.5 * (D[a, b] + D[b, a])
+        if not _inverse_spd(D, nb, T, Lc):
+            return False
+        for a in range(nb):
+            for b in range(nb):
+                Dinv[k, a, b] = T[a, b]
+    return True
+
+
+@njit(cache=True, fastmath=True)
+def ldl_solve5(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
+    """``ldl_solve`` for 5 x 5 blocks: out (n, 5) = A^-1 rhs (n, 5); x (n, 5) scratch."""
+    nb = _NB5
+    tmp = np.empty(nb)
+    for i in range(n):
+        for a in range(nb):
+            x[i, a] = rhs[perm[i], a]
+    for i in range(n):
+        for q in range(Lp[i], Lp[i + 1]):
+            r = Li[q]
+            for a in range(nb):
+                v = 0.0
+                for b in range(nb):
+                    v += Lx[q, a, b] * x[i, b]
+                x[r, a] -= v
+    for i in range(n):
+        for a in range(nb):
+            tmp[a] = x[i, a]
+        for a in range(nb):
+            v = 0.0
+            for b in range(nb):
+                v += Dinv[i, a, b] * tmp[b]
+            x[i, a] = v
+    for i in range(n - 1, -1, -1):
+        for q in range(Lp[i], Lp[i + 1]):
+            r = Li[q]
+            for a in range(nb):
+                v = 0.0
+                for b in range(nb):
+                    v += Lx[q, b, a] * x[r, b]
+                x[i, a] -= v
+    for i in range(n):
+        for a in range(nb):
+            out[perm[i], a] = x[i, a]

@@ -43,6 +43,23 @@ How (one iteration)
      because ``L`` gives a segment the stiffness ``f / l`` along itself too. The corrections stop
      for the rest of a solve that makes no progress with them (``stall_iterations``).
 
+   - ``"full"`` (behind a guide ring, ``ring_preconditioner``): the Hessian of the energy in
+     the positions and the materials together, 5 x 5 blocks per pair of crossings in the same
+     pattern and order (``full_values``, ``ldl_numeric5``), solved with the right-hand side
+     ``(F, 0)`` (the material equations hold after every sweep): its Schur complement on the
+     positions is the exact stiffness ``-dF/dC`` of the map with the materials swept, so the
+     update is a Newton step on the positions. ``"block"`` leaves out the yarns' axial
+     stiffness, none where a yarn slides (its tension is set by the top tension and the
+     friction bounds), but ``EA / q`` in series with the friction creep stiffness ``g /
+     eps_f`` where it sticks: behind a ring the new crossings form a few millimetres below
+     the ring points, at their friction centres, with large bounds (the yarns bend sharply
+     there), and hold their yarns along themselves at ~1e4 N/m against a geometric stiffness
+     of ~1e2 N/m, where the yarns cross at low angles; the block iteration's linearised map
+     has a spectral radius of 15 there (``docs/decisions-ring14.md``). Factorised as the
+     block one, anew where a segment newly jams (one that left the jam keeps its k_jam in
+     K: stiffer than the map there, the update falls short rather than beyond), 4-5x its
+     cost; a step without a new lowest residual in ``ring_stall`` iterations is Newton's.
+
    ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
    sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
    with friction 0.5 and jammed crossings, the first rows of a run) the step is not converged
@@ -86,6 +103,10 @@ except ImportError:     # pragma: no cover - qdldl is a dependency
 
 #: steps solved by the Newton fallback since import (``solve_zone``), for benchmarks and tests
 FALLBACKS = [0]
+#: relaxation iterations of every step ``solve_zone`` gave the relaxation since import
+#: (converged or not), for benchmarks: the median a step and, with FALLBACKS, the share of
+#: steps Newton solved
+ITERATIONS: list[int] = []
 
 
 @dataclass(frozen=True)
@@ -151,8 +172,9 @@ class RelaxSettings:
     #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
     floor: float = 1e-3
     #: the position update's preconditioner: "block", the lattice's geometric stiffness with
-    #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself), or
-    #: "scalar", the force-density Laplacian shared by x, y, z with ``smoothing`` block-Jacobi
+    #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself),
+    #: "full", the Hessian in the positions and materials (5 x 5 blocks), or "scalar", the
+    #: force-density Laplacian shared by x, y, z with ``smoothing`` block-Jacobi
     #: corrections (``docs/decisions.md``: 10-17 iterations of one material sweep on case A
     #: steps with "block", 33-44 of three with "scalar")
     preconditioner: str = "block"
@@ -177,6 +199,15 @@ class RelaxSettings:
     #: (the whole update is scaled down to it: the stiffness holds for moves small against
     #: the segments)
     block_cap: float = 2.0
+    #: the preconditioner of a zone behind a guide ring (``solve_zone``): "full", the Hessian
+    #: in the positions and the materials (``docs/decisions-ring14.md``: the block one leaves
+    #: out the axial stiffness of yarns that stick at the new crossings below the ring, and
+    #: stalls on 80-98 % of case B's steps)
+    ring_preconditioner: str = "full"
+    #: ``block_stall`` of the full preconditioner: a step it converges on takes a median 8
+    #: iterations (case B); one without a new lowest residual in 10 goes to Newton sooner
+    #: (case B end to end: CPU 132 s against 180 s with 20, fallbacks 13.8 % against 12.5 %)
+    ring_stall: int = 10
 
 
 @dataclass
@@ -282,15 +313,17 @@ class _Laplacian:
 
 
 class _BlockStiffness:
-    """The block preconditioner K (``_kernels.relax.block_values``) of a lattice: its pattern of
-    3 x 3 blocks in a nested-dissection order of the band of crossings around the machine axis
-    (``band_dissection``: the order keeps the factor's fill per crossing nearly flat as the zone
-    grows), the symbolic analysis of its block LDL^T once per solve, the factorisation
-    (``ldl_numeric``) and solves (``ldl_solve``)."""
+    """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
+    ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
+    of the band of crossings around the machine axis (``band_dissection``: the order keeps the
+    factor's fill per crossing nearly flat as the zone grows), the symbolic analysis of its
+    block LDL^T once per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and
+    solves (``ldl_solve``, ``ldl_solve5``)."""
 
-    def __init__(self, lat: Lattice, pos):
+    def __init__(self, lat: Lattice, pos, nb=3):
         m = lat.m
         self.m = m
+        self.nb = nb
         r = np.hypot(pos[:, 0], pos[:, 1])
         u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
         perm = np.empty(m, dtype=np.int64)
@@ -316,30 +349,43 @@ class _BlockStiffness:
         self.Ap = np.zeros(m + 1, dtype=np.int64)
         np.add.at(self.Ap, col + 1, 1)
         self.Ap = np.cumsum(self.Ap)
-        self.vals = np.zeros((self.nslots, 3, 3))
-        self.Dg = np.empty((m, 3, 3))
+        self.vals = np.zeros((self.nslots, nb, nb))
+        self.Dg = np.empty((m, nb, nb))
         self.etree = np.empty(m, dtype=np.int64)
         self.Lnz = np.empty(m, dtype=np.int64)
         nnz = RK.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
                               self.etree)
         self.Lp = np.empty(m + 1, dtype=np.int64)
         self.Li = np.empty(max(nnz, 1), dtype=np.int64)
-        self.Lx = np.empty((max(nnz, 1), 3, 3))
-        self.Dinv = np.empty((m, 3, 3))
+        self.Lx = np.empty((max(nnz, 1), nb, nb))
+        self.Dinv = np.empty((m, nb, nb))
         self._marker = np.zeros(m, dtype=np.bool_)
         self._iw = np.empty((3, m), dtype=np.int64)
-        self._y = np.zeros((m, 3, 3))
-        self._D = np.empty((3, 3))
-        self._x = np.empty((m, 3))
+        self._y = np.zeros((m, nb, nb))
+        self._D = np.empty((nb, nb))
+        self._x = np.empty((m, nb))
+        self._rhs = np.zeros((m, nb))
+        self._out = np.empty((m, nb))
 
     def factor(self):
         """Factorise the current ``vals``; False if a pivot is not positive definite."""
-        return RK.ldl_numeric(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx,
-                              self.Dinv, self.etree, self.Lnz, self._marker, self._iw[0],
-                              self._iw[1], self._iw[2], self._y, self._D)
+        f = RK.ldl_numeric if self.nb == 3 else RK.ldl_numeric5
+        return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
+                 self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
+                 self._y, self._D)
 
     def solve(self, rhs, out):
-        RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out, self._x)
+        """out (m, 3) = the position part of K^-1 (rhs, 0): with the materials among the
+        unknowns (nb 5), their right-hand side is 0 (the material equations hold after every
+        sweep)."""
+        if self.nb == 3:
+            RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
+                         self._x)
+            return
+        self._rhs[:, :3] = rhs
+        RK.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,
+                       self._out, self._x)
+        out[:] = self._out[:, :3]
 
 
 class _Anderson:
@@ -536,12 +582,13 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         active[:] = dist < st.wall_contact
         behind = active & (dist < 0.0)
         pos[behind] -= dist[behind, None] * plane[behind, 3:]
-    block = st.preconditioner == "block"
-    if st.preconditioner not in ("block", "scalar"):
+    full = st.preconditioner == "full"
+    block = st.preconditioner in ("block", "full")
+    if st.preconditioner not in ("block", "scalar", "full"):
         raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
-                         "'block' or 'scalar'")
+                         "'block', 'full' or 'scalar'")
     lap = _Laplacian(lat) if m and not block else None
-    blk = _BlockStiffness(lat, pos) if m and block else None
+    blk = _BlockStiffness(lat, pos, 5 if full else 3) if m and block else None
     rhs = np.empty((m, 3))
     times["setup"] = time.perf_counter() - t_setup
     mixer = _Anderson(st.anderson_depth)
@@ -592,7 +639,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             smoothing = 0
             mixer.reset()
             best_it = it
-        if it >= st.max_iter or (block and it - best_it > st.block_stall):
+        if it >= st.max_iter or (block and it - best_it > (st.ring_stall if full else
+                                                             st.block_stall)):
             break
         it += 1
         if block:
@@ -601,7 +649,13 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             # width: where that set changed since the factorisation, K is factorised anew and
             # Anderson's history (of the old map) cleared
             jammed = (l_below < l_jam) & inner
-            if factored_jam is not None and not np.array_equal(jammed, factored_jam):
+            # with the full preconditioner only a segment jammed anew (a segment that left the
+            # jam keeps its k_jam in K, which then is stiffer there than the map: the update
+            # falls short rather than beyond)
+            changed_jam = (factored_jam is not None and
+                           ((jammed & ~factored_jam).any() if full else
+                            not np.array_equal(jammed, factored_jam)))
+            if changed_jam:
                 due = True
                 mixer.reset()
         else:
@@ -612,6 +666,19 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 factored_jam = jammed
                 reg = st.block_reg
                 while True:
+                    if full:
+                        # a pivot lost (a material whose yarn slides freely on both sides
+                        # has only kappa0): the isotropic share of the positions raised, up
+                        # to 1e6 times; beyond that the step is not converged (Newton's)
+                        RK.full_values(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
+                                       d_top, l_top, tension, f_top, s, s_fell, s_old, g, EA,
+                                       compression, eps_f, kappa0, l_jam, k_jam, st.floor, reg,
+                                       plane, active, blk.slot_diag, blk.slot_below,
+                                       blk.below_first, blk.vals, blk.Dg)
+                        if blk.factor() or reg > 1e6 * st.block_reg:
+                            break
+                        reg *= 10.0
+                        continue
                     RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
                                     tension, f_top, l_jam, k_jam, st.floor, reg, plane, active,
                                     blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
@@ -624,6 +691,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                                     lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
                 lap.factor()
             factored_active = active.copy()
+            if full and reg > 1e6 * st.block_reg:
+                break
         t3 = time.perf_counter()
         if block:
             RK.tangent_part(m, force, plane, active, rhs)
@@ -787,7 +856,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     to 1e-3) is Newton's (``frontal.solve_zone_inplace``), as is a step the relaxation does not
     converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
     the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``, counted in
-    ``FALLBACKS``). ``tol``: the balance tolerance (default ``relax_settings.tol``).
+    ``FALLBACKS``). Behind a guide ring the relaxation uses
+    ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
+    ``relax_settings.tol``).
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
@@ -799,6 +870,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                                           where=where, centre=centre)
     if tol is not None:
         rs = dataclasses.replace(rs, tol=float(tol))
+    if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
+        rs = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
     m = state.m
     centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
                        dtype=float)
@@ -809,6 +882,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
+    ITERATIONS.append(res.iterations)
     if not res.converged:
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
