@@ -61,6 +61,7 @@ case A, bent tube and bulge histories bit-identical, ``docs/decisions.md``).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -813,13 +814,21 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
     n = machine.n_per_group
     ny = machine.n_yarns
     ring = machine.has_ring
+    e = settings.energy
     ext_c = frontal.point_forces(st, bc, settings)
     points, offsets, tension, cid, slip, ext = [], [0], [], [], [], []
     for k in range(ny):
         side = 0 if k < n else 1
         chain = st.chain(k)
         pts = [bc.fell[k]] + [st.centerline_point(c, side, bc.h) for c in chain] + [bc.top[k]]
-        ten = [st.tension[c, side] for c in chain] + [f_top[k]]
+        # the top segment pulls with f_top along d / sqrt(|d|^2 + eps2 + eps2_top) (the smoothed
+        # length of the energy, ``EnergySettings.top_smoothing``): that is the tension written,
+        # so the highest crossing balances from the file also when it sits within a millimetre
+        # of its ring point (f_top less by eps2_top / (2 |d|^2), 2e-3 at 0.45 mm)
+        d = pts[-1] - pts[-2]
+        dd = float(d @ d)
+        f_written = f_top[k] * math.sqrt(dd / (dd + e.length_smoothing + e.top_smoothing2))
+        ten = [st.tension[c, side] for c in chain] + [f_written]
         ids = [-1] + [int(st.uid[c]) for c in chain] + [-1]
         sl = [0] + [int(st.slip[c, side] != 0) for c in chain] + [0]
         fx = [np.zeros(3)] + [ext_c[c, side] for c in chain] + [np.zeros(3)]
@@ -830,7 +839,7 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
             sl.append(0)
             fx.append(np.zeros(3))
             below, at, above = pts[-3], pts[-2], pts[-1]
-            fx[-2] = -(f_top[k] * _unit(below - at) + bc.f_spool * _unit(above - at))
+            fx[-2] = -(f_written * _unit(below - at) + bc.f_spool * _unit(above - at))
         points.extend(pts)
         tension.extend(ten)
         cid.extend(ids)
