@@ -62,3 +62,20 @@ def test_isotropic_remesh_of_a_coarse_box_keeps_its_corners():
     assert out.is_watertight and out.volume == pytest.approx(box.volume, rel=1e-6)
     for corner in box.vertices:
         assert np.linalg.norm(U - corner, axis=1).min() < 1e-9
+
+
+def test_the_remesher_import_warns_the_user_of_nothing():
+    """gpytoolbox imports deprecated scipy / numpy names; those DeprecationWarnings reached the
+    user as ``warning:`` lines of ``preform run``. A fresh process turning them into errors
+    remeshes without one."""
+    import subprocess
+    import sys
+
+    code = ("import trimesh\n"
+            "from preform.geometry.remesh import isotropic_remesh\n"
+            "m = trimesh.creation.icosphere(2)\n"
+            "print(len(isotropic_remesh(m.vertices, m.faces, 0.3)[1]))\n")
+    out = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert int(out.stdout.split()[-1]) > 100

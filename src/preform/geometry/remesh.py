@@ -169,7 +169,12 @@ def isotropic_remesh(vertices, faces, h, settings: RemeshSettings = RemeshSettin
     surface. vertices (nv, 3) float64 m; faces (nf, 3) int64 (closed, outward);
     h : float, m. Returns vertices (nv', 3) float64, faces (nf', 3) int64 (outward, like the input).
     """
-    import gpytoolbox
+    import warnings
+
+    with warnings.catch_warnings():
+        # gpytoolbox's own modules import deprecated scipy / numpy names; not the user's concern
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import gpytoolbox
 
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
