@@ -59,7 +59,9 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "preform.io.surface",
                         types.SimpleNamespace(write_surface=write_surface, PICTURES=(),
-                                              write_surface_pictures=write_surface_pictures))
+                                              write_surface_pictures=write_surface_pictures,
+                                              INPUT_VTU="surface_input.vtu",
+                                              write_input_mesh_fields=None))
     fields = object()
     written = write_results(small_result, fields, tmp_path)
     assert calls[0] == (fields, tmp_path, False)   # the data files, then the pictures

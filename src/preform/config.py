@@ -113,6 +113,9 @@ class OutputConfig:
     dir: Path                       # absolute path
     field_edge_length: float | None = None   # m; None: a few yarn widths
     snapshots: int = 20             # number of convergence-zone snapshots written
+    #: also write the fields on the mandrel's own (STL) triangles, surface_input.vtu
+    #: (``fields.fields_on_input``, area-weighted), for a next tool that needs its mesh
+    input_mesh_fields: bool = False
 
 
 @dataclass(frozen=True)
@@ -201,7 +204,7 @@ KEYS = {
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed", "solver"),
-    "output": ("dir", "field_edge_length", "snapshots"),
+    "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
 }
@@ -718,7 +721,15 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
         field_edge_length=sec.number("field_edge_length", "m", default=None, positive=True),
         snapshots=sec.integer("snapshots", "a non-negative integer", default=OutputConfig.snapshots,
                               minimum=0),
+        input_mesh_fields=_flag(sec, "input_mesh_fields", OutputConfig.input_mesh_fields),
     )
+
+
+def _flag(sec: _Section, key: str, default: bool) -> bool:
+    value = sec.raw(key, default)
+    if not isinstance(value, bool):
+        raise sec.error(key, value, "true or false")
+    return value
 
 
 # ----- echo ----------------------------------------------------------------------------------
@@ -776,7 +787,8 @@ def _dump_sections(config: Config) -> dict:
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed,
                   "solver": mo.solver},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
-                                            "snapshots": out.snapshots},
+                                            "snapshots": out.snapshots,
+                                            "input_mesh_fields": out.input_mesh_fields},
         "axial_yarn": {"width": config.axial_yarn.width, "thickness": config.axial_yarn.thickness,
                        "linear_density_tex": config.axial_yarn.linear_density_tex},
         "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,

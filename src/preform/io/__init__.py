@@ -115,6 +115,13 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
             from .surface import write_surface
 
             written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
+            from .surface import INPUT_VTU, write_input_mesh_fields
+
+            output = result.config.output
+            if output is not None and output.input_mesh_fields and result.mandrel is not None:
+                written.append(write_input_mesh_fields(fields, result.mandrel, out_dir))
+            else:   # not left over from an earlier run into this folder
+                (out_dir / INPUT_VTU).unlink(missing_ok=True)
         rtm = _write_rtm(result, fields, out_dir, written)
     except BaseException:
         worker.stop()

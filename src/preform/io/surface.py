@@ -23,6 +23,8 @@ import numpy as np
 from .atomic import atomic_path
 
 VTU = "surface.vtu"
+#: the fields on the mandrel's own triangles (``[output] input_mesh_fields``)
+INPUT_VTU = "surface_input.vtu"
 XDMF = "surface.xdmf"
 H5 = "surface.h5"
 PLOTS = "plots"
@@ -77,6 +79,20 @@ def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> li
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return written + (write_surface_pictures(fields, out_dir / PLOTS, title) if pictures else [])
+
+
+def write_input_mesh_fields(fields, mandrel, out_dir) -> Path:
+    """``surface_input.vtu``: the fields carried over to the mandrel's own triangles (the STL's,
+    after repair; ``fields.fields_on_input``, area-weighted), written atomically."""
+    import meshio
+
+    from ..fields import fields_on_input
+
+    path = Path(out_dir) / INPUT_VTU
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, surface_mesh(fields_on_input(fields, mandrel)), file_format="vtu",
+                     compression=None)
+    return path
 
 
 def write_surface_pictures(fields, plots_dir, title: str = "") -> list[Path]:
