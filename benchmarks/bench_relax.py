@@ -59,20 +59,12 @@ def _case_config(path, carriers, mu, solver):
 
 
 def _stepper(carriers, mu, steps, solver, case=None):
+    from simcase import advanced_stepper
     from test_relax import _config
-    from preform.reference import resolve_pose_lead
-    from preform.simulation import load_geometry, make_stepper
-    from preform.stepping import take_up_speed
 
     cfg = (_config(carriers, 0.25 if mu is None else mu, solver) if case is None
            else _case_config(case, carriers, mu, solver))
-    mandrel, cl = load_geometry(cfg)
-    cfg = resolve_pose_lead(cfg, mandrel, cl)
-    s = make_stepper(cfg, mandrel, cl)
-    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
-    for _ in range(steps):
-        s.advance(speed())
-    return s, speed
+    return advanced_stepper(cfg, steps)
 
 
 def run_end_to_end(config, out):
@@ -122,7 +114,7 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as tmp:
             run_end_to_end(args.run, args.out or tmp)
         return
-    from test_relax import _capture
+    from simcase import capture_step as _capture
     from preform.interaction import frontal, relax as R
 
     summary = {}

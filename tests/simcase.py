@@ -114,3 +114,47 @@ def case_b_like_config(folder, ring_friction):
                       initial_position=0.2, angular_speed=np.radians(18.0), take_up_speed=0.0263,
                       eccentricity=(0.02, 0.0), snapshots=0)
     return dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"))
+
+
+def advanced_stepper(cfg, steps):
+    """(stepper, take-up speed function) of ``cfg`` (its pose lead resolved) after ``steps``
+    steps."""
+    from preform.reference import resolve_pose_lead
+    from preform.simulation import load_geometry, make_stepper
+    from preform.stepping import take_up_speed
+
+    mandrel, cl = load_geometry(cfg)
+    cfg = resolve_pose_lead(cfg, mandrel, cl)
+    s = make_stepper(cfg, mandrel, cl)
+    return advance(s, cfg, steps)
+
+
+def advance(s, cfg, steps):
+    """Advance the stepper ``s`` of ``cfg`` by ``steps`` steps; (s, take-up speed function)."""
+    from preform.stepping import take_up_speed
+
+    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
+    for _ in range(steps):
+        s.advance(speed())
+    return s, speed
+
+
+def capture_step(s, speed):
+    """(state, boundary with wall planes, top tensions, friction centres) of the step the
+    interaction stepper ``s`` takes next, on copies: the problem ``InteractionZone.step`` poses
+    its solver (fell points anchored, crossings created, normals radial)."""
+    import copy
+
+    from preform._kernels import frontal as FK
+    from preform.interaction import frontal
+
+    t0, dt = s.clock.t, s.dt
+    pose_end = s.pose(s.clock.travel + speed() * dt)
+    z = copy.deepcopy(s.zone)
+    bc = z.boundary(t0 + dt, pose_end.to_machine(s.F))
+    st = z.state
+    st.material_fell[:] = frontal.fell_material(st, bc)
+    z._create_crossings(t0, t0 + dt, bc)
+    FK.radial_normals(st.m, st.pos, st.normal)
+    z.pose_end = pose_end
+    return st, z._with_wall(bc), z.f_top.copy(), frontal.friction_centres(st).copy()

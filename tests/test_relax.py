@@ -10,7 +10,6 @@ of a case A run (``simulation.make_stepper``) after some steps.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from preform.reference import resolve_pose_lead
 from preform.simulation import load_geometry, make_stepper
 from preform.stepping import take_up_speed
 import naive_relax as naive
+from simcase import advanced_stepper, capture_step
 from preform._kernels import frontal as FK
 from preform._kernels import relax as RK
 from preform.interaction import frontal, relax as R
@@ -44,14 +44,7 @@ def _config(carriers, mu, solver="newton"):
 
 
 def _stepper(carriers, mu, steps):
-    cfg = _config(carriers, mu)
-    mandrel, cl = load_geometry(cfg)
-    cfg = resolve_pose_lead(cfg, mandrel, cl)
-    s = make_stepper(cfg, mandrel, cl)
-    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
-    for _ in range(steps):
-        s.advance(speed())
-    return s, speed
+    return advanced_stepper(_config(carriers, mu), steps)
 
 
 @pytest.fixture(scope="module")
@@ -65,22 +58,9 @@ def captured():
         key = (carriers, mu, steps)
         if key not in runs:
             runs[key] = _stepper(carriers, mu, steps)
-        return _capture(*runs[key])
+        return capture_step(*runs[key])
 
     return capture
-
-
-def _capture(s, speed):
-    t0, dt = s.clock.t, s.dt
-    pose_end = s.pose(s.clock.travel + speed() * dt)
-    z = copy.deepcopy(s.zone)
-    bc = z.boundary(t0 + dt, pose_end.to_machine(s.F))
-    st = z.state
-    st.material_fell[:] = frontal.fell_material(st, bc)
-    z._create_crossings(t0, t0 + dt, bc)
-    FK.radial_normals(st.m, st.pos, st.normal)
-    z.pose_end = pose_end
-    return st, z._with_wall(bc), z.f_top.copy(), frontal.friction_centres(st).copy()
 
 
 def _newton(st, bc, f_top, s_old, tol):

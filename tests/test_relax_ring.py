@@ -11,20 +11,15 @@ says how), here of the case-B-like mandrel (``simcase.case_b_like_config``).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 
 import numpy as np
 import pytest
 
-from preform._kernels import frontal as FK
 from preform._kernels import relax as RK
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
-from preform.reference import resolve_pose_lead
-from preform.simulation import load_geometry, make_stepper
-from preform.stepping import take_up_speed
-from simcase import case_b_like_config
+from simcase import advanced_stepper, capture_step, case_b_like_config
 
 E = DEFAULT.energy
 EPS_F = DEFAULT.frontal.friction_creep
@@ -32,27 +27,13 @@ EPS_F = DEFAULT.frontal.friction_creep
 
 def _stepper(folder, mu, steps):
     cfg = case_b_like_config(folder, 0.17)
-    cfg = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=mu))
-    mandrel, cl = load_geometry(cfg)
-    cfg = resolve_pose_lead(cfg, mandrel, cl)
-    s = make_stepper(cfg, mandrel, cl)
-    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
-    for _ in range(steps):
-        s.advance(speed())
-    return s, speed
+    return advanced_stepper(dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=mu)),
+                            steps)
 
 
 def _capture(s, speed):
-    t0, dt = s.clock.t, s.dt
-    pose_end = s.pose(s.clock.travel + speed() * dt)
-    z = copy.deepcopy(s.zone)
-    bc = z.boundary(t0 + dt, pose_end.to_machine(s.F))
-    st = z.state
-    st.material_fell[:] = frontal.fell_material(st, bc)
-    z._create_crossings(t0, t0 + dt, bc)
-    FK.radial_normals(st.m, st.pos, st.normal)
-    z.pose_end = pose_end
-    return st, z._with_wall(bc), frontal.friction_centres(st).copy()
+    st, bc, _, centres = capture_step(s, speed)
+    return st, bc, centres
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,6 @@ direction there) and keep a start-dependent iterate (``docs/decisions.md``).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import tempfile
 from pathlib import Path
@@ -30,9 +29,9 @@ from preform.interaction.settings import DEFAULT
 from preform.machine import Machine
 from preform.reference import resolve_pose_lead
 from preform.simulation import load_geometry, make_stepper
-from preform.stepping import Stepper, take_up_speed
+from preform.stepping import Stepper
 from preform._kernels import frontal as FK
-from simcase import case_b_like_config
+from simcase import advance, capture_step, case_b_like_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,21 +56,6 @@ def _case_a(carriers, mu):
         output=dataclasses.replace(cfg.output, snapshots=0))
 
 
-def _capture(s, speed):
-    """(state, boundary with wall planes, friction centres) of the step the stepper ``s`` takes
-    next, on copies: fell points anchored, crossings created, normals radial."""
-    t0, dt = s.clock.t, s.dt
-    pose_end = s.pose(s.clock.travel + speed() * dt)
-    z = copy.deepcopy(s.zone)
-    bc = z.boundary(t0 + dt, pose_end.to_machine(s.F))
-    st = z.state
-    st.material_fell[:] = frontal.fell_material(st, bc)
-    z._create_crossings(t0, t0 + dt, bc)
-    FK.radial_normals(st.m, st.pos, st.normal)
-    z.pose_end = pose_end
-    return st, z._with_wall(bc), frontal.friction_centres(st).copy()
-
-
 def _captured_step(name):
     """(state, boundary, friction centres) of the step after ``name``'s run: (carriers,
     friction, steps) of case A, or "ring", 60 steps of the case-B-like run (mu_r 0.2)."""
@@ -88,10 +72,8 @@ def _captured_step(name):
         mandrel, cl = load_geometry(cfg)
         cfg = resolve_pose_lead(cfg, mandrel, cl)
         s = make_stepper(cfg, mandrel, cl)
-    speed = lambda: take_up_speed(cfg.process.take_up_speed, s.braided)  # noqa: E731
-    for _ in range(steps):
-        s.advance(speed())
-    return _capture(s, speed)
+    st, bc, _, centres = capture_step(*advance(s, cfg, steps))
+    return st, bc, centres
 
 
 @pytest.fixture(scope="module")
