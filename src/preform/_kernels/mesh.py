@@ -662,6 +662,21 @@ def long_side_faces(V, F, h, out):
                 break
 
 
+@njit(cache=True, inline="always")
+def face_cross(V, F, f):
+    """``(p1 - p0) x (p2 - p0)`` of face f, in the operations of ``np.cross``."""
+    i0 = F[f, 0]
+    i1 = F[f, 1]
+    i2 = F[f, 2]
+    ux = V[i1, 0] - V[i0, 0]
+    uy = V[i1, 1] - V[i0, 1]
+    uz = V[i1, 2] - V[i0, 2]
+    wx = V[i2, 0] - V[i0, 0]
+    wy = V[i2, 1] - V[i0, 1]
+    wz = V[i2, 2] - V[i0, 2]
+    return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+
+
 @njit(cache=True)
 def triangle_moments(V, F, area, centroid, second):
     """Area, centroid and second moment of every face of F (m, 3) on V (n, 3), into area (m,),
@@ -673,15 +688,7 @@ def triangle_moments(V, F, area, centroid, second):
         i0 = F[f, 0]
         i1 = F[f, 1]
         i2 = F[f, 2]
-        ux = V[i1, 0] - V[i0, 0]
-        uy = V[i1, 1] - V[i0, 1]
-        uz = V[i1, 2] - V[i0, 2]
-        wx = V[i2, 0] - V[i0, 0]
-        wy = V[i2, 1] - V[i0, 1]
-        wz = V[i2, 2] - V[i0, 2]
-        cx = uy * wz - uz * wy
-        cy = uz * wx - ux * wz
-        cz = ux * wy - uy * wx
+        cx, cy, cz = face_cross(V, F, f)
         a = 0.5 * np.sqrt((cx * cx + cy * cy) + cz * cz)
         area[f] = a
         w = a / 12.0
@@ -728,18 +735,7 @@ def face_cross_normals(V, F, cross, normals):
     ``c / |c|`` (``c`` itself where ``|c| = 0``) into normals (m, 3), in the operations of
     ``np.cross`` and ``np.linalg.norm`` (bit-identical to ``c / np.where(a > 0, a, 1)``)."""
     for f in range(F.shape[0]):
-        i0 = F[f, 0]
-        i1 = F[f, 1]
-        i2 = F[f, 2]
-        ux = V[i1, 0] - V[i0, 0]
-        uy = V[i1, 1] - V[i0, 1]
-        uz = V[i1, 2] - V[i0, 2]
-        wx = V[i2, 0] - V[i0, 0]
-        wy = V[i2, 1] - V[i0, 1]
-        wz = V[i2, 2] - V[i0, 2]
-        cx = uy * wz - uz * wy
-        cy = uz * wx - ux * wz
-        cz = ux * wy - uy * wx
+        cx, cy, cz = face_cross(V, F, f)
         cross[f, 0] = cx
         cross[f, 1] = cy
         cross[f, 2] = cz
