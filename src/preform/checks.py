@@ -97,13 +97,19 @@ INSIDE_SAMPLES = 25
 
 def _check_centerline_inside(config, mandrel, centerline) -> None:
     """The centerline must run inside the mandrel where it is braided (the yarns are tied around it)."""
-    contains = getattr(getattr(mandrel, "mesh", None), "contains", None)
-    if contains is None:    # stand-in geometry without a mesh
+    vertices, faces = getattr(mandrel, "vertices", None), getattr(mandrel, "faces", None)
+    if vertices is None or faces is None:    # stand-in geometry without a mesh
         return
+    from ._kernels.mesh import winding_numbers
+
     end = min(config.process.initial_position + config.process.braid_length, centerline.length)
     s = np.linspace(0.02 * end, end, INSIDE_SAMPLES)
-    points = centerline.frames_at(s)[0]
-    inside = np.asarray(contains(points), dtype=bool)
+    points = np.ascontiguousarray(centerline.frames_at(s)[0], dtype=np.float64)
+    # inside where the winding number of the (closed, outward) surface is 1, outside 0
+    w = np.empty(len(points))
+    winding_numbers(np.ascontiguousarray(vertices, dtype=np.float64),
+                    np.ascontiguousarray(faces, dtype=np.int64), points, w)
+    inside = w > 0.5
     if not np.all(inside):
         bad = s[~inside][0]
         p = points[~inside][0]

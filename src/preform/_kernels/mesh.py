@@ -823,3 +823,38 @@ def grid_neighbours_exist(P, cell):
             slot = (slot + 1) & (size - 1)
         table[slot] = i
     return False
+
+
+@njit(cache=True)
+def winding_numbers(V, F, P, out):
+    """The generalised winding number of the closed surface (V, F) at each point of P (k, 3), into
+    out (k,): ``w(p) = sum_f Omega_f(p) / (4 pi)``, with the solid angle of triangle (a, b, c)
+    seen from p by Van Oosterom and Strackee (1983), ``tan(Omega / 2) = a . (b x c) / (|a||b||c|
+    + (a . b)|c| + (a . c)|b| + (b . c)|a|)`` on the corners relative to p. 1 inside an outward
+    surface, 0 outside, 1/2 on it; exact for any triangulation (no rays, no closest points)."""
+    for k in range(P.shape[0]):
+        px = P[k, 0]
+        py = P[k, 1]
+        pz = P[k, 2]
+        total = 0.0
+        for f in range(F.shape[0]):
+            i0 = F[f, 0]
+            i1 = F[f, 1]
+            i2 = F[f, 2]
+            ax = V[i0, 0] - px
+            ay = V[i0, 1] - py
+            az = V[i0, 2] - pz
+            bx = V[i1, 0] - px
+            by = V[i1, 1] - py
+            bz = V[i1, 2] - pz
+            cx = V[i2, 0] - px
+            cy = V[i2, 1] - py
+            cz = V[i2, 2] - pz
+            la = np.sqrt(ax * ax + ay * ay + az * az)
+            lb = np.sqrt(bx * bx + by * by + bz * bz)
+            lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+            det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+            den = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc
+                   + (ax * cx + ay * cy + az * cz) * lb + (bx * cx + by * cy + bz * cz) * la)
+            total += 2.0 * np.arctan2(det, den)
+        out[k] = total / (4.0 * np.pi)
