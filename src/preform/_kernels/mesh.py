@@ -628,38 +628,37 @@ def corners_by_vertex(F, n_vertices, vert_ptr, vert_faces, vert_corner):
             fill[v] += 1
 
 
+@njit(cache=True, inline="always")
+def _side_longer(V, F, f, h):
+    """Whether face f has a side ``|p_k - p_(k-1)|`` longer than h, the norm summed as
+    np.linalg.norm does, ``(dx^2 + dy^2) + dz^2``."""
+    for k in range(3):
+        a = F[f, k]
+        b = F[f, (k + 2) % 3]
+        dx = V[a, 0] - V[b, 0]
+        dy = V[a, 1] - V[b, 1]
+        dz = V[a, 2] - V[b, 2]
+        if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
+            return True
+    return False
+
+
 @njit(cache=True)
 def any_side_longer(V, F, h):
-    """True when some face of F has a side ``|p_k - p_(k-1)|`` longer than h (the norm summed as
-    np.linalg.norm), the test ``geometry.remesh.subdivide_long_edges`` starts with."""
+    """True when some face of F has a side longer than h (``_side_longer``), the test
+    ``geometry.remesh.subdivide_long_edges`` starts with."""
     for f in range(F.shape[0]):
-        for k in range(3):
-            a = F[f, k]
-            b = F[f, (k + 2) % 3]
-            dx = V[a, 0] - V[b, 0]
-            dy = V[a, 1] - V[b, 1]
-            dz = V[a, 2] - V[b, 2]
-            if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
-                return True
+        if _side_longer(V, F, f, h):
+            return True
     return False
 
 
 @njit(cache=True)
 def long_side_faces(V, F, h, out):
-    """Faces of F with a side ``|p_k - p_(k-1)|`` longer than h into out (m,) bool: the mask
-    ``(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)`` with the norm
-    summed as np.linalg.norm does, ``(dx^2 + dy^2) + dz^2``."""
+    """Faces of F with a side longer than h (``_side_longer``) into out (m,) bool: the mask
+    ``(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) > h).any(axis=1)``."""
     for f in range(F.shape[0]):
-        out[f] = False
-        for k in range(3):
-            a = F[f, k]
-            b = F[f, (k + 2) % 3]
-            dx = V[a, 0] - V[b, 0]
-            dy = V[a, 1] - V[b, 1]
-            dz = V[a, 2] - V[b, 2]
-            if np.sqrt((dx * dx + dy * dy) + dz * dz) > h:
-                out[f] = True
-                break
+        out[f] = _side_longer(V, F, f, h)
 
 
 @njit(cache=True, inline="always")
