@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .mesh import hash_slot
+
 #: a vertex with more incident half-edges than this sorts them with a merge sort, not insertion
 INSERTION_MAX = 32
 
@@ -133,11 +135,7 @@ def first_of_each_face(F, keep):
         sorted_f[f, 0] = a
         sorted_f[f, 1] = b
         sorted_f[f, 2] = c
-        h = np.uint64(1469598103934665603)
-        for x in (a, b, c):
-            h = (h ^ np.uint64(x)) * np.uint64(1099511628211)
-            h ^= h >> np.uint64(29)
-        slot = np.int64(h & np.uint64(size - 1))
+        slot = hash_slot(a, b, c, size)
         while True:
             g = table[slot]
             if g < 0:

@@ -483,6 +483,17 @@ def edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offs
 
 
 # ------------------------------------------------------------------------------ exact welding
+@njit(cache=True, inline="always")
+def hash_slot(x, y, z, size):
+    """Slot in an open-addressing table of ``size`` (a power of two) for three 64-bit words:
+    FNV-1a style mixing, ``h = (h ^ w) * 1099511628211; h ^= h >> 29`` per word."""
+    h = np.uint64(1469598103934665603)
+    for w in (np.uint64(x), np.uint64(y), np.uint64(z)):
+        h = (h ^ w) * np.uint64(1099511628211)
+        h ^= h >> np.uint64(29)
+    return np.int64(h & np.uint64(size - 1))
+
+
 @njit(cache=True)
 def weld_exact(V, inverse):
     """Distinct rows of V (n, 3) float64 in order of first appearance: writes the index of each
@@ -501,11 +512,7 @@ def weld_exact(V, inverse):
     for i in range(n):
         for c in range(3):
             bits[c] = V[i, c] + 0.0            # -0.0 -> 0.0
-        h = np.uint64(1469598103934665603)
-        for c in range(3):
-            h = (h ^ ibits[c]) * np.uint64(1099511628211)
-            h ^= h >> np.uint64(29)
-        slot = np.int64(h & np.uint64(size - 1))
+        slot = hash_slot(ibits[0], ibits[1], ibits[2], size)
         while True:
             j = table[slot]
             if j < 0:
@@ -800,11 +807,7 @@ def grid_neighbours_exist(P, cell):
                     qx = cube[i, 0] + dx
                     qy = cube[i, 1] + dy
                     qz = cube[i, 2] + dz
-                    h = np.uint64(1469598103934665603)
-                    for q in (qx, qy, qz):
-                        h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
-                        h ^= h >> np.uint64(29)
-                    slot = np.int64(h & np.uint64(size - 1))
+                    slot = hash_slot(qx, qy, qz, size)
                     while True:
                         j = table[slot]
                         if j < 0:
@@ -813,11 +816,7 @@ def grid_neighbours_exist(P, cell):
                             return True
                         slot = (slot + 1) & (size - 1)
         # then enter the point's own cube (a second point in it is found by the lookups above)
-        h = np.uint64(1469598103934665603)
-        for q in (cube[i, 0], cube[i, 1], cube[i, 2]):
-            h = (h ^ np.uint64(q)) * np.uint64(1099511628211)
-            h ^= h >> np.uint64(29)
-        slot = np.int64(h & np.uint64(size - 1))
+        slot = hash_slot(cube[i, 0], cube[i, 1], cube[i, 2], size)
         while table[slot] >= 0:
             slot = (slot + 1) & (size - 1)
         table[slot] = i
