@@ -450,3 +450,22 @@ def test_segment_hits_match_the_multiple_hit_reference(bent):
     # 1e-9 m: both recompute the hit on the triangle's plane in float64
     assert np.allclose(dist[hit], ref[hit], rtol=0, atol=1e-9)
     assert np.allclose(point[hit], starts[hit] + dist[hit, None] * u[hit], atol=1e-12)
+
+
+def test_embree_scene_is_trimeshs_wrapper(bent):
+    """``EmbreeScene`` (built from the arrays, no trimesh) has trimesh's embree wrapper's origin and
+    scale bit for bit and returns the same first faces for the same float32 rays."""
+    pytest.importorskip("embreex")
+    ours = bent._embree
+    theirs = bent.mesh.ray._scene
+    np.testing.assert_array_equal(ours.origin, theirs.origin)
+    assert ours.scale == theirs.scale
+    rng = np.random.default_rng(11)
+    lo, hi = bent.bounds
+    origins = ((rng.uniform(lo - 0.05, hi + 0.05, (500, 3)) - ours.origin) * ours.scale).astype(np.float32)
+    aim = (bent.vertices[rng.integers(len(bent.vertices), size=500)] - ours.origin) * ours.scale
+    dirs = aim - origins + rng.normal(scale=5.0, size=(500, 3))      # towards the mandrel, or past it
+    dirs = (dirs / np.linalg.norm(dirs, axis=1)[:, None]).astype(np.float32)
+    got = np.asarray(ours.scene.run(origins, dirs))
+    np.testing.assert_array_equal(got, np.asarray(theirs.scene.run(origins, dirs)))
+    assert 100 < (got >= 0).sum() < 500               # hits and misses

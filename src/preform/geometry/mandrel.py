@@ -20,6 +20,29 @@ from ..tolerances import tol
 UNITS = {"m": 1.0, "mm": 1e-3}
 
 
+class EmbreeScene:
+    """The triangles in an embree scene, in float32 (embree's precision), shifted by ``origin``
+    (the vertices' low corner) and scaled by ``scale = 100 / d`` (d the diagonal of the bounding
+    box of the vertices the faces use) to a box of diagonal 100: trimesh's embree wrapper with
+    its ``scale_to_box``, built here from the arrays so that the ray queries of every step do
+    not load trimesh. ``scene.run(origins, directions, dists=tfar)`` takes scaled float32 rays
+    and returns the first face hit (-1 for none)."""
+
+    def __init__(self, vertices, faces, rtcore_scene, triangle_mesh):
+        vertices = np.array(vertices, dtype=np.float64)
+        faces = np.asarray(faces)
+        used = np.zeros(len(vertices), dtype=bool)
+        used[faces.reshape(-1)] = True
+        referenced = vertices[used]
+        diagonal = float((np.ptp(np.array([referenced.min(axis=0), referenced.max(axis=0)]),
+                                 axis=0) ** 2).sum() ** 0.5) if len(referenced) else 0.0
+        self.origin = vertices.min(axis=0)
+        self.scale = 100.0 / (diagonal if diagonal >= 1e-13 else 1.0)
+        self.scene = rtcore_scene.EmbreeScene()
+        triangle_mesh(scene=self.scene, vertices=((vertices - self.origin) * self.scale).astype(np.float32),
+                      indices=faces.astype(np.int32))
+
+
 @dataclass(frozen=True)
 class Mandrel:
     """A watertight mandrel mesh, mandrel frame, SI.
@@ -49,6 +72,13 @@ class Mandrel:
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
     @cached_property
+    def sections(self):
+        """The faces indexed for plane sections (``centerline.SectionIndex``), without trimesh."""
+        from .centerline import SectionIndex
+
+        return SectionIndex(self.vertices, self.faces)
+
+    @cached_property
     def bounds(self) -> np.ndarray:
         return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
 
@@ -60,10 +90,14 @@ class Mandrel:
 
     @cached_property
     def _embree(self):
-        """trimesh's embree scene wrapper of the mesh (its origin and scale), or None without
-        embreex; kept here, as trimesh checks its cache's mesh hash on every access."""
-        scene = getattr(self.mesh.ray, "_scene", None)
-        return scene if scene is not None and hasattr(scene, "scene") else None
+        """The mandrel's embree scene (``EmbreeScene``), or None without embreex (then the ray
+        queries go through trimesh's own ray tracer)."""
+        try:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+        except ImportError:
+            return None
+        return EmbreeScene(self.vertices, self.faces, rtcore_scene, TriangleMesh)
 
     def intersect_segments(self, starts, ends):
         """First hit of each segment start -> end with the mandrel.

@@ -6,6 +6,9 @@ centerline's own frame ``(N, B)`` at the face's section, so the map is the same 
 the part. Three panels: braid angle, cover factor and thickness, each coloured over the braided
 faces only (faces no yarn reached are grey, so the colour range is that of the braid). One
 picture shows the whole surface, all sides at once, which no 3D view does.
+
+matplotlib is imported by the functions that draw, not with the module: ``write_results`` reads
+:data:`MAP` before it forks the picture worker, which should not wait for matplotlib.
 """
 
 from __future__ import annotations
@@ -13,9 +16,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import to_rgba
-from matplotlib.figure import Figure
 
 from .atomic import atomic_path
 
@@ -129,7 +129,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
     as ``fig.colour_ranges[k]`` ((lo, hi) in the shown unit, None where nothing is coloured).
     """
     from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import LogNorm, Normalize
+    from matplotlib.colors import LogNorm, Normalize, to_rgba
+    from matplotlib.figure import Figure
 
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
@@ -186,6 +187,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
 
 def write_surface_map(fields, centerline, path, title: str, panels=PANELS) -> Path:
     """Write ``surface_map.png`` (or another map of ``panels``) atomically; return its path."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     fig = surface_map_figure(fields, centerline, title, panels)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
