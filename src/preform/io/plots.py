@@ -10,8 +10,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from .atomic import atomic_path
 
@@ -26,7 +24,17 @@ DPI = 150
 MAX_POINTS_PER_YARN = 2000
 
 
+def _figure(**kwargs):
+    """A matplotlib Figure (matplotlib imported here, not with the module: the picture worker
+    renders with VTK and needs only this module's labels)."""
+    from matplotlib.figure import Figure
+
+    return Figure(**kwargs)
+
+
 def _save(fig: Figure, path) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI)
@@ -91,7 +99,7 @@ def _steady_mark(ax, steady):
 def braid_angle_figure(result, refs=None, steady=None) -> Figure:
     """Warp and weft braid angle (deg) against braided length (m), with Ko's angle (``refs``, a
     :class:`preform.reference.References`) and the start of steady state (``steady``)."""
-    fig = Figure(figsize=HISTORY_SIZE)
+    fig = _figure(figsize=HISTORY_SIZE)
     fig.subplots_adjust(**HISTORY_MARGINS)
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
@@ -124,7 +132,7 @@ def _finish(ax, result, length, columns, reference, steady, ylabel, title):
 def convergence_length_figure(result, refs=None, steady=None) -> Figure:
     """Mean convergence length (m) with its min-max band over yarns, against braided length (m),
     with the kinematic steady value H_inf (``refs``) and the start of steady state."""
-    fig = Figure(figsize=HISTORY_SIZE)
+    fig = _figure(figsize=HISTORY_SIZE)
     fig.subplots_adjust(**HISTORY_MARGINS)
     ax = fig.add_subplot()
     length = _column(result, "braided_length_m")
@@ -172,7 +180,7 @@ def yarns_figure(result) -> Figure:
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
     yarns = result.yarns
-    fig = Figure(figsize=(6.4, 6.4), layout="constrained")
+    fig = _figure(figsize=(6.4, 6.4), layout="constrained")
     ax = fig.add_subplot(projection="3d")
     points = np.asarray(yarns.points, dtype=np.float64).reshape(-1, 3)
     drawn = False
