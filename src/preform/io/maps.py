@@ -142,7 +142,7 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
     extent = (float(s_all.min()), float(s_all.max()), -180.0, 180.0)
     grey = np.array(to_rgba(UNREACHED))
     fig.face_pixels, fig.shown, fig.colour_ranges = [], [], []
-    axes = []
+    axes, rasters = [], {}
     for k, ((name, label, scale), (rect, bar)) in enumerate(zip(panels, _panel_rects(n))):
         ax = fig.add_axes(rect, sharex=axes[0] if axes else None)
         axes.append(ax)
@@ -150,8 +150,10 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
         if name == "braid_angle_deg" and "layer2_braid_angle_deg" in data:
             label = "braid angle of layer 1 (deg)"     # the stack's totals in the other panels
-        pixels = face_raster(polys, extent, (max(1, round(rect[3] * PANEL_IN * n * DPI)),
-                                             max(1, round(rect[2] * WIDTH_IN * DPI))))
+        shape = (max(1, round(rect[3] * PANEL_IN * n * DPI)), max(1, round(rect[2] * WIDTH_IN * DPI)))
+        if shape not in rasters:                  # panels of one size share one raster
+            rasters[shape] = face_raster(polys, extent, shape)
+        pixels = rasters[shape]
         rgba = np.zeros((*pixels.shape, 4))                 # transparent where no face lies
         on = pixels >= 0
         rgba[on] = grey
