@@ -25,6 +25,8 @@ MAX_POINTS_PER_YARN = 1000
 #: multisampling of the render window: none. With 4 samples Mesa's software rasteriser (llvmpipe,
 #: the usual off-screen EGL) took 1.5 s for this frame of 3 x 576 k line points, 0.6 s without
 MULTI_SAMPLES = 0
+#: a view's half extents are its content's times this (a margin around the part)
+_VIEW_MARGIN = 1.08
 
 
 def view_axes(points):
@@ -34,9 +36,9 @@ def view_axes(points):
     return centre, vt[0], vt[1], vt[2]
 
 
-def _yarn_lines(yarns, group):
-    import pyvista as pv
-
+def _yarn_polylines(yarns, group):
+    """The yarns of ``group`` as point blocks (each (k, 3), every ``stride``-th point and the
+    last, at most ``MAX_POINTS_PER_YARN``), one per yarn with two points or more."""
     blocks = []
     for k in np.flatnonzero(np.asarray(yarns.group) == group):
         yarn = yarns.yarn(k)
@@ -44,6 +46,13 @@ def _yarn_lines(yarns, group):
             continue
         stride = max(1, int(np.ceil(len(yarn) / MAX_POINTS_PER_YARN)))
         blocks.append(np.vstack([yarn[::stride], yarn[-1:]]))
+    return blocks
+
+
+def _lines(blocks):
+    """One PolyData of polylines (each block a polyline), or None for no block."""
+    import pyvista as pv
+
     if not blocks:
         return None
     points = np.vstack(blocks)
@@ -51,6 +60,23 @@ def _yarn_lines(yarns, group):
     starts = np.cumsum([0, *sizes[:-1]])
     lines = np.concatenate([np.concatenate([[n], np.arange(s, s + n)]) for s, n in zip(starts, sizes)])
     return pv.PolyData(points, lines=lines)
+
+
+def _clipped(blocks, centre, right, up, half_right, half_up):
+    """The blocks cut to the runs of points inside the box ``|(p - centre) . right| <= half_right,
+    |(p - centre) . up| <= half_up`` widened on each side by the longest segment: a segment that
+    crosses the box then has both end points in the widened box, so every segment a view of that
+    box shows is kept whole, and the segments it cannot show are not drawn."""
+    out = []
+    for b in blocks:
+        rel = b - centre
+        reach = float(np.max(np.linalg.norm(np.diff(b, axis=0), axis=1)))
+        keep = (np.abs(rel @ right) <= half_right + reach) & (np.abs(rel @ up) <= half_up + reach)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(np.int8), [0]])))
+        for a, z in zip(edges[::2], edges[1::2]):
+            if z - a >= 2:
+                out.append(b[a:z])
+    return out
 
 
 def _close_up(result, laid, centre, axis, across, third):
@@ -98,7 +124,7 @@ def _camera(plotter, centre, view, up, half_width, half_height, aspect):
     plotter.camera_position = [tuple(centre + 10.0 * max(half_width, half_height) * view),
                                tuple(centre), tuple(up)]
     plotter.enable_parallel_projection()
-    plotter.camera.parallel_scale = 1.08 * max(half_height, half_width / aspect)
+    plotter.camera.parallel_scale = _VIEW_MARGIN * max(half_height, half_width / aspect)
     plotter.reset_camera_clipping_range()
 
 
@@ -132,7 +158,13 @@ def render_braided_mandrel(result, path, title: str) -> None:
     plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 2),
                          groups=[(0, np.s_[:])], border=False)
     plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
-    lines = [_yarn_lines(yarns, group) for group in (0, 1)]
+    blocks = [_yarn_polylines(yarns, group) for group in (0, 1)]
+    # the close-ups show a box 3 section radii wide around the middle: their lines are cut to it
+    # (llvmpipe draws every line sent, visible or not)
+    scale = _VIEW_MARGIN * max(1.5 * radius, 3.0 * radius / (w / h))
+    cut = [_clipped(b, mid, np.cross(front, up), up, scale * w / h, scale) for b in blocks]
+    whole = [_lines(b) for b in blocks]
+    close = [_lines(b) for b in cut]
     views = [((0, 0), whole_view, whole_up, whole_centre, 0.5 * (hi - lo) + 0.1 * spread,
               max(spread, depth), 2.0 * w / h, f"{title}: braided part"),
              ((1, 0), front, up, mid, 3.0 * radius, 1.5 * radius, w / h, "middle of the braid, front"),
@@ -142,7 +174,7 @@ def render_braided_mandrel(result, path, title: str) -> None:
             plotter.subplot(row, col)
             plotter.set_background("white")
             plotter.add_mesh(surface, color=MANDREL_COLOUR, smooth_shading=True, ambient=0.35, diffuse=0.7)
-            for group, poly in enumerate(lines):
+            for group, poly in enumerate(close if row else whole):
                 if poly is not None:
                     plotter.add_mesh(poly, color=COLOURS[group], line_width=1.5 if row else 1.0)
             plotter.add_text(label, font_size=10 if row else 11, color="black", position="upper_left")
