@@ -1,6 +1,7 @@
 """Interaction model timing (issue 4, item 7) and frontal residual per iteration.
 
 ``python benchmarks/bench_interaction.py [--full] [--png residual.png] [--linear-solver splu]``
+``python benchmarks/bench_interaction.py --breakdown [--case examples/bent_tube.toml]``
 
 * default: a synthetic zone (fell points held on a 75 mm circle at z = 0.6 m, case-A machine
   speeds, spool radius 1.382 m) for 48, 96 and 144 carriers: prints the time per crossing per
@@ -16,8 +17,10 @@
   "relax"``, from 0.4 m, ``--length`` braided, 20 snapshots per m) through ``preform run``'s
   ``run_case`` (simulate, fields, files), timed by part: the zone's step outside its solver and
   the stepper around it (ms a step), the relaxation's solves, the Newton fallbacks (with the
-  relaxation's failed attempt), the snapshots (and their Newton re-balance), fields and files;
-  wall and process time;
+  relaxation's failed attempt, and Newton's part of them), the snapshots (and their Newton
+  re-balance), fields and files; wall and process time; with ``--case FILE`` that example as
+  it is (``preform run FILE --model interaction``; ``--carriers``, ``--mu``, ``--length``,
+  ``--snapshots`` override it);
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step

@@ -87,7 +87,7 @@ How (one iteration)
    (``ring_halvings`` halvings at most, the last taken as it is). The sweep of the accepted
    trial is the next iteration's. Without it the iteration cycles where the jamming law's
    kink (``l = width``) or a stale K sends a Newton step beyond the minimum and back: 18 % of
-   the bent tube's steps stalled and went to Newton; with it 4 of 1200 do.
+   the bent tube's steps stalled and went to Newton; with it 0-4 of 1200 do.
 
 Convergence: the largest relative imbalance over the crossings (``wall_residual``: force over the
 sum of the four tensions; at a wall crossing its tangential part and any pull away from the
