@@ -1,6 +1,7 @@
 """Interaction model timing (issue 4, item 7) and frontal residual per iteration.
 
 ``python benchmarks/bench_interaction.py [--full] [--png residual.png] [--linear-solver splu]``
+``python benchmarks/bench_interaction.py --breakdown [--case examples/bent_tube.toml]``
 
 * default: a synthetic zone (fell points held on a 75 mm circle at z = 0.6 m, case-A machine
   speeds, spool radius 1.382 m) for 48, 96 and 144 carriers: prints the time per crossing per
@@ -16,8 +17,10 @@
   "relax"``, from 0.4 m, ``--length`` braided, 20 snapshots per m) through ``preform run``'s
   ``run_case`` (simulate, fields, files), timed by part: the zone's step outside its solver and
   the stepper around it (ms a step), the relaxation's solves, the Newton fallbacks (with the
-  relaxation's failed attempt), the snapshots (and their Newton re-balance), fields and files;
-  wall and process time;
+  relaxation's failed attempt, and Newton's part of them), the snapshots (and their Newton
+  re-balance), fields and files; wall and process time; with ``--case FILE`` that example as
+  it is (``preform run FILE --model interaction``; ``--carriers``, ``--mu``, ``--length``,
+  ``--snapshots`` override it);
 * ``--full``: ``examples/case_a.toml`` with ``kind = "interaction"`` (1 m braided, 144 carriers) and
   the same case with 48 and 96 carriers through ``preform.simulate`` (needs the geometry package
   and ``mandrels/case_a.stl``); ``--carriers 48 --length 0.4 --step-factor 1`` runs the time step
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace as NS
@@ -162,8 +166,8 @@ class _Timers:
     removed after it), not model settings."""
 
     def __init__(self):
-        self.s = dict.fromkeys(("advance", "step", "solve", "fallback", "snapshot",
-                                "snapshot_newton", "loop"), 0.0)
+        self.s = dict.fromkeys(("advance", "step", "solve", "fallback", "fallback_newton",
+                                "snapshot", "snapshot_newton", "loop"), 0.0)
         self.cpu = dict.fromkeys(self.s, 0.0)    # process time (s) of the same parts
         self.n = dict.fromkeys(("step", "fallback", "snapshot", "snapshot_newton"), 0)
         self.inside = None          # "step" or "snapshot": who calls the solver now
@@ -189,26 +193,47 @@ class _Timers:
         return lambda: setattr(owner, name, orig)
 
 
-def breakdown(carriers, mu, length, snapshots, out_dir):
+def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
     """Case A (``examples/case_a.toml``, interaction model, ``solver = "relax"``, from 0.4 m)
     through ``pipeline.run_case`` (simulate, fields, files) with the time of every part (see
     ``_Timers``); snapshots: the number a run of ``length`` writes (default: as many as a 1 m run
-    writes per metre, 20 per m, so the snapshots' share is that of the full run)."""
+    writes per metre, 20 per m, so the snapshots' share is that of the full run).
+
+    ``case``: another example file, run as it is with ``kind = "interaction"`` and ``solver =
+    "relax"`` (its own carriers, friction, start, length and snapshots unless ``carriers``,
+    ``mu``, ``length`` or ``snapshots`` are given): what ``preform run FILE --model
+    interaction`` does, timed by part."""
     import preform as pf
-    from preform import simulation, stepping
+    from preform import stepping
     from preform.interaction import frontal, relax
     from preform.interaction.model import InteractionZone
     from preform.pipeline import run_case
 
-    cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
-    cfg = dataclasses.replace(
-        cfg, model=dataclasses.replace(cfg.model, kind="interaction", solver="relax"),
-        machine=dataclasses.replace(cfg.machine, carriers=carriers),
-        yarn=dataclasses.replace(cfg.yarn, friction=mu),
-        process=dataclasses.replace(cfg.process, braid_length=length, initial_position=0.4),
-        output=dataclasses.replace(cfg.output, snapshots=snapshots))
+    if case is None:
+        cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
+        cfg = dataclasses.replace(
+            cfg, model=dataclasses.replace(cfg.model, kind="interaction", solver="relax"),
+            machine=dataclasses.replace(cfg.machine, carriers=carriers),
+            yarn=dataclasses.replace(cfg.yarn, friction=mu),
+            process=dataclasses.replace(cfg.process, braid_length=length, initial_position=0.4),
+            output=dataclasses.replace(cfg.output, snapshots=snapshots))
+    else:
+        cfg = pf.load_config(case)
+        cfg = dataclasses.replace(
+            cfg, model=dataclasses.replace(cfg.model, kind="interaction", solver="relax"))
+        if carriers is not None:
+            cfg = dataclasses.replace(cfg, machine=dataclasses.replace(cfg.machine,
+                                                                       carriers=carriers))
+        if mu is not None:
+            cfg = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=mu))
+        if length is not None:
+            cfg = dataclasses.replace(cfg, process=dataclasses.replace(cfg.process,
+                                                                       braid_length=length))
+        if snapshots is not None:
+            cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output,
+                                                                      snapshots=snapshots))
     T = _Timers()
-    solver = simulation.solver_of("relax")
+    solver = relax.solve_zone
     newton = frontal.solve_zone_inplace
 
     def solve(state, bc, **k):
@@ -236,19 +261,22 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
             if T.inside == "snapshot":
                 T.s["snapshot_newton"] += time.perf_counter() - t0
                 T.n["snapshot_newton"] += 1
+            else:
+                T.s["fallback_newton"] += time.perf_counter() - t0
 
     undo = [T.wrap(stepping.Stepper, "advance", "advance"),
             T.wrap(stepping.Stepper, "run", "loop"),
             T.wrap(InteractionZone, "step", "step", "step", inside="step"),
             T.wrap(InteractionZone, "snapshot", "snapshot", "snapshot", inside="snapshot")]
-    simulation.solver_of("relax") = solve
+    # the zone takes its solver from ``relax.solve_zone`` when it is built (``solver_of``)
+    relax.solve_zone = solve
     frontal.solve_zone_inplace = newton_timed
     try:
-        t0 = time.perf_counter()
+        t0, c_start, i_start = time.perf_counter(), time.process_time(), len(relax.ITERATIONS)
         outcome = run_case(cfg, out_dir)
         wall = time.perf_counter() - t0
     finally:
-        simulation.solver_of("relax") = solver
+        relax.solve_zone = solver
         frontal.solve_zone_inplace = newton
         for u in undo:
             u()
@@ -259,8 +287,13 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
     steps = max(n["step"], 1)
     outside = s["step"] - s["solve"] - s["fallback"]
     h = outcome.result.history
-    print(f"case A, {carriers} carriers, mu {mu}, {length} m, relax: {outcome.result.status}, "
-          f"wall {wall:.1f} s, {n['step']} steps, max {int(np.max(h['contacts']))} crossings")
+    name = "case A" if case is None else Path(case).name
+    print(f"{name}, {cfg.machine.carriers} carriers, mu {cfg.yarn.friction}, "
+          f"{cfg.process.braid_length} m, relax: {outcome.result.status}, wall {wall:.1f} s, "
+          f"process time {time.process_time() - c_start:.1f} s, {n['step']} steps, max "
+          f"{int(np.max(h['contacts']))} crossings, median "
+          f"{np.median(relax.ITERATIONS[i_start:]) if len(relax.ITERATIONS) > i_start else 0:.0f}"
+          " relaxation iterations a step")
     rows = [
         ("zone step outside the solver", outside, outside / steps * 1e3),
         ("stepper around the zone step", s["advance"] - s["step"] - s["snapshot"],
@@ -269,6 +302,8 @@ def breakdown(carriers, mu, length, snapshots, out_dir):
          s["solve"] / max(steps - n["fallback"], 1) * 1e3),
         (f"Newton fallbacks ({n['fallback']}, with the failed relaxation)", s["fallback"],
          s["fallback"] / max(n["fallback"], 1) * 1e3),
+        ("  of which Newton's solves", s["fallback_newton"],
+         s["fallback_newton"] / max(n["fallback"], 1) * 1e3),
         (f"snapshots ({n['snapshot']}; {n['snapshot_newton']} Newton solves "
          f"{s['snapshot_newton']:.1f} s)", s["snapshot"],
          s["snapshot"] / max(n["snapshot"], 1) * 1e3),
@@ -307,13 +342,27 @@ def main(argv=None):
     ap.add_argument("--snapshots", type=int, default=None,
                     help="--breakdown: snapshots written (default 20 per m braided)")
     ap.add_argument("--out", default=None, help="--breakdown: results folder (default: temporary)")
+    ap.add_argument("--case", default=None,
+                    help="--breakdown: this example as it is (e.g. examples/bent_tube.toml) "
+                         "instead of case A; --carriers, --mu, --length, --snapshots override it")
     ap.add_argument("--png", default=str(ROOT / "benchmarks" / "frontal_residual.png"))
     ap.add_argument("--linear-solver", default="auto", choices=("auto", "cholmod", "splu"),
                     help="factorisation of the Newton systems (interaction/linalg.py)")
     ap.add_argument("--no-plot", action="store_true", help="timings only")
     args = ap.parse_args(argv)
+    given = set(sys.argv[1:] if argv is None else argv)
+    args.carriers_given = "--carriers" in given
+    args.mu_given = "--mu" in given
+    args.length_given = "--length" in given
     if args.breakdown:
         import tempfile
+        if args.case is not None:
+            with tempfile.TemporaryDirectory() as tmp:
+                breakdown(args.carriers[0] if args.carriers_given else None,
+                          args.mu if args.mu_given else None,
+                          args.length if args.length_given else None, args.snapshots,
+                          args.out or tmp, case=args.case)
+            return
         snaps = args.snapshots if args.snapshots is not None else max(1, round(20 * args.length))
         for n in args.carriers:
             with tempfile.TemporaryDirectory() as tmp:

@@ -1285,3 +1285,42 @@ def ldl_solve5(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
     for i in range(n):
         for a in range(nb):
             out[perm[i], a] = x[i, a]
+
+
+@njit(cache=True)
+def reduced_energy(m, n_yarns, yarn, low, highest, l_below, l_top, s, s_fell, s_old, g, f_top,
+                   EA, compression, eps_f, kappa0, l_jam, k_jam, s_ref):
+    """The step energy E (``_kernels.frontal.energy``) of the lengths ``l_below`` (m, 2),
+    ``l_top`` (2n,) (``segment_vectors``) and materials ``s`` (m, 2), without its wall term (the
+    relaxation keeps crossings outside their planes exactly): per segment the stretch ``k (l -
+    q)^2 / (2 q)`` and, between two crossings shorter than the width, the jamming ``k_jam (l_jam
+    - l)^2 / 2``; per crossing and yarn the friction ``g (sqrt(x^2 + eps_f^2) - eps_f) + kappa0
+    x^2 / 2`` of its slide x = s - s_old; per yarn the held top tension's ``f_top l_top +
+    F_top (s_top - s_ref)`` with ``F_top = f_top + f_top^2 / (2 EA)`` (the payout, measured from
+    the top material ``s_ref`` (2n,) so that its metres do not swamp the round-off). With the
+    materials swept for the lengths (``material_sweep``) it is the reduced energy of the
+    positions alone, whose negative gradient is ``forces``' net force. inf where a material
+    length is not positive."""
+    n = n_yarns // 2
+    E = 0.0
+    for c in range(m):
+        for side in range(2):
+            lo = low[c, side]
+            below = s[lo, side] if lo >= 0 else s_fell[yarn[c, side]]
+            q = s[c, side] - below
+            if q <= 0.0:
+                return np.inf
+            l = l_below[c, side]
+            E += 0.5 * _ka(l, q, EA, compression) * (l - q) * (l - q) / q
+            if lo >= 0 and l < l_jam:
+                E += 0.5 * k_jam * (l_jam - l) * (l_jam - l)
+            x = s[c, side] - s_old[c, side]
+            E += g[c, side] * (math.sqrt(x * x + eps_f * eps_f) - eps_f) + 0.5 * kappa0 * x * x
+    for k in range(n_yarns):
+        c = highest[k]
+        if c < 0:
+            continue
+        side = 0 if k < n else 1
+        F_top = f_top[k] + f_top[k] * f_top[k] / (2.0 * EA)
+        E += f_top[k] * l_top[k] + F_top * (s[c, side] - s_ref[k])
+    return E

@@ -55,10 +55,14 @@ How (one iteration)
      the ring points, at their friction centres, with large bounds (the yarns bend sharply
      there), and hold their yarns along themselves at ~1e4 N/m against a geometric stiffness
      of ~1e2 N/m, where the yarns cross at low angles; the block iteration's linearised map
-     has a spectral radius of 15 there (``docs/decisions-ring14.md``). Factorised as the
-     block one, anew where a segment newly jams (one that left the jam keeps its k_jam in
-     K: stiffer than the map there, the update falls short rather than beyond), 4-5x its
-     cost; a step without a new lowest residual in ``ring_stall`` iterations is Newton's.
+     has a spectral radius of 15 there (``docs/decisions.md``). Its elimination order is
+     METIS's nested dissection of the lattice (``ring_order``: half the factorisation's work
+     of ``band_dissection``'s). Factorised at the start, anew where a segment newly jams (one
+     that left the jam keeps its k_jam in K: stiffer than the map there, the update falls
+     short rather than beyond), after a step the line search shortened (item 5) and after
+     ``ring_refactor_stall`` iterations without a new lowest residual since the last
+     factorisation: each factorisation is a Newton refresh of K. A step without a new lowest
+     residual in ``ring_stall`` iterations is Newton's.
 
    ``"block"`` needs 10-17 iterations on case A steps where ``"scalar"`` needs 33-44 of three
    sweeps each. Where it stalls (``block_stall`` iterations without a new lowest residual: steps
@@ -73,13 +77,32 @@ How (one iteration)
 4. *Anderson mixing* of the positions over the last ``anderson_depth`` iterates: the paper's
    eq. 17 (the minimum-residual combination of two iterates) in its general form. History is
    cleared when the active set changes (the map changes).
+5. *Line search* (``"full"`` only, ``ring_line_search``): the iterate is judged by the reduced
+   energy ``E_r(C) = E(C, s(C))``, the step energy with the materials swept for the positions
+   (``reduced_energy``; without the wall, which the active set keeps exactly). Its gradient is
+   ``-F`` (the materials are stationary), so the update ``delta = K^-1 F`` with K positive
+   definite descends it: ``dE_r = -F . delta < 0``. The Anderson-mixed iterate is taken where
+   it does not raise ``E_r`` (to its round-off, 1e-13 |E_r|); otherwise Anderson's history is
+   cleared and ``delta`` is backtracked to Armijo's ``E_r(C + t delta) <= E_r(C) + 1e-4 t dE_r``
+   (``ring_halvings`` halvings at most, the last taken as it is). The sweep of the accepted
+   trial is the next iteration's. Without it the iteration cycles where the jamming law's
+   kink (``l = width``) or a stale K sends a Newton step beyond the minimum and back: 18 % of
+   the bent tube's steps stalled and went to Newton; with it 0-4 of 1200 do.
 
 Convergence: the largest relative imbalance over the crossings (``wall_residual``: force over the
 sum of the four tensions; at a wall crossing its tangential part and any pull away from the
-wall) below ``tol``; the material equations hold to ``material_tol`` at every iterate. The
-iteration is not monotone in any merit. A step that does not reach ``tol`` in ``max_iter``
-(some steps where crossings must slide far stall) is solved by the Newton reference
-(``solve_zone``, ``newton_fallback``) or raises :class:`SimulationError`.
+wall) below ``tol``; the material equations hold to ``material_tol`` at every iterate. With
+``"block"`` and ``"scalar"`` the iteration is not monotone in any merit; with ``"full"`` and
+its line search it is monotone in the reduced energy ``E_r`` (up to its round-off, and except
+where ``ring_halvings`` halvings found no decrease), the merit issue 14 allows. A step that
+does not reach ``tol`` in ``max_iter`` (some steps where crossings must slide far stall) is
+solved by the Newton reference (``solve_zone``, ``newton_fallback``) or raises
+:class:`SimulationError`.
+
+Behind a guide ring ``solve_zone`` also gives the frontal iterations of the bounds that a
+snapshot asks for (its ring passes and its final solve) to the relaxation with consistent
+bounds (``ring_frontal``); the final one is finished by Newton's frontal iteration from that
+result, whose wall penalty puts the wall force into the written files (``frontal.point_forces``).
 """
 
 from __future__ import annotations
@@ -208,6 +231,32 @@ class RelaxSettings:
     #: iterations (case B); one without a new lowest residual in 10 goes to Newton sooner
     #: (case B end to end: CPU 132 s against 180 s with 20, fallbacks 13.8 % against 12.5 %)
     ring_stall: int = 10
+    #: with the full preconditioner, the line search on the reduced energy (module docstring,
+    #: item 5): without it the iteration cycles on 18 % of the bent tube's steps (those go to
+    #: Newton); with it 400 of 400 sampled steps converge, at the same median of 12 iterations
+    ring_line_search: bool = True
+    #: halvings of that line search at most; the last step is taken as it is (a step shortened
+    #: 256 times moves by millimetres / 256; K is factorised anew after it)
+    ring_halvings: int = 8
+    #: a step the line search shortened was taken with a stale K: K is factorised anew at the
+    #: next iteration (on 48 of the bent tube's steps the plain iteration stalls on, 47
+    #: converge in a median 18 iterations against 45 in 24 without)
+    ring_refactor_damped: bool = True
+    #: iterations without a new lowest residual since the last factorisation after which K is
+    #: factorised anew (0: never): a chord iteration from a stale K converges linearly and
+    #: slowly (a 48-carrier case-B-like step: 55 iterations, stalled at ring_stall; with 3, 18
+    #: iterations and 2 factorisations; neutral on the bent tube's steps)
+    ring_refactor_stall: int = 3
+    #: the full preconditioner's elimination order: "metis" (METIS's nested dissection of the
+    #: lattice, pymetis, ~3 ms at 1230 crossings: 27 % less fill than "band" and half its
+    #: factorisation work; bent tube 0.6 m end to end: 31 s of CPU against 40 s) or "band"
+    #: (``band_dissection``, the block preconditioner's)
+    ring_order: str = "metis"
+    #: behind a guide ring the frontal iterations of the bounds a snapshot asks for (its ring
+    #: passes and final solve) by the relaxation with consistent bounds, the final one finished
+    #: by Newton's (module docstring); off: Newton's alone (a bent-tube snapshot 1.4 s against
+    #: 2.1-2.3 s, its crossings within 0.4 mm of Newton's alone)
+    ring_frontal: bool = True
 
 
 @dataclass
@@ -312,22 +361,44 @@ class _Laplacian:
             out[:, i] = self.solver.solve(np.ascontiguousarray(rhs[:, i]))
 
 
+def _metis_order(lat: Lattice):
+    """METIS's nested-dissection order (perm[i]: the crossing at position i) of the lattice's
+    graph (crossings, an edge per segment between two crossings)."""
+    import pymetis
+    m = lat.m
+    c = np.repeat(np.arange(m), 2)
+    lo = lat.low.ravel()
+    link = lo >= 0
+    a, b = c[link], lo[link]
+    key = np.unique(np.concatenate([a * m + b, b * m + a]))
+    rows, cols = key // m, key % m
+    indptr = np.zeros(m + 1, dtype=np.int32)
+    np.add.at(indptr, rows + 1, 1)
+    indptr = np.cumsum(indptr).astype(np.int32)
+    perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(indptr, cols.astype(np.int32)))
+    return np.asarray(perm).astype(np.int64)
+
+
 class _BlockStiffness:
     """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
     ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
-    of the band of crossings around the machine axis (``band_dissection``: the order keeps the
-    factor's fill per crossing nearly flat as the zone grows), the symbolic analysis of its
+    of the band of crossings around the machine axis (``order`` "band", ``band_dissection``:
+    the order keeps the factor's fill per crossing nearly flat as the zone grows) or of the
+    lattice's graph ("metis", ``_metis_order``), the symbolic analysis of its
     block LDL^T once per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and
     solves (``ldl_solve``, ``ldl_solve5``)."""
 
-    def __init__(self, lat: Lattice, pos, nb=3):
+    def __init__(self, lat: Lattice, pos, nb=3, order="band"):
         m = lat.m
         self.m = m
         self.nb = nb
-        r = np.hypot(pos[:, 0], pos[:, 1])
-        u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
-        perm = np.empty(m, dtype=np.int64)
-        RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
+        if order == "metis" and m > 8:
+            perm = _metis_order(lat)
+        else:
+            r = np.hypot(pos[:, 0], pos[:, 1])
+            u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
+            perm = np.empty(m, dtype=np.int64)
+            RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
         pinv = np.empty(m, dtype=np.int64)
         pinv[perm] = np.arange(m)
         self.perm = perm
@@ -366,6 +437,26 @@ class _BlockStiffness:
         self._x = np.empty((m, nb))
         self._rhs = np.zeros((m, nb))
         self._out = np.empty((m, nb))
+
+    #: the last structure built with an order that depends on the lattice alone ("metis"):
+    #: (nb, order, low, structure); the frontal iterations of a snapshot solve the same
+    #: lattice 60 times over, and its METIS order and symbolic analysis are 20 % of their time
+    _last = None
+
+    @classmethod
+    def of(cls, lat: Lattice, pos, nb=3, order="band"):
+        """The structure of ``lat`` (``__init__``), the last one again where it was built for
+        the same block size, order ("metis") and lattice (its ``low``; the pattern and the
+        order depend on nothing else). Its values and factor are scratch of the solve that
+        uses it."""
+        last = cls._last
+        if (order == "metis" and last is not None and last[0] == nb and last[1] == order
+                and last[2].shape == lat.low.shape and np.array_equal(last[2], lat.low)):
+            return last[3]
+        blk = cls(lat, pos, nb, order)
+        if order == "metis":
+            cls._last = (nb, order, lat.low.copy(), blk)
+        return blk
 
     def factor(self):
         """Factorise the current ``vals``; False if a pivot is not positive definite."""
@@ -588,7 +679,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
                          "'block', 'full' or 'scalar'")
     lap = _Laplacian(lat) if m and not block else None
-    blk = _BlockStiffness(lat, pos, 5 if full else 3) if m and block else None
+    blk = (_BlockStiffness.of(lat, pos, 5 if full else 3, st.ring_order if full else "band")
+           if m and block else None)
     rhs = np.empty((m, 3))
     times["setup"] = time.perf_counter() - t_setup
     mixer = _Anderson(st.anderson_depth)
@@ -601,19 +693,56 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     stats = np.zeros(2, dtype=np.int64)
     smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
+    best_f, best_f_it = np.inf, 0
     l_prev = np.empty((m, 2))
     factorisations = 0
     inner = lat.low >= 0
     factored_jam = None
     predict = False
     predict_on = st.material_predict and block
+    search = full and st.ring_line_search and m > 0
+    if search:
+        # the top materials at the start: the reference of the energy's payout term
+        s_ref = np.array([s[lat.highest[k], 0 if k < ny // 2 else 1] if lat.highest[k] >= 0
+                          else 0.0 for k in range(ny)])
+        d_t, l_t = np.empty((m, 2, 3)), np.empty((m, 2))
+        dtop_t, ltop_t = np.empty((ny, 3)), np.empty(ny)
+        s_t, ten_t = np.empty((m, 2)), np.empty((m, 2))
+        damped_refactor = False
+
+        def merit(trial):
+            if has_wall:
+                # as the iterate will be: projected onto its plane where behind it
+                RK.wall_distance(m, trial, plane, dist)
+                behind = (dist < 0.0) & active | (dist < -st.wall_release)
+                if behind.any():
+                    trial = trial.copy()
+                    trial[behind] -= dist[behind, None] * plane[behind, 3:]
+            RK.segment_vectors(m, ny, lat.yarn, trial, lat.normal, lat.over, lat.low,
+                               lat.highest, fell, top, h, eps2, eps2_top, d_t, l_t, dtop_t,
+                               ltop_t)
+            s_t[:] = s
+            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_t, s_t, s_fell, s_old, g,
+                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
+                              st.material_newton, ten_t, chain, work, stats, l_below)
+            return RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_t, ltop_t, s_t,
+                                     s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
+                                     l_jam, k_jam, s_ref)
+    swept = False
     while True:
         t0 = time.perf_counter()
-        RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
-                           fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
-        RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g, f_top,
-                          EA, compression, eps_f, kappa0, st.material_tol, st.material_newton,
-                          tension, chain, work, stats, l_prev if predict else None)
+        if swept:
+            # the line search swept the materials at this iterate already
+            d_below[:], l_below[:], d_top[:], l_top[:] = d_t, l_t, dtop_t, ltop_t
+            s[:], tension[:] = s_t, ten_t
+            swept = False
+        else:
+            RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
+                               fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
+            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
+                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
+                              st.material_newton, tension, chain, work, stats,
+                              l_prev if predict else None)
         if predict_on:
             l_prev[:] = l_below
             predict = True
@@ -623,6 +752,10 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
                     if m else 0.0)
         history.append(residual)
+        if search:
+            E_cur = RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_below, l_top, s,
+                                      s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
+                                      l_jam, k_jam, s_ref)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
         times["forces"] += t2 - t1
@@ -633,6 +766,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         # local model fails (a jammed crossing of the 48-carrier, friction 0.5 step: a fixed
         # point of the composite map at residual 6e-2); without progress the iteration goes on
         # without them
+        if residual < best_f:
+            best_f, best_f_it = residual, it
         if residual < best:
             best, best_it = residual, it
         elif smoothing and it - best_it > st.stall_iterations:
@@ -658,10 +793,17 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             if changed_jam:
                 due = True
                 mixer.reset()
+            if search and damped_refactor:
+                due = True
+                damped_refactor = False
+            if full and st.ring_refactor_stall and it - 1 - best_f_it >= st.ring_refactor_stall:
+                due = True
+                mixer.reset()
         else:
             due = (it - 1) % st.refactor_every == 0
         if due or factored_active is None or not np.array_equal(active, factored_active):
             factorisations += 1
+            best_f, best_f_it = np.inf, it - 1
             if block:
                 factored_jam = jammed
                 reg = st.block_reg
@@ -756,7 +898,29 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         t5 = t6
         if changed:
             mixer.reset()
-        pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
+        if search:
+            cand = mixer(pos.ravel(), new.ravel()).reshape(m, 3).copy()
+            mixed = mixer.k > 0
+            E_c = merit(cand)
+            roundoff = 1e-13 * abs(E_cur)
+            step = new - pos
+            slope = -float(np.vdot(force, step))
+            if not (E_c <= E_cur + roundoff) and slope < -10.0 * roundoff:
+                # the mixed iterate raised the energy: back along the preconditioned step
+                mixer.reset()
+                tt = 1.0 if mixed else 0.5
+                for _ in range(st.ring_halvings):
+                    cand = pos + tt * step
+                    E_c = merit(cand)
+                    if E_c <= E_cur + 1e-4 * tt * slope + roundoff:
+                        break
+                    tt *= 0.5
+                if tt < 1.0:
+                    damped_refactor = st.ring_refactor_damped
+            swept = True
+            pos[:] = cand
+        else:
+            pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
         if has_wall:
             # a combination of iterates on the planes stays on them; one that reaches behind
             # a plane (Anderson's weights may be negative) is projected onto it and rests there
@@ -783,6 +947,54 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                        converged=converged, times=times, set_changes=set_changes,
                        factorisations=factorisations,
                        sweep_stats=(int(stats[0]), int(stats[1])))
+
+
+def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max_iter,
+                  finish):
+    """``solve_zone``'s frontal iteration behind a guide ring (``RelaxSettings.ring_frontal``):
+    ``max_iter`` solves at most (Newton's frontal iterations), the bounds and ring top tensions
+    taken anew from each converged geometry until they change by less than ``friction_tol``
+    (``relax`` with consistent bounds). With ``finish`` (a snapshot's final solve, which
+    gives ``friction_tol``) Newton's frontal iteration (``frontal.solve_zone_inplace``) finishes from that
+    state: its wall penalty sets the crossings on the mandrel the micrometre behind their
+    planes that ``frontal.point_forces`` writes as the wall force, and it takes one iteration
+    where the bounds have converged. Otherwise the relaxation's state is the result, the
+    newest bounds (of its converged geometry) lagged, as Newton's after ``max_iter``
+    iterations. None (state untouched) where a relaxation did not converge: then Newton's
+    alone."""
+    from . import frontal
+    fr = settings.frontal
+    friction_tol = fr.friction_tolerance if friction_tol is None else friction_tol
+    max_iter = fr.max_iterations if max_iter is None else max_iter
+    m = state.m
+    centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
+                       dtype=float)
+    bounds, ft = start_bounds(state, bc, settings)
+    if m == 0:
+        return None
+    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner, consistent_bounds=True,
+                              bound_iterations=max_iter - 1, friction_tol=friction_tol,
+                              **({} if tol is None else dict(tol=float(tol))))
+    res = relax(lattice_of(state), state.pos[:m], state.material[:m], state.material_fell,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
+                width=bc.width, plane=bc.plane, settings=rsc, model=settings,
+                top_tensions=ring_top_tensions(state, bc))
+    if not res.residual < rsc.tol:
+        return None
+    state.pos[:m] = res.pos
+    state.material[:m] = res.s
+    state.tension[:m] = res.tension
+    state.bound[:m] = res.bounds
+    slide = res.s - centres
+    state.slip[:m] = np.where(np.abs(slide) > fr.slip_report, np.sign(slide), 0)
+    cap = fr.memory_cap
+    state.offset[:m] = np.clip(slide, -cap, cap)
+    if finish:
+        return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
+                                          friction_tol=friction_tol, max_iter=max_iter,
+                                          where=where, centre=centres)
+    return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
+                               res.history, res.f_top.copy(), lagged=not res.converged)
 
 
 # -- adapter from the zone's state ------------------------------------------------------------
@@ -853,15 +1065,22 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
     into ``state.bound`` for the next step. A call that asks for the frontal iteration of the
     bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
-    to 1e-3) is Newton's (``frontal.solve_zone_inplace``), as is a step the relaxation does not
-    converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
-    the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``, counted in
-    ``FALLBACKS``). Behind a guide ring the relaxation uses
+    to 1e-3) is Newton's (``frontal.solve_zone_inplace``; behind a guide ring the
+    relaxation's with consistent bounds first, ``_ring_frontal``), as is a step the relaxation
+    does not converge on (``relax_settings.max_iter`` reached, or the block preconditioner
+    stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``,
+    counted in ``FALLBACKS``). Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
     ``relax_settings.tol``).
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
+    if ((max_iter is not None or friction_tol is not None) and bc.has_ring
+            and rs.ring_frontal and not settings.frontal.consistent_bounds):
+        report = _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol,
+                               max_iter, finish=friction_tol is not None)
+        if report is not None:
+            return report
     if max_iter is not None or friction_tol is not None or settings.frontal.consistent_bounds:
         # consistent bounds: the relaxation does not converge on steps whose crossings stick
         # (docs/decisions.md), Newton's frontal iteration solves them
