@@ -818,36 +818,69 @@ def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
 
 
 @njit(cache=True)
-def _split_separator(a, b, order, low, up, seg, id_l, id_r, side):
-    """Label the first half of order[a:b] id_l and the second id_r in seg, flag in side (1)
-    the crossings of the first half with a lattice neighbour in the second (0 the others of the
-    first half, 2 the second half); returns their number."""
+def _neighbour_ranks(c, low, up, owner, sid, rank, n):
+    """(lowest, highest) rank among the lattice neighbours (``low``/``up``) of crossing c that
+    belong to the set ``sid`` (``owner``); (n, -1) if none."""
+    mn = n
+    mx = -1
+    for s in range(2):
+        for q in range(2):
+            nb = low[c, s] if q == 0 else up[c, s]
+            if nb >= 0 and owner[nb] == sid:
+                r = rank[nb]
+                if r < mn:
+                    mn = r
+                if r > mx:
+                    mx = r
+    return mn, mx
+
+
+@njit(cache=True)
+def _best_cut(a, b, order, low, up, owner, sid, rank, cnt1, cnt2, lo_t, hi_t):
+    """The smallest vertex separator of the set ``sid`` (sorted in order[a:b]) among the cuts
+    at ranks t in [lo_t, hi_t] (first part: ranks < t): variant 0, the first part's crossings
+    with a neighbour at rank >= t; variant 1, the second part's with one at rank < t. A
+    crossing at rank i with neighbours at ranks mn..mx is in variant 0's separator for t in
+    (i, mx] and in variant 1's for t in (mn, i], so both counts for every t come from one
+    pass and a running sum (cnt1, cnt2 (n + 2,) scratch, rank (m,) scratch). Returns (size,
+    t, variant); ties go to the cut nearest the middle."""
     n = b - a
-    half = n // 2
     for i in range(a, b):
-        seg[order[i]] = id_l if i - a < half else id_r
-    n_s = 0
-    for i in range(a, a + half):
-        c = order[i]
-        sep = False
-        for s in range(2):
-            nb = low[c, s]
-            if nb >= 0 and seg[nb] == id_r:
-                sep = True
-            nb = up[c, s]
-            if nb >= 0 and seg[nb] == id_r:
-                sep = True
-        side[c] = 1 if sep else 0
-        n_s += side[c]
-    for i in range(a + half, b):
-        side[order[i]] = 2
-    return n_s
+        rank[order[i]] = i - a
+    for t in range(n + 2):
+        cnt1[t] = 0
+        cnt2[t] = 0
+    for i in range(n):
+        mn, mx = _neighbour_ranks(order[a + i], low, up, owner, sid, rank, n)
+        if mx > i:
+            cnt1[i + 1] += 1
+            cnt1[mx + 1] -= 1
+        if mn < i:
+            cnt2[mn + 1] += 1
+            cnt2[i + 1] -= 1
+    best = n + 1
+    bt = n // 2
+    bv = 0
+    s1 = 0
+    s2 = 0
+    for t in range(hi_t + 1):
+        s1 += cnt1[t]
+        s2 += cnt2[t]
+        if t < lo_t:
+            continue
+        for var in range(2):
+            size = s1 if var == 0 else s2
+            if size < best or (size == best and abs(2 * t - n) < abs(2 * bt - n)):
+                best = size
+                bt = t
+                bv = var
+    return best, bt, bv
 
 
 @njit(cache=True)
 def _partition(a, b, order, side, buf):
-    """Stable partition of order[a:b] into the first half's crossings off the separator (side
-    0), the second half's (2), then the separator's (1)."""
+    """Stable partition of order[a:b] into the first part's crossings off the separator (side
+    0), the second part's (2), then the separator's (1)."""
     k = 0
     for group in (0, 2, 1):
         for i in range(a, b):
@@ -859,49 +892,73 @@ def _partition(a, b, order, side, buf):
 
 
 @njit(cache=True)
-def band_dissection(m, low, up, u, v, leaf, perm):
+def band_dissection(m, low, up, u, v, leaf, window, perm):
     """Fill-reducing order of a lattice of crossings on a band around an axis, by geometric
-    nested dissection: a set of crossings is split at the median of u (the angle around the
-    axis) or of v (the height along it), whichever gives the smaller separator: the crossings
-    of the first half with a lattice neighbour (``low``/``up``, (m, 2)) in the second; the order
-    is the first half's, then the second's, then the separator's (George 1973). Sets up to
-    ``leaf`` crossings keep their order. On the whole band the median of u cuts it into two
-    arcs at two seams, whose crossings are the first separator. The crossings are sorted by u
-    and by v once, and every split partitions both orders stably, so each set's crossings stay
-    sorted: O(m log m). perm (m,) receives the order (perm[i]: the crossing at position i)."""
-    seg = np.zeros(m, dtype=np.int64)
+    nested dissection (George 1973): a set of crossings, sorted by u (the angle around the
+    axis) and by v (the height along it), is cut at the rank t in each sort, within ``window``
+    of the set's size from its middle, that gives the smallest vertex separator, the crossings
+    of one part with a lattice neighbour (``low``/``up``, (m, 2)) in the other, either part's
+    (``_best_cut``); the order is the first part's, the second's, then the separator's, each
+    part dissected in turn. Sets up to ``leaf`` crossings keep their order. On the whole band
+    a cut in u makes two arcs at two seams, whose crossings are the first separator. The
+    crossings are sorted by u and by v once and every cut partitions both sorts stably, so
+    each set's crossings stay sorted: O(m) a level, O(m log m) in all. perm (m,) receives the
+    order (perm[i]: the crossing at position i)."""
+    owner = np.zeros(m, dtype=np.int64)
     side = np.zeros(m, dtype=np.int8)
     buf = np.empty(m, dtype=np.int64)
+    rank = np.empty(m, dtype=np.int64)
+    cnt1 = np.empty(m + 2, dtype=np.int64)
+    cnt2 = np.empty(m + 2, dtype=np.int64)
     by_u = np.argsort(u)
     by_v = np.argsort(v)
-    stack = np.empty((2 * m + 2, 2), dtype=np.int64)
+    stack = np.empty((2 * m + 2, 3), dtype=np.int64)
     stack[0, 0] = 0
     stack[0, 1] = m
+    stack[0, 2] = 0
     top = 1
     next_id = 1
     while top:
         top -= 1
-        a, b = stack[top, 0], stack[top, 1]
+        a, b, sid = stack[top, 0], stack[top, 1], stack[top, 2]
         n = b - a
         if n <= leaf:
             continue
+        lo_t = max(1, int(math.ceil((0.5 - window) * n)))
+        hi_t = min(n - 1, int(math.floor((0.5 + window) * n)))
+        if hi_t < lo_t:
+            lo_t = hi_t = n // 2
+        s_v, t_v, var_v = _best_cut(a, b, by_v, low, up, owner, sid, rank, cnt1, cnt2,
+                                    lo_t, hi_t)
+        s_u, t_u, var_u = _best_cut(a, b, by_u, low, up, owner, sid, rank, cnt1, cnt2,
+                                    lo_t, hi_t)
+        if s_v <= s_u:
+            order, t, var, n_s = by_v, t_v, var_v, s_v
+        else:
+            order, t, var, n_s = by_u, t_u, var_u, s_u
+        for i in range(a, b):
+            rank[order[i]] = i - a
+        for i in range(n):
+            c = order[a + i]
+            mn, mx = _neighbour_ranks(c, low, up, owner, sid, rank, n)
+            if i < t:
+                side[c] = 1 if (var == 0 and mx >= t) else 0
+            else:
+                side[c] = 1 if (var == 1 and mn < t) else 2
         id_l, id_r = next_id, next_id + 1
         next_id += 2
-        s_v = _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
-        s_u = _split_separator(a, b, by_u, low, up, seg, id_l, id_r, side)
-        if s_v <= s_u:
-            _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
-        n_s = min(s_u, s_v)
         for i in range(a, b):
-            if side[by_u[i]] == 1:
-                seg[by_u[i]] = -1
+            c = by_u[i]
+            owner[c] = id_l if side[c] == 0 else (id_r if side[c] == 2 else -1)
         _partition(a, b, by_u, side, buf)
         _partition(a, b, by_v, side, buf)
-        n_l = n // 2 - n_s
+        n_l = t - n_s if var == 0 else t
         stack[top, 0] = a
         stack[top, 1] = a + n_l
+        stack[top, 2] = id_l
         stack[top + 1, 0] = a + n_l
         stack[top + 1, 1] = b - n_s
+        stack[top + 1, 2] = id_r
         top += 2
     for i in range(m):
         perm[i] = by_u[i]

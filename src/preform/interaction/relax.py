@@ -182,6 +182,13 @@ class RelaxSettings:
     #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
     #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
     block_reg: float = 1e-3
+    #: sets of crossings up to this size keep their order in the nested dissection of the
+    #: block preconditioners (``band_dissection``); 4: 2908 crossings, 11.8 blocks of L a
+    #: column against 12.8 with 8 (docs/decisions-flat14.md)
+    order_leaf: int = 4
+    #: the dissection cuts a set at the smallest separator within this fraction of its size
+    #: from the middle; 0.15: 19 % less fill than the median cut (0), 4 % less than METIS
+    order_window: float = 0.15
     #: iterations between factorisations of the block preconditioner (0: once per solve, and
     #: when the wall's active set or the set of jammed segments changes): a preconditioner
     #: that changes within a solve changes Anderson's map under it (144 carriers: 12-15
@@ -315,19 +322,21 @@ class _Laplacian:
 class _BlockStiffness:
     """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
     ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
-    of the band of crossings around the machine axis (``band_dissection``: the order keeps the
-    factor's fill per crossing nearly flat as the zone grows), the symbolic analysis of its
+    of the band of crossings around the machine axis (``band_dissection`` with ``leaf`` and
+    ``window``, ``RelaxSettings.order_leaf``, ``order_window``: the factor's fill grows as log
+    m, 6-7 blocks a column at 288 crossings, 11.5-11.8 at 2900), the symbolic analysis of its
     block LDL^T once per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and
     solves (``ldl_solve``, ``ldl_solve5``)."""
 
-    def __init__(self, lat: Lattice, pos, nb=3):
+    def __init__(self, lat: Lattice, pos, nb=3, leaf=4, window=0.15):
         m = lat.m
         self.m = m
         self.nb = nb
         r = np.hypot(pos[:, 0], pos[:, 1])
         u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
         perm = np.empty(m, dtype=np.int64)
-        RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
+        RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf, window,
+                           perm)
         pinv = np.empty(m, dtype=np.int64)
         pinv[perm] = np.arange(m)
         self.perm = perm
@@ -588,7 +597,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
                          "'block', 'full' or 'scalar'")
     lap = _Laplacian(lat) if m and not block else None
-    blk = _BlockStiffness(lat, pos, 5 if full else 3) if m and block else None
+    blk = (_BlockStiffness(lat, pos, 5 if full else 3, st.order_leaf, st.order_window)
+           if m and block else None)
     rhs = np.empty((m, 3))
     times["setup"] = time.perf_counter() - t_setup
     mixer = _Anderson(st.anderson_depth)
