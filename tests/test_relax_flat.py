@@ -129,3 +129,153 @@ def test_band_dissection_fill_at_most_metis():
     theirs = block_fill(low, np.asarray(metis, dtype=np.int64))
     assert ours <= theirs
     assert ours < median_cut
+
+
+def _wall_problem(seed, release=1e-4):
+    """A lattice with random positions, forces, force densities, planes (unit normals) and
+    resting crossings, and a block update of the size of the release distance (some
+    crossings join, some leave)."""
+    rng = np.random.default_rng(seed)
+    low, up, _, _ = band_lattice(10, 6, seed)
+    m = low.shape[0]
+    pos = rng.normal(size=(m, 3)) * 1e-2
+    n = rng.normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    active = rng.random(m) < 0.4
+    gap = np.where(active, 0.0, rng.uniform(0.0, 3 * release, m))
+    plane = np.concatenate([pos - gap[:, None] * n, n], axis=1)
+    delta = rng.normal(size=(m, 3)) * 2 * release
+    force = rng.normal(size=(m, 3)) * 1e-2
+    w_below = rng.uniform(1.0, 10.0, (m, 2))
+    W = rng.uniform(20.0, 40.0, m)
+    return low, up, pos, plane, active, delta, force, w_below, W, release
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_wall_matches_the_array_form(seed):
+    """``block_wall`` gives the update, active set, wall forces and change flag of the NumPy
+    operations it replaces (the block driver's wall step), bit for bit."""
+    low, up, pos, plane, active, delta, force, w_below, W, release = _wall_problem(seed)
+    m = low.shape[0]
+    # the array form
+    d = delta.copy()
+    a = active.copy()
+    wf = np.empty(m)
+    dist = np.empty(m)
+    moved = d.copy()
+    d[a] = 0.0
+    RK.wall_update(m, low, up, w_below, force, pos, d, W, plane, a, release, wf)
+    RK.wall_distance(m, pos + d, plane, dist)
+    stay = a & (dist <= release)
+    d[stay] = moved[stay]
+    want = pos + d
+    RK.wall_distance(m, want, plane, dist)
+    join = ~a & (dist < -release)
+    leave = a & (dist > release)
+    want[join] -= dist[join, None] * plane[join, 3:]
+    want_active = (a | join) & ~leave
+    assert join.any() and leave.any()       # the problem exercises both
+    # the kernel
+    d2 = delta.copy()
+    a2 = active.copy()
+    wf2 = np.empty(m)
+    new = np.empty((m, 3))
+    changed = RK.block_wall(m, low, up, w_below, force, pos, d2, W, plane, a2, release, wf2,
+                            np.empty((m, 3)), new)
+    assert changed == bool(join.any() or leave.any())
+    assert np.array_equal(new, want)
+    assert np.array_equal(d2, d)
+    assert np.array_equal(a2, want_active)
+    assert np.array_equal(wf2, wf)
+    # nothing changes where nothing crosses the thresholds
+    a3 = np.zeros(m, dtype=np.bool_)
+    far = plane.copy()
+    far[:, :3] = pos - 1.0 * plane[:, 3:]
+    assert not RK.block_wall(m, low, up, w_below, force, pos, delta.copy(), W, far, a3,
+                             release, wf2, np.empty((m, 3)), new)
+    assert np.array_equal(new, pos + delta) and not a3.any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_wall_project_matches_the_array_form(seed):
+    """``wall_project`` projects and joins as the NumPy operations it replaces, bit for bit."""
+    low, up, pos, plane, active, delta, _, _, _, release = _wall_problem(seed)
+    m = low.shape[0]
+    x = pos + delta
+    dist = np.empty(m)
+    RK.wall_distance(m, x, plane, dist)
+    behind = (dist < 0.0) & active | (dist < -release)
+    want = x.copy()
+    want[behind] -= dist[behind, None] * plane[behind, 3:]
+    assert (behind & ~active).any() and (behind & active).any()
+    a2 = active.copy()
+    joined = RK.wall_project(m, x, plane, a2, release)
+    assert joined == bool((behind & ~active).any())
+    assert np.array_equal(x, want)
+    assert np.array_equal(a2, active | behind)
+
+
+def test_jam_changed_and_same_flags():
+    """``jam_changed``: the jammed segments ``(l < l_jam) & (low >= 0)`` and whether they
+    differ from the factorised set (any change, or only a newly jammed segment);
+    ``same_flags`` is ``np.array_equal``."""
+    rng = np.random.default_rng(3)
+    low, _, _, _ = band_lattice(8, 5)
+    m = low.shape[0]
+    l_below = rng.uniform(0.0, 2.0, (m, 2))
+    want = (l_below < 1.0) & (low >= 0)
+    jammed = np.empty((m, 2), dtype=np.bool_)
+    assert not RK.jam_changed(m, low, l_below, 1.0, want.copy(), False, jammed)
+    assert np.array_equal(jammed, want)
+    fewer = want.copy()
+    fewer[np.argwhere(want)[0][0], np.argwhere(want)[0][1]] = False
+    more = want | (low >= 0)
+    assert RK.jam_changed(m, low, l_below, 1.0, fewer, False, jammed)
+    assert RK.jam_changed(m, low, l_below, 1.0, fewer, True, jammed)
+    assert RK.jam_changed(m, low, l_below, 1.0, more, False, jammed)
+    assert not RK.jam_changed(m, low, l_below, 1.0, more, True, jammed)
+    a = rng.random(m) < 0.5
+    b = a.copy()
+    assert RK.same_flags(m, a, b)
+    b[m // 2] = not b[m // 2]
+    assert not RK.same_flags(m, a, b)
+
+
+@pytest.mark.parametrize("k", [1, 3, 10])
+def test_anderson_step_matches_the_numpy_solve(k):
+    """``anderson_step``: the Gram pass of ``anderson_gram``, gamma = (G + reg I)^-1 b (reg =
+    1e-12 trace G + 1e-300) as NumPy's solve (to 1e-10 relative: a solve of a system of
+    condition ~1e2 by a different elimination order), and out = gx - (DX + DR) gamma;
+    status 0 with no difference held."""
+    rng = np.random.default_rng(k)
+    n, depth = 40, 10
+    x, gx = rng.normal(size=n), rng.normal(size=n)
+    DX, DR = rng.normal(size=(n, depth)), rng.normal(size=(n, depth))
+    x_prev, r_prev = rng.normal(size=n), rng.normal(size=n)
+    G = np.zeros((depth, depth))
+    G[:k, :k] = DR[:, :k].T @ DR[:, :k]
+    j = k - 1
+    args = [arr.copy() for arr in (x_prev, r_prev, DX, DR, G)]
+    b_ref = np.empty(depth)
+    RK.anderson_gram(n, x, gx, *args, k, j, True, b_ref)
+    Gk = args[4][:k, :k]
+    gamma = np.linalg.solve(Gk + (1e-12 * np.trace(Gk) + 1e-300) * np.eye(k), b_ref[:k])
+    want = gx - (args[2][:, :k] + args[3][:, :k]) @ gamma
+    mine = [arr.copy() for arr in (x_prev, r_prev, DX, DR, G)]
+    b, out = np.empty(depth), np.empty(n)
+    status = RK.anderson_step(n, x, gx, *mine, k, j, True, b, np.empty((depth, depth)),
+                              np.empty(depth), out)
+    assert status == 1
+    for got, ref in zip(mine, args):
+        assert np.array_equal(got, ref)
+    assert np.allclose(out, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
+    assert RK.anderson_step(n, x, gx, *[arr.copy() for arr in (x_prev, r_prev, DX, DR, G)],
+                            0, 0, False, b, np.empty((depth, depth)), np.empty(depth),
+                            out) == 0
+    # the same iterate and residual again: zero differences, gamma 0 (reg keeps the pivot
+    # off zero, as in NumPy's solve), the mix is gx
+    zero = np.zeros((n, depth))
+    assert RK.anderson_step(n, np.zeros(n), r_prev, np.zeros(n), r_prev.copy(), zero.copy(),
+                            zero.copy(), np.zeros((depth, depth)), 1, 0, True, b,
+                            np.empty((depth, depth)), np.empty(depth), out) == 1
+    assert np.array_equal(out, r_prev)

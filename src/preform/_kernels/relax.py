@@ -1043,6 +1043,146 @@ def anderson_combine(n, gx, DX, DR, gamma, k, out):
         out[e] = v
 
 
+@njit(cache=True)
+def anderson_step(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b, M, gamma, out):
+    """One Anderson mixing step (``interaction/relax._Anderson``) in one call: the pass of
+    ``anderson_gram`` (k: the differences held after this one, j its column), then gamma =
+    (G_k + reg I)^-1 b_k with reg = 1e-12 trace(G_k) + 1e-300 by Gaussian elimination with
+    partial pivoting (M (depth, depth), gamma (depth,) scratch), then out = gx - (DX + DR)
+    gamma (``anderson_combine``). Returns 1 (out holds the mix), 0 (no difference held yet:
+    gx is the mix) or -1 (a zero pivot: the caller clears the history; gx is the mix)."""
+    anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b)
+    if k == 0:
+        return 0
+    tr = 0.0
+    for i in range(k):
+        tr += G[i, i]
+    reg = 1e-12 * tr + 1e-300
+    for i in range(k):
+        for c in range(k):
+            M[i, c] = G[i, c]
+        M[i, i] += reg
+        gamma[i] = b[i]
+    for col in range(k):
+        piv = col
+        big = abs(M[col, col])
+        for i in range(col + 1, k):
+            if abs(M[i, col]) > big:
+                big = abs(M[i, col])
+                piv = i
+        if big == 0.0:
+            return -1
+        if piv != col:
+            for c in range(k):
+                M[col, c], M[piv, c] = M[piv, c], M[col, c]
+            gamma[col], gamma[piv] = gamma[piv], gamma[col]
+        for i in range(col + 1, k):
+            f = M[i, col] / M[col, col]
+            if f != 0.0:
+                for c in range(col, k):
+                    M[i, c] -= f * M[col, c]
+                gamma[i] -= f * gamma[col]
+    for i in range(k - 1, -1, -1):
+        v = gamma[i]
+        for c in range(i + 1, k):
+            v -= M[i, c] * gamma[c]
+        gamma[i] = v / M[i, i]
+    anderson_combine(n, gx, DX, DR, gamma, k, out)
+    return 1
+
+
+@njit(cache=True)
+def _plane_distance(x, y, z, plane, c):
+    """Signed distance (m) of the point (x, y, z) in front of crossing c's tangent plane (as
+    ``wall_distance``)."""
+    return ((x - plane[c, 0]) * plane[c, 3] + (y - plane[c, 1]) * plane[c, 4]
+            + (z - plane[c, 2]) * plane[c, 5])
+
+
+@njit(cache=True)
+def block_wall(m, low, up, w_below, force, pos, delta, W, plane, active, release, wall_force,
+               moved, new):
+    """The wall's active set after a block update delta (m, 3), which moved the resting
+    crossings (active) in their planes: each resting crossing's own balance (``wall_update``
+    with the diagonal W, from the update with the resting crossings held) decides: one whose
+    point lies within ``release`` (m) of its plane keeps the block move, one further in front
+    takes the local move and leaves. Then new (m, 3) = pos + delta; a free crossing more than
+    ``release`` behind its plane is projected onto it and joins, a resting one more than
+    ``release`` in front leaves (active updated in place). wall_force (m,) the wall's push
+    (``wall_update``); moved (m, 3) scratch. Returns True if the set changed."""
+    for c in range(m):
+        for i in range(3):
+            moved[c, i] = delta[c, i]
+            if active[c]:
+                delta[c, i] = 0.0
+    wall_update(m, low, up, w_below, force, pos, delta, W, plane, active, release, wall_force)
+    for c in range(m):
+        if active[c]:
+            d = _plane_distance(pos[c, 0] + delta[c, 0], pos[c, 1] + delta[c, 1],
+                                pos[c, 2] + delta[c, 2], plane, c)
+            if d <= release:
+                for i in range(3):
+                    delta[c, i] = moved[c, i]
+    changed = False
+    for c in range(m):
+        for i in range(3):
+            new[c, i] = pos[c, i] + delta[c, i]
+        d = _plane_distance(new[c, 0], new[c, 1], new[c, 2], plane, c)
+        if not active[c] and d < -release:
+            for i in range(3):
+                new[c, i] -= d * plane[c, 3 + i]
+            active[c] = True
+            changed = True
+        elif active[c] and d > release:
+            active[c] = False
+            changed = True
+    return changed
+
+
+@njit(cache=True)
+def wall_project(m, pos, plane, active, release):
+    """Project onto its tangent plane every crossing behind it that rests on the wall (active)
+    and every free one more than ``release`` (m) behind (a combination of iterates on the
+    planes stays on them; Anderson's weights may be negative); the free ones join the active
+    set (in place). Returns True if one joined."""
+    joined = False
+    for c in range(m):
+        d = _plane_distance(pos[c, 0], pos[c, 1], pos[c, 2], plane, c)
+        if (d < 0.0 and active[c]) or d < -release:
+            for i in range(3):
+                pos[c, i] -= d * plane[c, 3 + i]
+            if not active[c]:
+                active[c] = True
+                joined = True
+    return joined
+
+
+@njit(cache=True)
+def jam_changed(m, low, l_below, l_jam, factored, new_only, jammed):
+    """jammed (m, 2) = the segments between two crossings shorter than l_jam (where the
+    jamming stiffness enters the block preconditioner); returns whether that set differs from
+    ``factored`` (the set at the last factorisation), or with ``new_only`` whether a segment
+    jammed that was not."""
+    changed = False
+    for c in range(m):
+        for side in range(2):
+            j = l_below[c, side] < l_jam and low[c, side] >= 0
+            jammed[c, side] = j
+            f = factored[c, side]
+            if j != f and (j or not new_only):
+                changed = True
+    return changed
+
+
+@njit(cache=True)
+def same_flags(m, a, b):
+    """True if the flags a, b (m,) are equal."""
+    for c in range(m):
+        if a[c] != b[c]:
+            return False
+    return True
+
+
 # -- the full preconditioner: positions and materials, 5 unknowns a crossing --------------------
 
 @njit(cache=True)

@@ -402,7 +402,7 @@ class _Anderson:
     last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
     paper's eq. 17 is the case of one difference). The least-squares problem goes through the
     Gram matrix dR^T dR, kept up to date one column per iteration: two passes over the
-    differences a call (``_kernels.relax.anderson_gram``, ``anderson_combine``)."""
+    differences and the small solve in one kernel call (``_kernels.relax.anderson_step``)."""
 
     def __init__(self, depth):
         self.depth = depth
@@ -426,27 +426,23 @@ class _Anderson:
             self.x_prev = np.empty(n)
             self.r_prev = np.empty(n)
             self.b = np.empty(self.depth)
+            self._M = np.empty((self.depth, self.depth))
+            self._gamma = np.empty(self.depth)
             self.out = np.empty(n)
             self.reset()
         j = self.head
         if self.have_prev:
             self.head = (j + 1) % self.depth
             self.k = min(self.k + 1, self.depth)
-        RK.anderson_gram(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G, self.k,
-                         j, self.have_prev, self.b)
+        status = RK.anderson_step(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G,
+                                  self.k, j, self.have_prev, self.b, self._M, self._gamma,
+                                  self.out)
         self.have_prev = True
-        k = self.k
-        if k == 0:
-            return gx
-        G = self.G[:k, :k]
-        reg = 1e-12 * np.trace(G) + 1e-300
-        try:
-            gamma = np.linalg.solve(G + reg * np.eye(k), self.b[:k])
-        except np.linalg.LinAlgError:
+        if status == 1:
+            return self.out
+        if status < 0:      # a zero pivot: the history is degenerate
             self.reset()
-            return gx
-        RK.anderson_combine(n, gx, self.DX, self.DR, gamma, k, self.out)
-        return self.out
+        return gx
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
@@ -613,8 +609,10 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     best, best_it = np.inf, 0
     l_prev = np.empty((m, 2))
     factorisations = 0
-    inner = lat.low >= 0
+    jammed = np.zeros((m, 2), dtype=np.bool_)
     factored_jam = None
+    moved = np.empty((m, 3))
+    new = np.empty((m, 3))
     predict = False
     predict_on = st.material_predict and block
     while True:
@@ -658,22 +656,21 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             # the jamming stiffness k_jam d d^T enters K where a segment is shorter than a
             # width: where that set changed since the factorisation, K is factorised anew and
             # Anderson's history (of the old map) cleared
-            jammed = (l_below < l_jam) & inner
             # with the full preconditioner only a segment jammed anew (a segment that left the
             # jam keeps its k_jam in K, which then is stiffer there than the map: the update
             # falls short rather than beyond)
-            changed_jam = (factored_jam is not None and
-                           ((jammed & ~factored_jam).any() if full else
-                            not np.array_equal(jammed, factored_jam)))
+            changed_jam = RK.jam_changed(m, lat.low, l_below, l_jam,
+                                         jammed if factored_jam is None else factored_jam,
+                                         full, jammed) and factored_jam is not None
             if changed_jam:
                 due = True
                 mixer.reset()
         else:
             due = (it - 1) % st.refactor_every == 0
-        if due or factored_active is None or not np.array_equal(active, factored_active):
+        if due or factored_active is None or not RK.same_flags(m, active, factored_active):
             factorisations += 1
             if block:
-                factored_jam = jammed
+                factored_jam = jammed.copy()
                 reg = st.block_reg
                 while True:
                     if full:
@@ -713,22 +710,17 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             lap.solve(rhs, delta)
         t4 = time.perf_counter()
         changed = False
-        if has_wall:
-            if block:
-                # the block update moved the resting crossings in their planes; the local
-                # balance decides who leaves
-                moved = delta.copy()
-                delta[active] = 0.0
-                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
-                               active, st.wall_release, wall_force)
-                RK.wall_distance(m, pos + delta, plane, dist)
-                stay = active & (dist <= st.wall_release)
-                delta[stay] = moved[stay]
-            else:
-                delta[active] = 0.0
-                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
-                               active, st.wall_release, wall_force)
-            new = pos + delta
+        if has_wall and block:
+            # the block update moved the resting crossings in their planes; the local balance
+            # decides who leaves, and who joins (one kernel call: the iteration's fixed cost)
+            changed = RK.block_wall(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
+                                    active, st.wall_release, wall_force, moved, new)
+            set_changes += changed
+        elif has_wall:
+            delta[active] = 0.0
+            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
+                           active, st.wall_release, wall_force)
+            np.add(pos, delta, out=new)
             RK.wall_distance(m, new, plane, dist)
             join = ~active & (dist < -st.wall_release)
             leave = active & (dist > st.wall_release)
@@ -739,7 +731,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 changed = True
                 set_changes += 1
         else:
-            new = pos + delta
+            np.add(pos, delta, out=new)
         t5 = time.perf_counter()
         times["wall"] += t5 - t4
         for _ in range(smoothing):
@@ -767,17 +759,11 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         if changed:
             mixer.reset()
         pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
-        if has_wall:
-            # a combination of iterates on the planes stays on them; one that reaches behind
-            # a plane (Anderson's weights may be negative) is projected onto it and rests there
-            RK.wall_distance(m, pos, plane, dist)
-            behind = (dist < 0.0) & active | (dist < -st.wall_release)
-            if behind.any():
-                pos[behind] -= dist[behind, None] * plane[behind, 3:]
-                if (behind & ~active).any():
-                    active |= behind
-                    mixer.reset()
-                    set_changes += 1
+        # a combination of iterates on the planes stays on them; one that reaches behind a
+        # plane (Anderson's weights may be negative) is projected onto it and rests there
+        if has_wall and RK.wall_project(m, pos, plane, active, st.wall_release):
+            mixer.reset()
+            set_changes += 1
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
