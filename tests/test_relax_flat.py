@@ -279,3 +279,41 @@ def test_anderson_step_matches_the_numpy_solve(k):
                             zero.copy(), np.zeros((depth, depth)), 1, 0, True, b,
                             np.empty((depth, depth)), np.empty(depth), out) == 1
     assert np.array_equal(out, r_prev)
+
+
+def _pattern_by_unique(low, perm):
+    """The block pattern by NumPy's unique on the keys column * m + row (the form
+    ``block_pattern`` replaces): Ap, Ai, slot_diag, slot_below, below_first."""
+    m = low.shape[0]
+    pinv = np.empty(m, dtype=np.int64)
+    pinv[perm] = np.arange(m)
+    link = low >= 0
+    pc = np.broadcast_to(pinv[:, None], low.shape)
+    plo = np.where(link, pinv[np.maximum(low, 0)], -1)
+    rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
+    cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
+    uniq, inv = np.unique(cols * m + rows, return_inverse=True)
+    slot_below = np.full(low.shape, -1, dtype=np.int64)
+    slot_below[link] = inv[m:]
+    Ap = np.zeros(m + 1, dtype=np.int64)
+    np.add.at(Ap, uniq // m + 1, 1)
+    return np.cumsum(Ap), uniq % m, inv[:m], slot_below, link & (plo < pc)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_block_pattern_matches_unique(seed):
+    """``block_pattern`` gives the pattern and slots of the keys' unique (a pair given twice,
+    both yarns of a crossing running to the same crossing below, shares one block)."""
+    rng = np.random.default_rng(seed)
+    low, up, u, v = band_lattice(9, 6, seed)
+    m = low.shape[0]
+    low[20, 1] = low[20, 0]      # the same pair twice
+    perm = rng.permutation(m).astype(np.int64)
+    Ap, Ai = np.empty(m + 1, dtype=np.int64), np.empty(3 * m, dtype=np.int64)
+    sd, sb = np.empty(m, dtype=np.int64), np.empty((m, 2), dtype=np.int64)
+    bf = np.empty((m, 2), dtype=np.bool_)
+    n = RK.block_pattern(m, low, perm, Ap, Ai, sd, sb, bf)
+    want = _pattern_by_unique(low, perm)
+    assert n == want[1].size and sb[20, 0] == sb[20, 1]
+    for got, ref in zip((Ap, Ai[:n], sd, sb, bf), want):
+        assert np.array_equal(got, ref)

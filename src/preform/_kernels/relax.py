@@ -647,6 +647,73 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
 
 
 @njit(cache=True)
+def block_pattern(m, low, perm, Ap, Ai, slot_diag, slot_below, below_first):
+    """The pattern of the block preconditioners in the order perm (perm[i]: the crossing at
+    position i): the upper triangle, CSC of blocks, of one block per crossing and one per pair
+    (c, low[c, side]) (a pair given twice shares its block). Ap (m + 1,) the column starts,
+    Ai (3m,) the rows, sorted within each column (the first Ap[m] used); slot_diag (m,) the
+    slot of c's diagonal block, slot_below (m, 2) the slot of the pair (c, low[c, side]) (-1
+    none), below_first (m, 2) True where low[c, side] comes first in the order (the slot holds
+    the block (low, c)). Returns the number of slots."""
+    pinv = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        pinv[perm[i]] = i
+    count = np.zeros(m + 1, dtype=np.int64)
+    for c in range(m):
+        count[pinv[c] + 1] += 1
+        for side in range(2):
+            lo = low[c, side]
+            if lo >= 0:
+                count[max(pinv[c], pinv[lo]) + 1] += 1
+    for j in range(m):
+        count[j + 1] += count[j]
+    rows = np.empty(count[m], dtype=np.int64)
+    owner = np.empty(count[m], dtype=np.int64)     # -1 - c: c's diagonal; 2 c + side: a pair
+    fill = count[:m].copy()
+    for c in range(m):
+        pc = pinv[c]
+        rows[fill[pc]] = pc
+        owner[fill[pc]] = -1 - c
+        fill[pc] += 1
+        for side in range(2):
+            lo = low[c, side]
+            slot_below[c, side] = -1
+            below_first[c, side] = False
+            if lo >= 0:
+                pl = pinv[lo]
+                j = max(pc, pl)
+                rows[fill[j]] = min(pc, pl)
+                owner[fill[j]] = 2 * c + side
+                fill[j] += 1
+                below_first[c, side] = pl < pc
+    nslots = 0
+    Ap[0] = 0
+    for j in range(m):
+        a, b = count[j], count[j + 1]
+        # insertion sort of the column's few entries by row
+        for i in range(a + 1, b):
+            r, o = rows[i], owner[i]
+            k = i - 1
+            while k >= a and rows[k] > r:
+                rows[k + 1] = rows[k]
+                owner[k + 1] = owner[k]
+                k -= 1
+            rows[k + 1] = r
+            owner[k + 1] = o
+        for i in range(a, b):
+            if i == a or rows[i] != rows[i - 1]:
+                Ai[nslots] = rows[i]
+                nslots += 1
+            o = owner[i]
+            if o < 0:
+                slot_diag[-1 - o] = nslots - 1
+            else:
+                slot_below[o // 2, o % 2] = nslots - 1
+        Ap[j + 1] = nslots
+    return nslots
+
+
+@njit(cache=True)
 def ldl_symbolic(n, Ap, Ai, work, Lnz, etree):
     """Elimination tree etree (n,) and column counts Lnz (n,) of the block LDL^T of a symmetric
     matrix given by the pattern of its upper triangle (CSC: Ap (n+1,), Ai, rows <= column; one
@@ -793,18 +860,19 @@ def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim
 @njit(cache=True, fastmath=True)
 def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
     """out (n, 3) = A^-1 rhs (n, 3) for the factor of ``ldl_numeric``, A in the order perm
-    (perm[i]: the crossing at position i); x (n, 3) is scratch."""
+    (perm[i]: the crossing at position i): L z = P rhs, then D^-1 in the same pass, then L^T
+    y = D^-1 z, each row written back to out as it is final; x (n, 3) is scratch."""
     for i in range(n):
         for a in range(3):
             x[i, a] = rhs[perm[i], a]
     for i in range(n):
+        # x_i is final here: L's column i updates the rows below, then D_i^-1 scales x_i (the
+        # forward solve and the diagonal in one pass)
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         for q in range(Lp[i], Lp[i + 1]):
             r = Li[q]
             for a in range(3):
                 x[r, a] -= Lx[q, a, 0] * x0 + Lx[q, a, 1] * x1 + Lx[q, a, 2] * x2
-    for i in range(n):
-        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         for a in range(3):
             x[i, a] = Dinv[i, a, 0] * x0 + Dinv[i, a, 1] * x1 + Dinv[i, a, 2] * x2
     for i in range(n - 1, -1, -1):
@@ -812,9 +880,9 @@ def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
             r = Li[q]
             for a in range(3):
                 x[i, a] -= Lx[q, 0, a] * x[r, 0] + Lx[q, 1, a] * x[r, 1] + Lx[q, 2, a] * x[r, 2]
-    for i in range(n):
+        c = perm[i]
         for a in range(3):
-            out[perm[i], a] = x[i, a]
+            out[c, a] = x[i, a]
 
 
 @njit(cache=True)

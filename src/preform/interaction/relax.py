@@ -337,27 +337,15 @@ class _BlockStiffness:
         perm = np.empty(m, dtype=np.int64)
         RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf, window,
                            perm)
-        pinv = np.empty(m, dtype=np.int64)
-        pinv[perm] = np.arange(m)
         self.perm = perm
-        lo = lat.low
-        link = lo >= 0
-        pc = np.broadcast_to(pinv[:, None], lo.shape)
-        plo = np.where(link, pinv[np.maximum(lo, 0)], -1)
-        rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
-        cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
-        key = cols * m + rows
-        uniq, inv = np.unique(key, return_inverse=True)
-        self.nslots = uniq.size
-        self.slot_diag = np.ascontiguousarray(inv[:m], dtype=np.int64)
-        self.slot_below = np.full(lo.shape, -1, dtype=np.int64)
-        self.slot_below[link] = inv[m:]
-        self.below_first = np.ascontiguousarray(link & (plo < pc))
-        self.Ai = (uniq % m).astype(np.int64)
-        col = uniq // m
-        self.Ap = np.zeros(m + 1, dtype=np.int64)
-        np.add.at(self.Ap, col + 1, 1)
-        self.Ap = np.cumsum(self.Ap)
+        self.Ap = np.empty(m + 1, dtype=np.int64)
+        Ai = np.empty(3 * m, dtype=np.int64)
+        self.slot_diag = np.empty(m, dtype=np.int64)
+        self.slot_below = np.empty((m, 2), dtype=np.int64)
+        self.below_first = np.empty((m, 2), dtype=np.bool_)
+        self.nslots = RK.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
+                                       self.slot_below, self.below_first)
+        self.Ai = Ai[:self.nslots]
         self.vals = np.zeros((self.nslots, nb, nb))
         self.Dg = np.empty((m, nb, nb))
         self.etree = np.empty(m, dtype=np.int64)
