@@ -904,14 +904,15 @@ def _neighbour_ranks(c, low, up, owner, sid, rank, n):
 
 
 @njit(cache=True)
-def _best_cut(a, b, order, low, up, owner, sid, rank, cnt1, cnt2, lo_t, hi_t):
+def _best_cut(a, b, order, low, up, owner, sid, rank, lo_r, hi_r, cnt1, cnt2, lo_t, hi_t):
     """The smallest vertex separator of the set ``sid`` (sorted in order[a:b]) among the cuts
     at ranks t in [lo_t, hi_t] (first part: ranks < t): variant 0, the first part's crossings
     with a neighbour at rank >= t; variant 1, the second part's with one at rank < t. A
     crossing at rank i with neighbours at ranks mn..mx is in variant 0's separator for t in
     (i, mx] and in variant 1's for t in (mn, i], so both counts for every t come from one
-    pass and a running sum (cnt1, cnt2 (n + 2,) scratch, rank (m,) scratch). Returns (size,
-    t, variant); ties go to the cut nearest the middle."""
+    pass and a running sum (cnt1, cnt2 (n + 2,) scratch). rank, lo_r, hi_r (m,) receive each
+    crossing's rank and its neighbours' lowest and highest. Returns (size, t, variant); ties go
+    to the cut nearest the middle."""
     n = b - a
     for i in range(a, b):
         rank[order[i]] = i - a
@@ -919,7 +920,10 @@ def _best_cut(a, b, order, low, up, owner, sid, rank, cnt1, cnt2, lo_t, hi_t):
         cnt1[t] = 0
         cnt2[t] = 0
     for i in range(n):
-        mn, mx = _neighbour_ranks(order[a + i], low, up, owner, sid, rank, n)
+        c = order[a + i]
+        mn, mx = _neighbour_ranks(c, low, up, owner, sid, rank, n)
+        lo_r[c] = mn
+        hi_r[c] = mx
         if mx > i:
             cnt1[i + 1] += 1
             cnt1[mx + 1] -= 1
@@ -946,15 +950,22 @@ def _best_cut(a, b, order, low, up, owner, sid, rank, cnt1, cnt2, lo_t, hi_t):
 
 
 @njit(cache=True)
-def _partition(a, b, order, side, buf):
+def _partition(a, b, order, side, n_l, n_r, buf):
     """Stable partition of order[a:b] into the first part's crossings off the separator (side
-    0), the second part's (2), then the separator's (1)."""
-    k = 0
-    for group in (0, 2, 1):
-        for i in range(a, b):
-            if side[order[i]] == group:
-                buf[k] = order[i]
-                k += 1
+    0, n_l of them), the second part's (2, n_r), then the separator's (1)."""
+    k0, k2, k1 = 0, n_l, n_l + n_r
+    for i in range(a, b):
+        c = order[i]
+        g = side[c]
+        if g == 0:
+            buf[k0] = c
+            k0 += 1
+        elif g == 2:
+            buf[k2] = c
+            k2 += 1
+        else:
+            buf[k1] = c
+            k1 += 1
     for i in range(b - a):
         order[a + i] = buf[i]
 
@@ -975,7 +986,9 @@ def band_dissection(m, low, up, u, v, leaf, window, perm):
     owner = np.zeros(m, dtype=np.int64)
     side = np.zeros(m, dtype=np.int8)
     buf = np.empty(m, dtype=np.int64)
-    rank = np.empty(m, dtype=np.int64)
+    rank = np.empty((2, m), dtype=np.int64)
+    lo_r = np.empty((2, m), dtype=np.int64)
+    hi_r = np.empty((2, m), dtype=np.int64)
     cnt1 = np.empty(m + 2, dtype=np.int64)
     cnt2 = np.empty(m + 2, dtype=np.int64)
     by_u = np.argsort(u)
@@ -996,31 +1009,26 @@ def band_dissection(m, low, up, u, v, leaf, window, perm):
         hi_t = min(n - 1, int(math.floor((0.5 + window) * n)))
         if hi_t < lo_t:
             lo_t = hi_t = n // 2
-        s_v, t_v, var_v = _best_cut(a, b, by_v, low, up, owner, sid, rank, cnt1, cnt2,
-                                    lo_t, hi_t)
-        s_u, t_u, var_u = _best_cut(a, b, by_u, low, up, owner, sid, rank, cnt1, cnt2,
-                                    lo_t, hi_t)
+        s_v, t_v, var_v = _best_cut(a, b, by_v, low, up, owner, sid, rank[0], lo_r[0],
+                                    hi_r[0], cnt1, cnt2, lo_t, hi_t)
+        s_u, t_u, var_u = _best_cut(a, b, by_u, low, up, owner, sid, rank[1], lo_r[1],
+                                    hi_r[1], cnt1, cnt2, lo_t, hi_t)
         if s_v <= s_u:
-            order, t, var, n_s = by_v, t_v, var_v, s_v
+            d, t, var, n_s = 0, t_v, var_v, s_v
         else:
-            order, t, var, n_s = by_u, t_u, var_u, s_u
-        for i in range(a, b):
-            rank[order[i]] = i - a
-        for i in range(n):
-            c = order[a + i]
-            mn, mx = _neighbour_ranks(c, low, up, owner, sid, rank, n)
-            if i < t:
-                side[c] = 1 if (var == 0 and mx >= t) else 0
-            else:
-                side[c] = 1 if (var == 1 and mn < t) else 2
+            d, t, var, n_s = 1, t_u, var_u, s_u
         id_l, id_r = next_id, next_id + 1
         next_id += 2
         for i in range(a, b):
             c = by_u[i]
+            if rank[d, c] < t:
+                side[c] = 1 if (var == 0 and hi_r[d, c] >= t) else 0
+            else:
+                side[c] = 1 if (var == 1 and lo_r[d, c] < t) else 2
             owner[c] = id_l if side[c] == 0 else (id_r if side[c] == 2 else -1)
-        _partition(a, b, by_u, side, buf)
-        _partition(a, b, by_v, side, buf)
         n_l = t - n_s if var == 0 else t
+        _partition(a, b, by_u, side, n_l, n - n_l - n_s, buf)
+        _partition(a, b, by_v, side, n_l, n - n_l - n_s, buf)
         stack[top, 0] = a
         stack[top, 1] = a + n_l
         stack[top, 2] = id_l
