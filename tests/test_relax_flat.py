@@ -317,3 +317,102 @@ def test_block_pattern_matches_unique(seed):
     assert n == want[1].size and sb[20, 0] == sb[20, 1]
     for got, ref in zip((Ap, Ai[:n], sd, sb, bf), want):
         assert np.array_equal(got, ref)
+
+
+@pytest.fixture(scope="module")
+def step16():
+    """A 16-carrier case A step with friction 0.25 after 60 steps (``simcase.capture_step``),
+    perturbed by 2 mm so that the materials and tensions are away from balance."""
+    from simcase import advanced_stepper, capture_step
+    from test_relax import _config
+
+    st, bc, f_top, s_old = capture_step(*advanced_stepper(_config(16, 0.25), 60))
+    st = st.copy()
+    st.pos[:st.m] += np.random.default_rng(5).normal(scale=2e-3, size=(st.m, 3))
+    return st, bc, f_top, s_old
+
+
+def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
+    """``sweep`` (``segment_vectors``, ``material_sweep`` with and without the predicted
+    start, the lengths kept), ``forces_residual`` (``forces``, ``wall_residual``) and
+    ``block_step`` (``tangent_part``, ``ldl_solve``, ``cap_moves``) give what the calls they
+    fold together give, bit for bit."""
+    from preform.interaction import relax as R
+    from preform.interaction.settings import DEFAULT
+
+    st, bc, f_top, s_old = step16
+    e, fr = DEFAULT.energy, DEFAULT.frontal
+    m, ny = st.m, st.n_yarns
+    lat = R.lattice_of(st)
+    fell, top = np.ascontiguousarray(bc.fell), np.ascontiguousarray(bc.top)
+    pos = np.ascontiguousarray(st.pos[:m])
+    g, f_top = R.start_bounds(st, bc)
+    EA = bc.f_spool / e.tow_strain
+    rng = np.random.default_rng(8)
+    active = rng.random(m) < 0.2
+    nrm = rng.normal(size=(m, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    plane = np.hstack([pos, nrm])
+    l_prev0 = np.empty((m, 2))
+    RK.segment_vectors(m, ny, lat.yarn, pos - 1e-3, lat.normal, lat.over, lat.low, lat.highest,
+                       fell, top, bc.h, e.length_smoothing, e.top_smoothing2, np.empty((m, 2, 3)),
+                       l_prev0, np.empty((ny, 3)), np.empty(ny))
+
+    def buffers():
+        return dict(d_below=np.empty((m, 2, 3)), l_below=np.empty((m, 2)),
+                    d_top=np.empty((ny, 3)), l_top=np.empty(ny), tension=np.empty((m, 2)),
+                    chain=np.zeros(m, dtype=np.int64), work=np.zeros((m, 6)),
+                    stats=np.zeros(2, dtype=np.int64), s=np.array(st.material[:m]),
+                    l_prev=l_prev0.copy())
+
+    for predict in (False, True):
+        a, b = buffers(), buffers()
+        RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
+                           fell, top, bc.h, e.length_smoothing, e.top_smoothing2, a["d_below"],
+                           a["l_below"], a["d_top"], a["l_top"])
+        wa = RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, a["l_below"], a["s"],
+                               st.material_fell, s_old[:m], g, f_top, EA, e.compression,
+                               fr.friction_creep, e.kappa0, 1e-10, 60, a["tension"], a["chain"],
+                               a["work"], a["stats"], a["l_prev"] if predict else None)
+        a["l_prev"][:] = a["l_below"]
+        wb = RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
+                      lat.highest, fell, top, bc.h, e.length_smoothing, e.top_smoothing2, b["s"],
+                      st.material_fell, s_old[:m], g, f_top, EA, e.compression,
+                      fr.friction_creep, e.kappa0, 1e-10, 60, b["d_below"], b["l_below"],
+                      b["d_top"], b["l_top"], b["tension"], b["chain"], b["work"], b["stats"],
+                      b["l_prev"], predict, True)
+        assert wa == wb
+        for key in a:
+            assert np.array_equal(a[key], b[key]), key
+    l_jam = float(np.quantile(a["l_below"][lat.low >= 0], 0.3))
+    k_jam = 50.0
+    out = [dict(force=np.empty((m, 3)), w_below=np.empty((m, 2)), w_top=np.empty(ny),
+                total=np.empty(m), W=np.empty(m), res=np.empty(m)) for _ in range(2)]
+    common = (m, ny, lat.yarn, lat.low, lat.highest, a["d_below"], a["l_below"], a["d_top"],
+              a["l_top"], a["tension"], f_top, l_jam, k_jam, 1e-3)
+    o = out[0]
+    RK.forces(*common, o["force"], o["w_below"], o["w_top"], o["total"], o["W"])
+    ra = RK.wall_residual(m, o["force"], o["total"], plane, active, o["W"], 1e-7, o["res"])
+    o = out[1]
+    rb = RK.forces_residual(*common, plane, active, 1e-7, o["force"], o["w_below"], o["w_top"],
+                            o["total"], o["W"], o["res"])
+    assert ra == rb
+    for key in out[0]:
+        assert np.array_equal(out[0][key], out[1][key]), key
+    blk = R._BlockStiffness(lat, pos)
+    RK.block_values(m, ny, lat.low, lat.highest, a["d_below"], a["l_below"], a["d_top"],
+                    a["l_top"], a["tension"], f_top, l_jam, k_jam, 1e-3, 1e-3, plane, active,
+                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals, blk.Dg)
+    assert blk.factor()
+    force = out[0]["force"]
+    for cap in (1e9, 1e-3):         # no scaling, and a cap that scales the update down
+        rhs, want = np.empty((m, 3)), np.empty((m, 3))
+        RK.tangent_part(m, force, plane, active, rhs)
+        blk.solve(rhs, want)
+        sa = RK.cap_moves(m, lat.low, a["l_below"], cap, np.empty(m), want)
+        got = np.empty((m, 3))
+        sb = RK.block_step(m, force, plane, active, lat.low, a["l_below"], cap, blk.Lp, blk.Li,
+                           blk.Lx, blk.Dinv, blk.perm, np.empty((m, 3)), np.empty((m, 3)),
+                           np.empty(m), got)
+        assert sa == sb and np.array_equal(got, want)
+    assert sb < 1.0

@@ -1120,6 +1120,54 @@ def anderson_combine(n, gx, DX, DR, gamma, k, out):
 
 
 @njit(cache=True)
+def sweep(m, n_yarns, yarn, pos, normal, over, low, up, lowest, highest, fell, top, h, eps2,
+          eps2_top, s, s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0, tol, max_newton,
+          d_below, l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict, keep):
+    """One material sweep at the positions pos in one call: the segments
+    (``segment_vectors``), then every yarn's material and tensions (``material_sweep``,
+    started from the strains of the lengths l_prev where ``predict``); with ``keep`` the new
+    lengths go into l_prev for the next sweep's start. Returns the sweep's largest relative
+    material residual."""
+    segment_vectors(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, h, eps2,
+                    eps2_top, d_below, l_below, d_top, l_top)
+    if predict:
+        worst = material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top,
+                               EA, compression, eps_f, kappa0, tol, max_newton, tension, chain,
+                               work, stats, l_prev)
+    else:
+        worst = material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top,
+                               EA, compression, eps_f, kappa0, tol, max_newton, tension, chain,
+                               work, stats, None)
+    if keep:
+        for c in range(m):
+            l_prev[c, 0] = l_below[c, 0]
+            l_prev[c, 1] = l_below[c, 1]
+    return worst
+
+
+@njit(cache=True)
+def forces_residual(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension,
+                    f_top, l_jam, k_jam, floor, plane, active, release, force, w_below, w_top,
+                    total, W, res_c):
+    """``forces`` then ``wall_residual`` (res_c (m,) the imbalance per crossing) in one call;
+    returns the largest relative imbalance (0 without crossings)."""
+    forces(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top,
+           l_jam, k_jam, floor, force, w_below, w_top, total, W)
+    return wall_residual(m, force, total, plane, active, W, release, res_c)
+
+
+@njit(cache=True)
+def block_step(m, force, plane, active, low, l_below, cap, Lp, Li, Lx, Dinv, perm, rhs, x,
+               lmin, delta):
+    """The block update in one call: delta = K^-1 P force (``tangent_part``, ``ldl_solve``;
+    rhs, x (m, 3) scratch), scaled down to ``cap`` times each crossing's shortest segment
+    (``cap_moves``, lmin (m,) scratch). Returns the scale."""
+    tangent_part(m, force, plane, active, rhs)
+    ldl_solve(m, Lp, Li, Lx, Dinv, perm, rhs, delta, x)
+    return cap_moves(m, low, l_below, cap, lmin, delta)
+
+
+@njit(cache=True)
 def anderson_step(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b, M, gamma, out):
     """One Anderson mixing step (``interaction/relax._Anderson``) in one call: the pass of
     ``anderson_gram`` (k: the differences held after this one, j its column), then gamma =

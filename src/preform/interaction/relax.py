@@ -371,6 +371,19 @@ class _BlockStiffness:
                  self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
                  self._y, self._D)
 
+    def update(self, force, plane, active, low, l_below, cap, lmin, rhs, delta):
+        """delta (m, 3) = K^-1 P force, the force's tangent part at the crossings resting on
+        the wall (``tangent_part``; rhs (m, 3) scratch), scaled down to ``cap`` times each
+        crossing's shortest segment (``cap_moves``); with 3 x 3 blocks in one kernel call
+        (``block_step``)."""
+        if self.nb == 3:
+            RK.block_step(self.m, force, plane, active, low, l_below, cap, self.Lp, self.Li,
+                          self.Lx, self.Dinv, self.perm, rhs, self._x, lmin, delta)
+            return
+        RK.tangent_part(self.m, force, plane, active, rhs)
+        self.solve(rhs, delta)
+        RK.cap_moves(self.m, low, l_below, cap, lmin, delta)
+
     def solve(self, rhs, out):
         """out (m, 3) = the position part of K^-1 (rhs, 0): with the materials among the
         unknowns (nb 5), their right-hand side is 0 (the material equations hold after every
@@ -605,19 +618,16 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     predict_on = st.material_predict and block
     while True:
         t0 = time.perf_counter()
-        RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
-                           fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
-        RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g, f_top,
-                          EA, compression, eps_f, kappa0, st.material_tol, st.material_newton,
-                          tension, chain, work, stats, l_prev if predict else None)
-        if predict_on:
-            l_prev[:] = l_below
-            predict = True
+        RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
+                 lat.highest, fell, top, h, eps2, eps2_top, s, s_fell, s_old, g, f_top, EA,
+                 compression, eps_f, kappa0, st.material_tol, st.material_newton, d_below,
+                 l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict, predict_on)
+        predict = predict_on
         t1 = time.perf_counter()
-        RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
-                  f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
-        residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
-                    if m else 0.0)
+        residual = RK.forces_residual(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
+                                      d_top, l_top, tension, f_top, l_jam, k_jam, st.floor,
+                                      plane, active, st.wall_release, force, w_below, w_top,
+                                      total, W, res_c)
         history.append(residual)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
@@ -690,9 +700,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 break
         t3 = time.perf_counter()
         if block:
-            RK.tangent_part(m, force, plane, active, rhs)
-            blk.solve(rhs, delta)
-            RK.cap_moves(m, lat.low, l_below, st.block_cap, lmin, delta)
+            blk.update(force, plane, active, lat.low, l_below, st.block_cap, lmin, rhs, delta)
         else:
             rhs = np.where(active[:, None], 0.0, force)
             lap.solve(rhs, delta)
