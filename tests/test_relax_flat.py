@@ -336,7 +336,7 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     """``sweep`` (``segment_vectors``, ``material_sweep`` with and without the predicted
     start, the lengths kept), ``forces_residual`` (``forces``, ``wall_residual``) and
     ``block_step`` (``tangent_part``, ``ldl_solve``, ``cap_moves``) give what the calls they
-    fold together give, bit for bit."""
+    fold together give: bit for bit, the solve (fastmath) to its round-off."""
     from preform.interaction import relax as R
     from preform.interaction.settings import DEFAULT
 
@@ -414,5 +414,9 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
         sb = RK.block_step(m, force, plane, active, lat.low, a["l_below"], cap, blk.Lp, blk.Li,
                            blk.Lx, blk.Dinv, blk.perm, np.empty((m, 3)), np.empty((m, 3)),
                            np.empty(m), got)
-        assert sa == sb and np.array_equal(got, want)
+        # the solve is compiled with fastmath: its loops may be vectorised differently, and
+        # summed in another order, inlined into block_step and with other array alignments;
+        # K's condition number here is about 1e6 (reg 1e-3), so 1e-16 x 1e6 with margin
+        assert np.isclose(sa, sb, rtol=1e-9, atol=0.0)
+        assert np.abs(got - want).max() <= 1e-9 * np.abs(want).max()
     assert sb < 1.0
