@@ -647,6 +647,73 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
 
 
 @njit(cache=True)
+def block_pattern(m, low, perm, Ap, Ai, slot_diag, slot_below, below_first):
+    """The pattern of the block preconditioners in the order perm (perm[i]: the crossing at
+    position i): the upper triangle, CSC of blocks, of one block per crossing and one per pair
+    (c, low[c, side]) (a pair given twice shares its block). Ap (m + 1,) the column starts,
+    Ai (3m,) the rows, sorted within each column (the first Ap[m] used); slot_diag (m,) the
+    slot of c's diagonal block, slot_below (m, 2) the slot of the pair (c, low[c, side]) (-1
+    none), below_first (m, 2) True where low[c, side] comes first in the order (the slot holds
+    the block (low, c)). Returns the number of slots."""
+    pinv = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        pinv[perm[i]] = i
+    count = np.zeros(m + 1, dtype=np.int64)
+    for c in range(m):
+        count[pinv[c] + 1] += 1
+        for side in range(2):
+            lo = low[c, side]
+            if lo >= 0:
+                count[max(pinv[c], pinv[lo]) + 1] += 1
+    for j in range(m):
+        count[j + 1] += count[j]
+    rows = np.empty(count[m], dtype=np.int64)
+    owner = np.empty(count[m], dtype=np.int64)     # -1 - c: c's diagonal; 2 c + side: a pair
+    fill = count[:m].copy()
+    for c in range(m):
+        pc = pinv[c]
+        rows[fill[pc]] = pc
+        owner[fill[pc]] = -1 - c
+        fill[pc] += 1
+        for side in range(2):
+            lo = low[c, side]
+            slot_below[c, side] = -1
+            below_first[c, side] = False
+            if lo >= 0:
+                pl = pinv[lo]
+                j = max(pc, pl)
+                rows[fill[j]] = min(pc, pl)
+                owner[fill[j]] = 2 * c + side
+                fill[j] += 1
+                below_first[c, side] = pl < pc
+    nslots = 0
+    Ap[0] = 0
+    for j in range(m):
+        a, b = count[j], count[j + 1]
+        # insertion sort of the column's few entries by row
+        for i in range(a + 1, b):
+            r, o = rows[i], owner[i]
+            k = i - 1
+            while k >= a and rows[k] > r:
+                rows[k + 1] = rows[k]
+                owner[k + 1] = owner[k]
+                k -= 1
+            rows[k + 1] = r
+            owner[k + 1] = o
+        for i in range(a, b):
+            if i == a or rows[i] != rows[i - 1]:
+                Ai[nslots] = rows[i]
+                nslots += 1
+            o = owner[i]
+            if o < 0:
+                slot_diag[-1 - o] = nslots - 1
+            else:
+                slot_below[o // 2, o % 2] = nslots - 1
+        Ap[j + 1] = nslots
+    return nslots
+
+
+@njit(cache=True)
 def ldl_symbolic(n, Ap, Ai, work, Lnz, etree):
     """Elimination tree etree (n,) and column counts Lnz (n,) of the block LDL^T of a symmetric
     matrix given by the pattern of its upper triangle (CSC: Ap (n+1,), Ai, rows <= column; one
@@ -793,18 +860,19 @@ def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim
 @njit(cache=True, fastmath=True)
 def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
     """out (n, 3) = A^-1 rhs (n, 3) for the factor of ``ldl_numeric``, A in the order perm
-    (perm[i]: the crossing at position i); x (n, 3) is scratch."""
+    (perm[i]: the crossing at position i): L z = P rhs, then D^-1 in the same pass, then L^T
+    y = D^-1 z, each row written back to out as it is final; x (n, 3) is scratch."""
     for i in range(n):
         for a in range(3):
             x[i, a] = rhs[perm[i], a]
     for i in range(n):
+        # x_i is final here: L's column i updates the rows below, then D_i^-1 scales x_i (the
+        # forward solve and the diagonal in one pass)
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         for q in range(Lp[i], Lp[i + 1]):
             r = Li[q]
             for a in range(3):
                 x[r, a] -= Lx[q, a, 0] * x0 + Lx[q, a, 1] * x1 + Lx[q, a, 2] * x2
-    for i in range(n):
-        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         for a in range(3):
             x[i, a] = Dinv[i, a, 0] * x0 + Dinv[i, a, 1] * x1 + Dinv[i, a, 2] * x2
     for i in range(n - 1, -1, -1):
@@ -812,96 +880,161 @@ def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
             r = Li[q]
             for a in range(3):
                 x[i, a] -= Lx[q, 0, a] * x[r, 0] + Lx[q, 1, a] * x[r, 1] + Lx[q, 2, a] * x[r, 2]
-    for i in range(n):
+        c = perm[i]
         for a in range(3):
-            out[perm[i], a] = x[i, a]
+            out[c, a] = x[i, a]
 
 
 @njit(cache=True)
-def _split_separator(a, b, order, low, up, seg, id_l, id_r, side):
-    """Label the first half of order[a:b] id_l and the second id_r in seg, flag in side (1)
-    the crossings of the first half with a lattice neighbour in the second (0 the others of the
-    first half, 2 the second half); returns their number."""
+def _neighbour_ranks(c, low, up, owner, sid, rank, n):
+    """(lowest, highest) rank among the lattice neighbours (``low``/``up``) of crossing c that
+    belong to the set ``sid`` (``owner``); (n, -1) if none."""
+    mn = n
+    mx = -1
+    for s in range(2):
+        for q in range(2):
+            nb = low[c, s] if q == 0 else up[c, s]
+            if nb >= 0 and owner[nb] == sid:
+                r = rank[nb]
+                if r < mn:
+                    mn = r
+                if r > mx:
+                    mx = r
+    return mn, mx
+
+
+@njit(cache=True)
+def _best_cut(a, b, order, low, up, owner, sid, rank, lo_r, hi_r, cnt1, cnt2, lo_t, hi_t):
+    """The smallest vertex separator of the set ``sid`` (sorted in order[a:b]) among the cuts
+    at ranks t in [lo_t, hi_t] (first part: ranks < t): variant 0, the first part's crossings
+    with a neighbour at rank >= t; variant 1, the second part's with one at rank < t. A
+    crossing at rank i with neighbours at ranks mn..mx is in variant 0's separator for t in
+    (i, mx] and in variant 1's for t in (mn, i], so both counts for every t come from one
+    pass and a running sum (cnt1, cnt2 (n + 2,) scratch). rank, lo_r, hi_r (m,) receive each
+    crossing's rank and its neighbours' lowest and highest. Returns (size, t, variant); ties go
+    to the cut nearest the middle."""
     n = b - a
-    half = n // 2
     for i in range(a, b):
-        seg[order[i]] = id_l if i - a < half else id_r
-    n_s = 0
-    for i in range(a, a + half):
-        c = order[i]
-        sep = False
-        for s in range(2):
-            nb = low[c, s]
-            if nb >= 0 and seg[nb] == id_r:
-                sep = True
-            nb = up[c, s]
-            if nb >= 0 and seg[nb] == id_r:
-                sep = True
-        side[c] = 1 if sep else 0
-        n_s += side[c]
-    for i in range(a + half, b):
-        side[order[i]] = 2
-    return n_s
+        rank[order[i]] = i - a
+    for t in range(n + 2):
+        cnt1[t] = 0
+        cnt2[t] = 0
+    for i in range(n):
+        c = order[a + i]
+        mn, mx = _neighbour_ranks(c, low, up, owner, sid, rank, n)
+        lo_r[c] = mn
+        hi_r[c] = mx
+        if mx > i:
+            cnt1[i + 1] += 1
+            cnt1[mx + 1] -= 1
+        if mn < i:
+            cnt2[mn + 1] += 1
+            cnt2[i + 1] -= 1
+    best = n + 1
+    bt = n // 2
+    bv = 0
+    s1 = 0
+    s2 = 0
+    for t in range(hi_t + 1):
+        s1 += cnt1[t]
+        s2 += cnt2[t]
+        if t < lo_t:
+            continue
+        for var in range(2):
+            size = s1 if var == 0 else s2
+            if size < best or (size == best and abs(2 * t - n) < abs(2 * bt - n)):
+                best = size
+                bt = t
+                bv = var
+    return best, bt, bv
 
 
 @njit(cache=True)
-def _partition(a, b, order, side, buf):
-    """Stable partition of order[a:b] into the first half's crossings off the separator (side
-    0), the second half's (2), then the separator's (1)."""
-    k = 0
-    for group in (0, 2, 1):
-        for i in range(a, b):
-            if side[order[i]] == group:
-                buf[k] = order[i]
-                k += 1
+def _partition(a, b, order, side, n_l, n_r, buf):
+    """Stable partition of order[a:b] into the first part's crossings off the separator (side
+    0, n_l of them), the second part's (2, n_r), then the separator's (1)."""
+    k0, k2, k1 = 0, n_l, n_l + n_r
+    for i in range(a, b):
+        c = order[i]
+        g = side[c]
+        if g == 0:
+            buf[k0] = c
+            k0 += 1
+        elif g == 2:
+            buf[k2] = c
+            k2 += 1
+        else:
+            buf[k1] = c
+            k1 += 1
     for i in range(b - a):
         order[a + i] = buf[i]
 
 
 @njit(cache=True)
-def band_dissection(m, low, up, u, v, leaf, perm):
+def band_dissection(m, low, up, u, v, leaf, window, perm):
     """Fill-reducing order of a lattice of crossings on a band around an axis, by geometric
-    nested dissection: a set of crossings is split at the median of u (the angle around the
-    axis) or of v (the height along it), whichever gives the smaller separator: the crossings
-    of the first half with a lattice neighbour (``low``/``up``, (m, 2)) in the second; the order
-    is the first half's, then the second's, then the separator's (George 1973). Sets up to
-    ``leaf`` crossings keep their order. On the whole band the median of u cuts it into two
-    arcs at two seams, whose crossings are the first separator. The crossings are sorted by u
-    and by v once, and every split partitions both orders stably, so each set's crossings stay
-    sorted: O(m log m). perm (m,) receives the order (perm[i]: the crossing at position i)."""
-    seg = np.zeros(m, dtype=np.int64)
+    nested dissection (George 1973): a set of crossings, sorted by u (the angle around the
+    axis) and by v (the height along it), is cut at the rank t in each sort, within ``window``
+    of the set's size from its middle, that gives the smallest vertex separator, the crossings
+    of one part with a lattice neighbour (``low``/``up``, (m, 2)) in the other, either part's
+    (``_best_cut``); the order is the first part's, the second's, then the separator's, each
+    part dissected in turn. Sets up to ``leaf`` crossings keep their order. On the whole band
+    a cut in u makes two arcs at two seams, whose crossings are the first separator. The
+    crossings are sorted by u and by v once and every cut partitions both sorts stably, so
+    each set's crossings stay sorted: O(m) a level, O(m log m) in all. perm (m,) receives the
+    order (perm[i]: the crossing at position i)."""
+    owner = np.zeros(m, dtype=np.int64)
     side = np.zeros(m, dtype=np.int8)
     buf = np.empty(m, dtype=np.int64)
+    rank = np.empty((2, m), dtype=np.int64)
+    lo_r = np.empty((2, m), dtype=np.int64)
+    hi_r = np.empty((2, m), dtype=np.int64)
+    cnt1 = np.empty(m + 2, dtype=np.int64)
+    cnt2 = np.empty(m + 2, dtype=np.int64)
     by_u = np.argsort(u)
     by_v = np.argsort(v)
-    stack = np.empty((2 * m + 2, 2), dtype=np.int64)
+    stack = np.empty((2 * m + 2, 3), dtype=np.int64)
     stack[0, 0] = 0
     stack[0, 1] = m
+    stack[0, 2] = 0
     top = 1
     next_id = 1
     while top:
         top -= 1
-        a, b = stack[top, 0], stack[top, 1]
+        a, b, sid = stack[top, 0], stack[top, 1], stack[top, 2]
         n = b - a
         if n <= leaf:
             continue
+        lo_t = max(1, int(math.ceil((0.5 - window) * n)))
+        hi_t = min(n - 1, int(math.floor((0.5 + window) * n)))
+        if hi_t < lo_t:
+            lo_t = hi_t = n // 2
+        s_v, t_v, var_v = _best_cut(a, b, by_v, low, up, owner, sid, rank[0], lo_r[0],
+                                    hi_r[0], cnt1, cnt2, lo_t, hi_t)
+        s_u, t_u, var_u = _best_cut(a, b, by_u, low, up, owner, sid, rank[1], lo_r[1],
+                                    hi_r[1], cnt1, cnt2, lo_t, hi_t)
+        if s_v <= s_u:
+            d, t, var, n_s = 0, t_v, var_v, s_v
+        else:
+            d, t, var, n_s = 1, t_u, var_u, s_u
         id_l, id_r = next_id, next_id + 1
         next_id += 2
-        s_v = _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
-        s_u = _split_separator(a, b, by_u, low, up, seg, id_l, id_r, side)
-        if s_v <= s_u:
-            _split_separator(a, b, by_v, low, up, seg, id_l, id_r, side)
-        n_s = min(s_u, s_v)
         for i in range(a, b):
-            if side[by_u[i]] == 1:
-                seg[by_u[i]] = -1
-        _partition(a, b, by_u, side, buf)
-        _partition(a, b, by_v, side, buf)
-        n_l = n // 2 - n_s
+            c = by_u[i]
+            if rank[d, c] < t:
+                side[c] = 1 if (var == 0 and hi_r[d, c] >= t) else 0
+            else:
+                side[c] = 1 if (var == 1 and lo_r[d, c] < t) else 2
+            owner[c] = id_l if side[c] == 0 else (id_r if side[c] == 2 else -1)
+        n_l = t - n_s if var == 0 else t
+        _partition(a, b, by_u, side, n_l, n - n_l - n_s, buf)
+        _partition(a, b, by_v, side, n_l, n - n_l - n_s, buf)
         stack[top, 0] = a
         stack[top, 1] = a + n_l
+        stack[top, 2] = id_l
         stack[top + 1, 0] = a + n_l
         stack[top + 1, 1] = b - n_s
+        stack[top + 1, 2] = id_r
         top += 2
     for i in range(m):
         perm[i] = by_u[i]
@@ -984,6 +1117,194 @@ def anderson_combine(n, gx, DX, DR, gamma, k, out):
         for i in range(k):
             v -= gamma[i] * (DX[e, i] + DR[e, i])
         out[e] = v
+
+
+@njit(cache=True)
+def sweep(m, n_yarns, yarn, pos, normal, over, low, up, lowest, highest, fell, top, h, eps2,
+          eps2_top, s, s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0, tol, max_newton,
+          d_below, l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict, keep):
+    """One material sweep at the positions pos in one call: the segments
+    (``segment_vectors``), then every yarn's material and tensions (``material_sweep``,
+    started from the strains of the lengths l_prev where ``predict``); with ``keep`` the new
+    lengths go into l_prev for the next sweep's start. Returns the sweep's largest relative
+    material residual."""
+    segment_vectors(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, h, eps2,
+                    eps2_top, d_below, l_below, d_top, l_top)
+    if predict:
+        worst = material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top,
+                               EA, compression, eps_f, kappa0, tol, max_newton, tension, chain,
+                               work, stats, l_prev)
+    else:
+        worst = material_sweep(n_yarns, lowest, up, yarn, l_below, s, s_fell, s_old, g, f_top,
+                               EA, compression, eps_f, kappa0, tol, max_newton, tension, chain,
+                               work, stats, None)
+    if keep:
+        for c in range(m):
+            l_prev[c, 0] = l_below[c, 0]
+            l_prev[c, 1] = l_below[c, 1]
+    return worst
+
+
+@njit(cache=True)
+def forces_residual(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension,
+                    f_top, l_jam, k_jam, floor, plane, active, release, force, w_below, w_top,
+                    total, W, res_c):
+    """``forces`` then ``wall_residual`` (res_c (m,) the imbalance per crossing) in one call;
+    returns the largest relative imbalance (0 without crossings)."""
+    forces(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top,
+           l_jam, k_jam, floor, force, w_below, w_top, total, W)
+    return wall_residual(m, force, total, plane, active, W, release, res_c)
+
+
+@njit(cache=True)
+def block_step(m, force, plane, active, low, l_below, cap, Lp, Li, Lx, Dinv, perm, rhs, x,
+               lmin, delta):
+    """The block update in one call: delta = K^-1 P force (``tangent_part``, ``ldl_solve``;
+    rhs, x (m, 3) scratch), scaled down to ``cap`` times each crossing's shortest segment
+    (``cap_moves``, lmin (m,) scratch). Returns the scale."""
+    tangent_part(m, force, plane, active, rhs)
+    ldl_solve(m, Lp, Li, Lx, Dinv, perm, rhs, delta, x)
+    return cap_moves(m, low, l_below, cap, lmin, delta)
+
+
+@njit(cache=True)
+def anderson_step(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b, M, gamma, out):
+    """One Anderson mixing step (``interaction/relax._Anderson``) in one call: the pass of
+    ``anderson_gram`` (k: the differences held after this one, j its column), then gamma =
+    (G_k + reg I)^-1 b_k with reg = 1e-12 trace(G_k) + 1e-300 by Gaussian elimination with
+    partial pivoting (M (depth, depth), gamma (depth,) scratch), then out = gx - (DX + DR)
+    gamma (``anderson_combine``). Returns 1 (out holds the mix), 0 (no difference held yet:
+    gx is the mix) or -1 (a zero pivot: the caller clears the history; gx is the mix)."""
+    anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b)
+    if k == 0:
+        return 0
+    tr = 0.0
+    for i in range(k):
+        tr += G[i, i]
+    reg = 1e-12 * tr + 1e-300
+    for i in range(k):
+        for c in range(k):
+            M[i, c] = G[i, c]
+        M[i, i] += reg
+        gamma[i] = b[i]
+    for col in range(k):
+        piv = col
+        big = abs(M[col, col])
+        for i in range(col + 1, k):
+            if abs(M[i, col]) > big:
+                big = abs(M[i, col])
+                piv = i
+        if big == 0.0:
+            return -1
+        if piv != col:
+            for c in range(k):
+                M[col, c], M[piv, c] = M[piv, c], M[col, c]
+            gamma[col], gamma[piv] = gamma[piv], gamma[col]
+        for i in range(col + 1, k):
+            f = M[i, col] / M[col, col]
+            if f != 0.0:
+                for c in range(col, k):
+                    M[i, c] -= f * M[col, c]
+                gamma[i] -= f * gamma[col]
+    for i in range(k - 1, -1, -1):
+        v = gamma[i]
+        for c in range(i + 1, k):
+            v -= M[i, c] * gamma[c]
+        gamma[i] = v / M[i, i]
+    anderson_combine(n, gx, DX, DR, gamma, k, out)
+    return 1
+
+
+@njit(cache=True)
+def _plane_distance(x, y, z, plane, c):
+    """Signed distance (m) of the point (x, y, z) in front of crossing c's tangent plane (as
+    ``wall_distance``)."""
+    return ((x - plane[c, 0]) * plane[c, 3] + (y - plane[c, 1]) * plane[c, 4]
+            + (z - plane[c, 2]) * plane[c, 5])
+
+
+@njit(cache=True)
+def block_wall(m, low, up, w_below, force, pos, delta, W, plane, active, release, wall_force,
+               moved, new):
+    """The wall's active set after a block update delta (m, 3), which moved the resting
+    crossings (active) in their planes: each resting crossing's own balance (``wall_update``
+    with the diagonal W, from the update with the resting crossings held) decides: one whose
+    point lies within ``release`` (m) of its plane keeps the block move, one further in front
+    takes the local move and leaves. Then new (m, 3) = pos + delta; a free crossing more than
+    ``release`` behind its plane is projected onto it and joins, a resting one more than
+    ``release`` in front leaves (active updated in place). wall_force (m,) the wall's push
+    (``wall_update``); moved (m, 3) scratch. Returns True if the set changed."""
+    for c in range(m):
+        for i in range(3):
+            moved[c, i] = delta[c, i]
+            if active[c]:
+                delta[c, i] = 0.0
+    wall_update(m, low, up, w_below, force, pos, delta, W, plane, active, release, wall_force)
+    for c in range(m):
+        if active[c]:
+            d = _plane_distance(pos[c, 0] + delta[c, 0], pos[c, 1] + delta[c, 1],
+                                pos[c, 2] + delta[c, 2], plane, c)
+            if d <= release:
+                for i in range(3):
+                    delta[c, i] = moved[c, i]
+    changed = False
+    for c in range(m):
+        for i in range(3):
+            new[c, i] = pos[c, i] + delta[c, i]
+        d = _plane_distance(new[c, 0], new[c, 1], new[c, 2], plane, c)
+        if not active[c] and d < -release:
+            for i in range(3):
+                new[c, i] -= d * plane[c, 3 + i]
+            active[c] = True
+            changed = True
+        elif active[c] and d > release:
+            active[c] = False
+            changed = True
+    return changed
+
+
+@njit(cache=True)
+def wall_project(m, pos, plane, active, release):
+    """Project onto its tangent plane every crossing behind it that rests on the wall (active)
+    and every free one more than ``release`` (m) behind (a combination of iterates on the
+    planes stays on them; Anderson's weights may be negative); the free ones join the active
+    set (in place). Returns True if one joined."""
+    joined = False
+    for c in range(m):
+        d = _plane_distance(pos[c, 0], pos[c, 1], pos[c, 2], plane, c)
+        if (d < 0.0 and active[c]) or d < -release:
+            for i in range(3):
+                pos[c, i] -= d * plane[c, 3 + i]
+            if not active[c]:
+                active[c] = True
+                joined = True
+    return joined
+
+
+@njit(cache=True)
+def jam_changed(m, low, l_below, l_jam, factored, new_only, jammed):
+    """jammed (m, 2) = the segments between two crossings shorter than l_jam (where the
+    jamming stiffness enters the block preconditioner); returns whether that set differs from
+    ``factored`` (the set at the last factorisation), or with ``new_only`` whether a segment
+    jammed that was not."""
+    changed = False
+    for c in range(m):
+        for side in range(2):
+            j = l_below[c, side] < l_jam and low[c, side] >= 0
+            jammed[c, side] = j
+            f = factored[c, side]
+            if j != f and (j or not new_only):
+                changed = True
+    return changed
+
+
+@njit(cache=True)
+def same_flags(m, a, b):
+    """True if the flags a, b (m,) are equal."""
+    for c in range(m):
+        if a[c] != b[c]:
+            return False
+    return True
 
 
 # -- the full preconditioner: positions and materials, 5 unknowns a crossing --------------------

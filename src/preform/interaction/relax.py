@@ -205,6 +205,13 @@ class RelaxSettings:
     #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
     #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
     block_reg: float = 1e-3
+    #: sets of crossings up to this size keep their order in the nested dissection of the
+    #: block preconditioners (``band_dissection``); 4: 2908 crossings, 11.8 blocks of L a
+    #: column against 12.8 with 8 (docs/decisions-flat14.md)
+    order_leaf: int = 4
+    #: the dissection cuts a set at the smallest separator within this fraction of its size
+    #: from the middle; 0.15: 19 % less fill than the median cut (0), 4 % less than METIS
+    order_window: float = 0.15
     #: iterations between factorisations of the block preconditioner (0: once per solve, and
     #: when the wall's active set or the set of jammed segments changes): a preconditioner
     #: that changes within a solve changes Anderson's map under it (144 carriers: 12-15
@@ -382,13 +389,14 @@ def _metis_order(lat: Lattice):
 class _BlockStiffness:
     """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
     ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
-    of the band of crossings around the machine axis (``order`` "band", ``band_dissection``:
-    the order keeps the factor's fill per crossing nearly flat as the zone grows) or of the
-    lattice's graph ("metis", ``_metis_order``), the symbolic analysis of its
-    block LDL^T once per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and
-    solves (``ldl_solve``, ``ldl_solve5``)."""
+    of the band of crossings around the machine axis (``order`` "band", ``band_dissection``
+    with ``leaf`` and ``window``, ``RelaxSettings.order_leaf``, ``order_window``: the factor's
+    fill grows as log m, 6-7 blocks a column at 288 crossings, 11.5-11.8 at 2900) or of the
+    lattice's graph ("metis", ``_metis_order``), the symbolic analysis of its block LDL^T once
+    per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and solves (``ldl_solve``,
+    ``ldl_solve5``)."""
 
-    def __init__(self, lat: Lattice, pos, nb=3, order="band"):
+    def __init__(self, lat: Lattice, pos, nb=3, order="band", leaf=4, window=0.15):
         m = lat.m
         self.m = m
         self.nb = nb
@@ -398,28 +406,17 @@ class _BlockStiffness:
             r = np.hypot(pos[:, 0], pos[:, 1])
             u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
             perm = np.empty(m, dtype=np.int64)
-            RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), 8, perm)
-        pinv = np.empty(m, dtype=np.int64)
-        pinv[perm] = np.arange(m)
+            RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf,
+                               window, perm)
         self.perm = perm
-        lo = lat.low
-        link = lo >= 0
-        pc = np.broadcast_to(pinv[:, None], lo.shape)
-        plo = np.where(link, pinv[np.maximum(lo, 0)], -1)
-        rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
-        cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
-        key = cols * m + rows
-        uniq, inv = np.unique(key, return_inverse=True)
-        self.nslots = uniq.size
-        self.slot_diag = np.ascontiguousarray(inv[:m], dtype=np.int64)
-        self.slot_below = np.full(lo.shape, -1, dtype=np.int64)
-        self.slot_below[link] = inv[m:]
-        self.below_first = np.ascontiguousarray(link & (plo < pc))
-        self.Ai = (uniq % m).astype(np.int64)
-        col = uniq // m
-        self.Ap = np.zeros(m + 1, dtype=np.int64)
-        np.add.at(self.Ap, col + 1, 1)
-        self.Ap = np.cumsum(self.Ap)
+        self.Ap = np.empty(m + 1, dtype=np.int64)
+        Ai = np.empty(3 * m, dtype=np.int64)
+        self.slot_diag = np.empty(m, dtype=np.int64)
+        self.slot_below = np.empty((m, 2), dtype=np.int64)
+        self.below_first = np.empty((m, 2), dtype=np.bool_)
+        self.nslots = RK.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
+                                       self.slot_below, self.below_first)
+        self.Ai = Ai[:self.nslots]
         self.vals = np.zeros((self.nslots, nb, nb))
         self.Dg = np.empty((m, nb, nb))
         self.etree = np.empty(m, dtype=np.int64)
@@ -444,7 +441,7 @@ class _BlockStiffness:
     _last = None
 
     @classmethod
-    def of(cls, lat: Lattice, pos, nb=3, order="band"):
+    def of(cls, lat: Lattice, pos, nb=3, order="band", leaf=4, window=0.15):
         """The structure of ``lat`` (``__init__``), the last one again where it was built for
         the same block size, order ("metis") and lattice (its ``low``; the pattern and the
         order depend on nothing else). Its values and factor are scratch of the solve that
@@ -453,7 +450,7 @@ class _BlockStiffness:
         if (order == "metis" and last is not None and last[0] == nb and last[1] == order
                 and last[2].shape == lat.low.shape and np.array_equal(last[2], lat.low)):
             return last[3]
-        blk = cls(lat, pos, nb, order)
+        blk = cls(lat, pos, nb, order, leaf, window)
         if order == "metis":
             cls._last = (nb, order, lat.low.copy(), blk)
         return blk
@@ -464,6 +461,19 @@ class _BlockStiffness:
         return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
                  self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
                  self._y, self._D)
+
+    def update(self, force, plane, active, low, l_below, cap, lmin, rhs, delta):
+        """delta (m, 3) = K^-1 P force, the force's tangent part at the crossings resting on
+        the wall (``tangent_part``; rhs (m, 3) scratch), scaled down to ``cap`` times each
+        crossing's shortest segment (``cap_moves``); with 3 x 3 blocks in one kernel call
+        (``block_step``)."""
+        if self.nb == 3:
+            RK.block_step(self.m, force, plane, active, low, l_below, cap, self.Lp, self.Li,
+                          self.Lx, self.Dinv, self.perm, rhs, self._x, lmin, delta)
+            return
+        RK.tangent_part(self.m, force, plane, active, rhs)
+        self.solve(rhs, delta)
+        RK.cap_moves(self.m, low, l_below, cap, lmin, delta)
 
     def solve(self, rhs, out):
         """out (m, 3) = the position part of K^-1 (rhs, 0): with the materials among the
@@ -484,7 +494,7 @@ class _Anderson:
     last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
     paper's eq. 17 is the case of one difference). The least-squares problem goes through the
     Gram matrix dR^T dR, kept up to date one column per iteration: two passes over the
-    differences a call (``_kernels.relax.anderson_gram``, ``anderson_combine``)."""
+    differences and the small solve in one kernel call (``_kernels.relax.anderson_step``)."""
 
     def __init__(self, depth):
         self.depth = depth
@@ -508,27 +518,23 @@ class _Anderson:
             self.x_prev = np.empty(n)
             self.r_prev = np.empty(n)
             self.b = np.empty(self.depth)
+            self._M = np.empty((self.depth, self.depth))
+            self._gamma = np.empty(self.depth)
             self.out = np.empty(n)
             self.reset()
         j = self.head
         if self.have_prev:
             self.head = (j + 1) % self.depth
             self.k = min(self.k + 1, self.depth)
-        RK.anderson_gram(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G, self.k,
-                         j, self.have_prev, self.b)
+        status = RK.anderson_step(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G,
+                                  self.k, j, self.have_prev, self.b, self._M, self._gamma,
+                                  self.out)
         self.have_prev = True
-        k = self.k
-        if k == 0:
-            return gx
-        G = self.G[:k, :k]
-        reg = 1e-12 * np.trace(G) + 1e-300
-        try:
-            gamma = np.linalg.solve(G + reg * np.eye(k), self.b[:k])
-        except np.linalg.LinAlgError:
+        if status == 1:
+            return self.out
+        if status < 0:      # a zero pivot: the history is degenerate
             self.reset()
-            return gx
-        RK.anderson_combine(n, gx, self.DX, self.DR, gamma, k, self.out)
-        return self.out
+        return gx
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
@@ -679,7 +685,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
                          "'block', 'full' or 'scalar'")
     lap = _Laplacian(lat) if m and not block else None
-    blk = (_BlockStiffness.of(lat, pos, 5 if full else 3, st.ring_order if full else "band")
+    blk = (_BlockStiffness.of(lat, pos, 5 if full else 3, st.ring_order if full else "band",
+                              st.order_leaf, st.order_window)
            if m and block else None)
     rhs = np.empty((m, 3))
     times["setup"] = time.perf_counter() - t_setup
@@ -696,8 +703,10 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     best_f, best_f_it = np.inf, 0
     l_prev = np.empty((m, 2))
     factorisations = 0
-    inner = lat.low >= 0
+    jammed = np.zeros((m, 2), dtype=np.bool_)
     factored_jam = None
+    moved = np.empty((m, 3))
+    new = np.empty((m, 3))
     predict = False
     predict_on = st.material_predict and block
     search = full and st.ring_line_search and m > 0
@@ -736,21 +745,20 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             d_below[:], l_below[:], d_top[:], l_top[:] = d_t, l_t, dtop_t, ltop_t
             s[:], tension[:] = s_t, ten_t
             swept = False
+            if predict_on:
+                l_prev[:] = l_below
         else:
-            RK.segment_vectors(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.highest,
-                               fell, top, h, eps2, eps2_top, d_below, l_below, d_top, l_top)
-            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
-                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
-                              st.material_newton, tension, chain, work, stats,
-                              l_prev if predict else None)
-        if predict_on:
-            l_prev[:] = l_below
-            predict = True
+            RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
+                     lat.highest, fell, top, h, eps2, eps2_top, s, s_fell, s_old, g, f_top, EA,
+                     compression, eps_f, kappa0, st.material_tol, st.material_newton, d_below,
+                     l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict,
+                     predict_on)
+        predict = predict_on
         t1 = time.perf_counter()
-        RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
-                  f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
-        residual = (RK.wall_residual(m, force, total, plane, active, W, st.wall_release, res_c)
-                    if m else 0.0)
+        residual = RK.forces_residual(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
+                                      d_top, l_top, tension, f_top, l_jam, k_jam, st.floor,
+                                      plane, active, st.wall_release, force, w_below, w_top,
+                                      total, W, res_c)
         history.append(residual)
         if search:
             E_cur = RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_below, l_top, s,
@@ -783,13 +791,12 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             # the jamming stiffness k_jam d d^T enters K where a segment is shorter than a
             # width: where that set changed since the factorisation, K is factorised anew and
             # Anderson's history (of the old map) cleared
-            jammed = (l_below < l_jam) & inner
             # with the full preconditioner only a segment jammed anew (a segment that left the
             # jam keeps its k_jam in K, which then is stiffer there than the map: the update
             # falls short rather than beyond)
-            changed_jam = (factored_jam is not None and
-                           ((jammed & ~factored_jam).any() if full else
-                            not np.array_equal(jammed, factored_jam)))
+            changed_jam = RK.jam_changed(m, lat.low, l_below, l_jam,
+                                         jammed if factored_jam is None else factored_jam,
+                                         full, jammed) and factored_jam is not None
             if changed_jam:
                 due = True
                 mixer.reset()
@@ -801,11 +808,11 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 mixer.reset()
         else:
             due = (it - 1) % st.refactor_every == 0
-        if due or factored_active is None or not np.array_equal(active, factored_active):
+        if due or factored_active is None or not RK.same_flags(m, active, factored_active):
             factorisations += 1
             best_f, best_f_it = np.inf, it - 1
             if block:
-                factored_jam = jammed
+                factored_jam = jammed.copy()
                 reg = st.block_reg
                 while True:
                     if full:
@@ -837,30 +844,23 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 break
         t3 = time.perf_counter()
         if block:
-            RK.tangent_part(m, force, plane, active, rhs)
-            blk.solve(rhs, delta)
-            RK.cap_moves(m, lat.low, l_below, st.block_cap, lmin, delta)
+            blk.update(force, plane, active, lat.low, l_below, st.block_cap, lmin, rhs, delta)
         else:
             rhs = np.where(active[:, None], 0.0, force)
             lap.solve(rhs, delta)
         t4 = time.perf_counter()
         changed = False
-        if has_wall:
-            if block:
-                # the block update moved the resting crossings in their planes; the local
-                # balance decides who leaves
-                moved = delta.copy()
-                delta[active] = 0.0
-                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
-                               active, st.wall_release, wall_force)
-                RK.wall_distance(m, pos + delta, plane, dist)
-                stay = active & (dist <= st.wall_release)
-                delta[stay] = moved[stay]
-            else:
-                delta[active] = 0.0
-                RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
-                               active, st.wall_release, wall_force)
-            new = pos + delta
+        if has_wall and block:
+            # the block update moved the resting crossings in their planes; the local balance
+            # decides who leaves, and who joins (one kernel call: the iteration's fixed cost)
+            changed = RK.block_wall(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
+                                    active, st.wall_release, wall_force, moved, new)
+            set_changes += changed
+        elif has_wall:
+            delta[active] = 0.0
+            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
+                           active, st.wall_release, wall_force)
+            np.add(pos, delta, out=new)
             RK.wall_distance(m, new, plane, dist)
             join = ~active & (dist < -st.wall_release)
             leave = active & (dist > st.wall_release)
@@ -871,7 +871,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 changed = True
                 set_changes += 1
         else:
-            new = pos + delta
+            np.add(pos, delta, out=new)
         t5 = time.perf_counter()
         times["wall"] += t5 - t4
         for _ in range(smoothing):
@@ -921,17 +921,13 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             pos[:] = cand
         else:
             pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
-        if has_wall:
-            # a combination of iterates on the planes stays on them; one that reaches behind
-            # a plane (Anderson's weights may be negative) is projected onto it and rests there
-            RK.wall_distance(m, pos, plane, dist)
-            behind = (dist < 0.0) & active | (dist < -st.wall_release)
-            if behind.any():
-                pos[behind] -= dist[behind, None] * plane[behind, 3:]
-                if (behind & ~active).any():
-                    active |= behind
-                    mixer.reset()
-                    set_changes += 1
+        # a combination of iterates on the planes stays on them; one that reaches behind a
+        # plane (Anderson's weights may be negative) is projected onto it and rests there
+        if has_wall and RK.wall_project(m, pos, plane, active, st.wall_release):
+            mixer.reset()
+            set_changes += 1
+        if swept and has_wall and not np.array_equal(pos, cand):
+            swept = False            # projected: the line search's sweep was at another iterate
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
