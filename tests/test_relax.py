@@ -432,8 +432,9 @@ def test_tangent_part_and_cap_moves_match_numpy(captured):
 
 def test_band_dissection_orders_with_little_fill(captured):
     """``band_dissection`` gives a permutation, and the block factor's fill in its order is
-    within 1.5x of METIS nested dissection's (``frontal.dissection_order``; measured 1.2x on
-    case A at 144 carriers) and well below the natural order's."""
+    within 1.5x of METIS nested dissection's (``frontal.dissection_order``; at most METIS's on
+    case A at 144 carriers, ``test_relax_flat.test_band_dissection_fill_at_most_metis``) and
+    well below the natural order's."""
     st, bc, f_top, s_old = captured(48, 0.25, 250)
     m = st.m
     lat = R.lattice_of(st)
