@@ -64,3 +64,24 @@ def test_more_yarns_than_fit_the_perimeter_are_refused_even_when_forced(case_a):
     # 5000 yarns x 4 mm = 20 m against a perimeter of 0.47 m
     with pytest.raises(ConfigError, match=r"carriers = 10000: .* at most 235 carriers"):
         check_work(cfg, est, RADIUS, force=True)
+
+
+@pytest.mark.parametrize("width", [1e-9, 1e-170, 5e-324])
+def test_a_tiny_yarn_width_is_refused_by_the_faces_it_asks_for(case_a, width):
+    """With no field_edge_length the edge comes from the yarn width; a width whose square
+    underflows to 0 counts as unbounded work, and the message names the width (the edge is
+    not in the config)."""
+    cfg = _with(case_a, "yarn", width=width)
+    est = estimate_work(cfg, 1.0, time_step=0.05)
+    assert est.field_faces > LIMITS.max_field_faces
+    with pytest.raises(ConfigError, match=r"field edge length .* \(from \[yarn\] width = .*\) asks for"):
+        check_work(cfg, est, RADIUS)
+
+
+def test_a_take_up_speed_that_makes_unbounded_steps_names_the_automatic_step(case_a):
+    cfg = _with(case_a, "process", take_up_speed=((0.0, 1e-320),))
+    est = estimate_work(cfg, 1.0, time_step=0.05)
+    assert est.steps > LIMITS.max_steps
+    with pytest.raises(ConfigError, match=r"the automatic time step 0.05 s makes about .* take_up_speed .* expected a take-up speed"):
+        check_work(cfg, est, RADIUS)
+    assert estimate_work(cfg, 1.0, time_step=0.0).steps >= LIMITS.max_steps   # no ZeroDivisionError

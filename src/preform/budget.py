@@ -36,11 +36,15 @@ BYTES_PER_YARN_STEP = 2 * (3 * 8 + 8 + 8 + 8 + 1)
 
 @dataclass(frozen=True)
 class WorkEstimate:
-    """field_faces: faces of the field mesh; steps: time steps; result_bytes: size of the results."""
+    """field_faces: faces of the field mesh; steps: time steps; result_bytes: size of the results;
+    field_edge_m, time_step_s: the field edge length (m) and the time step (s) they were counted
+    with (the configured ones or the defaults), for the messages."""
 
     field_faces: int
     steps: int
     result_bytes: int
+    field_edge_m: float = math.nan
+    time_step_s: float = math.nan
 
     def lines(self) -> list[str]:
         return [f"estimated work: {self.field_faces:,} field faces, {self.steps:,} time steps, "
@@ -70,15 +74,22 @@ def estimate_work(config, mandrel_area: float, time_step: float, convergence_len
 
     edge = config.output.field_edge_length if config.output is not None else None
     edge = edge or DEFAULT_EDGE_WIDTHS * config.yarn.width
-    faces = mandrel_area / (math.sqrt(3.0) / 4.0 * edge * edge)
-    steps = braiding_time(config) / time_step
+    faces = _ratio(mandrel_area, math.sqrt(3.0) / 4.0 * edge * edge)
+    steps = _ratio(braiding_time(config), time_step)
     if convergence_length is not None:
         length = float(config.process.braid_length)
         travel = max(length + convergence_length - config.process.initial_position, 0.1 * length)
         steps *= travel / length
     points = config.machine.carriers * min(steps, 1e12)
     size = BYTES_PER_FACE * min(faces, 1e15) + BYTES_PER_YARN_STEP * points
-    return WorkEstimate(field_faces=_count(faces), steps=_count(steps), result_bytes=_count(size))
+    return WorkEstimate(field_faces=_count(faces), steps=_count(steps), result_bytes=_count(size),
+                        field_edge_m=float(edge), time_step_s=float(time_step))
+
+
+def _ratio(a: float, b: float) -> float:
+    """a / b for a >= 0, infinite where b is not positive: an edge or a time step so small that
+    its square or the quotient leaves the floating-point range asks for unbounded work."""
+    return a / b if b > 0 else math.inf
 
 
 def _count(x: float) -> int:
@@ -93,16 +104,26 @@ def check_work(config, estimate: WorkEstimate, max_radius: float, *, force=False
     """
     fix = "; pass --force to run it anyway"
     if not force and estimate.field_faces > limits.max_field_faces:
+        if config.output is not None and config.output.field_edge_length:
+            edge = f"[output] field_edge_length = {estimate.field_edge_m:g} m"
+            expected = f"an edge length of the order of the yarn width ({config.yarn.width:g} m)"
+        else:
+            edge = (f"the field edge length {estimate.field_edge_m:g} m (from [yarn] width = "
+                    f"{config.yarn.width:g} m)")
+            expected = "a yarn width of millimetres"
         raise ConfigError(
-            f"[output] field_edge_length = {config.output.field_edge_length:g} m asks for about "
-            f"{estimate.field_faces:.3g} field faces (limit {limits.max_field_faces:.3g}, ~1 kB of "
-            f"memory each): expected an edge length of the order of the yarn width "
-            f"({config.yarn.width:g} m){fix}")
+            f"{edge} asks for about {estimate.field_faces:.3g} field faces (limit "
+            f"{limits.max_field_faces:.3g}, ~1 kB of memory each): expected {expected}{fix}")
     if not force and estimate.steps > limits.max_steps:
+        if config.model.time_step:
+            step = f"[model] time_step = {estimate.time_step_s:g} s"
+            expected = "a step of the order of the automatic one (leave time_step out)"
+        else:
+            step = f"the automatic time step {estimate.time_step_s:g} s"
+            expected = "a take-up speed of the order of mm/s to m/s"
         raise ConfigError(
-            f"[model] time_step = {config.model.time_step:g} s makes about {estimate.steps:.3g} "
-            f"steps (limit {limits.max_steps:.3g}): expected a step of the order of the automatic "
-            f"one (leave time_step out){fix}")
+            f"{step} makes about {estimate.steps:.3g} steps over the braided length at [process] "
+            f"take_up_speed (limit {limits.max_steps:.3g}): expected {expected}{fix}")
     n = config.machine.carriers
     width = config.yarn.width
     if n * width > 4.0 * math.pi * max_radius:
