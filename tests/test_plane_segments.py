@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from preform.geometry import shapes
-from preform.geometry.centerline import (SectionIndex, _faces_near_plane, _section_loops,
-                                         plane_segments)
+from preform.geometry.centerline import _faces_near_plane, _section_loops
+from preform.geometry.sections import SectionIndex, plane_segments
 
 trimesh = pytest.importorskip("trimesh")
 from trimesh.intersections import mesh_plane  # noqa: E402

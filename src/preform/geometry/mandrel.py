@@ -74,7 +74,7 @@ class Mandrel:
     @cached_property
     def sections(self):
         """The faces indexed for plane sections (``centerline.SectionIndex``), without trimesh."""
-        from .centerline import SectionIndex
+        from .sections import SectionIndex
 
         return SectionIndex(self.vertices, self.faces)
 
