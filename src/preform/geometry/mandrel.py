@@ -73,7 +73,7 @@ class Mandrel:
 
     @cached_property
     def sections(self):
-        """The faces indexed for plane sections (``centerline.SectionIndex``), without trimesh."""
+        """The faces indexed for plane sections (``sections.SectionIndex``), without trimesh."""
         from .sections import SectionIndex
 
         return SectionIndex(self.vertices, self.faces)
