@@ -104,7 +104,7 @@ def api(args):
 
 
 def command(args):
-    walls, summaries = [], []
+    walls, cpus, summaries = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeat):
             env = dict(os.environ)
@@ -113,19 +113,24 @@ def command(args):
                 env["PREFORM_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp, prefix="preform-")
             out = Path(tmp) / f"run{i}"
             t0 = time.perf_counter()
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             done = subprocess.run([sys.executable, "-m", "preform.cli", "run", args.toml, "--out", str(out),
                                    "--no-progress"], env=env, capture_output=True, text=True)
             wall = time.perf_counter() - t0
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
             if done.returncode != 0:
                 sys.exit(f"run {i} failed ({done.returncode}):\n{done.stderr}")
             summary = json.loads((out / "summary.json").read_text())
             walls.append(wall)
+            cpus.append(cpu)
             summaries.append(summary)
             stages = summary["stages_s"]
-            print(f"run {i}: {wall:.2f} s wall (summary {summary['wall_time_s']:.2f} s: "
+            print(f"run {i}: {wall:.2f} s wall, {cpu:.1f} s CPU (summary {summary['wall_time_s']:.2f} s: "
                   + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()) + ")", flush=True)
     keys = summaries[0]["stages_s"]
-    print(f"median of {args.repeat}{' fresh' if args.fresh else ''} runs: {statistics.median(walls):.2f} s wall "
+    print(f"median of {args.repeat}{' fresh' if args.fresh else ''} runs: {statistics.median(walls):.2f} s wall, "
+          f"{statistics.median(cpus):.1f} s CPU "
           f"(summary {statistics.median(s['wall_time_s'] for s in summaries):.2f} s: "
           + ", ".join(f"{k} {statistics.median(s['stages_s'][k] for s in summaries):.2f}" for k in keys) + ")")
 

@@ -157,7 +157,18 @@ def _cmd_run(args) -> int:
     startup = max(0.0, started - process_started()) if args.whole_process else None
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
-    mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+    from . import _jit
+
+    # a first run: the stepper's and the field kernels compile in a worker meanwhile
+    warmup = _jit.start(config, args.config, args.model or "")
+    try:
+        mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+    except BaseException:
+        if warmup is not None:
+            warmup.stop()
+        raise
+    if warmup is not None:
+        warmup.finish()
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
                        force=args.force, geometry=(mandrel, centerline, []), started=started,

@@ -1,0 +1,192 @@
+"""The numba kernels of a first run compiled on the second core while this process loads the mandrel.
+
+On a first run in an environment (numba's on-disk cache lacks the kinematic kernels), ``preform
+run`` compiles kernels for most of its first 20-30 s: the intake and check kernels
+(``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks the mandrel, then the
+stepper's (``_kernels.kinematic`` and the centerline projection) and the field kernels
+(``_kernels.fields``). The first group is needed at once, the others only after it, so
+:func:`start` launches a worker process that compiles the others meanwhile by running small
+representative jobs (:data:`JOBS`, in the order the run needs them). The kernels are
+``cache=True``: the worker writes them to the cache and this process loads them when it gets
+there instead of compiling them.
+
+The jobs are claimed through files created exclusively in a folder of the two processes: the
+worker claims them from the front; :meth:`Warmup.finish` (called once the mandrel is loaded and
+checked) claims what the worker has not reached and runs it here, then waits for the jobs the
+worker holds. A job is the run's own code on a small cylinder (the same calls, so the same
+argument types and the same compiled specialisations), so nothing here knows the kernels' types;
+a job that fails only means that the run compiles what it needs itself.
+
+The worker is a fresh interpreter (``python -m preform._jit``), not a fork: embree's thread pool
+and numba's state in this process are not fork-safe once started.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: the jobs, in the order the run needs their kernels
+JOBS = ("kinematic", "fields")
+
+#: longest wait (s) for the worker's jobs before this process compiles what it needs itself
+WAIT_LIMIT_S = 300.0
+
+
+def kernels_cached(module) -> bool:
+    """Whether numba's on-disk cache holds every ``cache=True`` kernel of ``module`` (their index
+    files exist: numba then loads them instead of compiling)."""
+    found = False
+    for value in vars(module).values():
+        cache = getattr(value, "_cache", None)
+        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+        if index is not None:
+            found = True
+            if not os.path.exists(index):
+                return False
+    return found
+
+
+def needed(config) -> bool:
+    """Whether a run of ``config`` is a first run worth a worker: a kinematic model and numba's
+    cache without the kinematic kernels (later runs load them)."""
+    if config.model.kind != "kinematic" or os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
+        return False
+    from ._kernels import kinematic
+
+    return not kernels_cached(kinematic)
+
+
+# ------------------------------------------------------------------------------------- jobs
+def small_case(config):
+    """(config, mandrel, centerline): ``config`` on a cylinder of 5 cm radius long enough for its
+    start (the machine, yarn, model and step settings of the run, so the same code paths run)."""
+    from .geometry import centerline_from_points, shapes
+    from .geometry.mandrel import mandrel_from_arrays
+
+    radius = 0.05
+    length = config.process.initial_position + 0.5
+    mandrel = mandrel_from_arrays(*shapes.cylinder(radius, length, n_around=32), source="warm-up cylinder")
+    centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
+    process = dataclasses.replace(config.process, braid_length=0.01)
+    return dataclasses.replace(config, process=process, layers=()), mandrel, centerline
+
+
+def job_kinematic(config):
+    """A few steps of the kinematic stepper and the result's analysis (braid angles of the laid
+    yarn) on :func:`small_case`: the stepper's, the projection's and the analysis kernels."""
+    from .simulation import make_stepper
+
+    small, mandrel, centerline = small_case(config)
+    stepper = make_stepper(small, mandrel, centerline)
+    stepper.run(progress=False, max_steps=3)
+    stepper.result("done", "", 0.0)
+
+
+def job_fields(config):
+    """Two helices mapped onto a small cylinder (``pipeline._compile_map_kernels``): the field
+    kernels."""
+    from .pipeline import _compile_map_kernels
+
+    _compile_map_kernels(config)
+
+
+RUNNERS = {"kinematic": job_kinematic, "fields": job_fields}
+
+
+# ------------------------------------------------------------------------------ coordination
+def _claim(folder: Path, job: str) -> bool:
+    """True for the one process that creates ``job``'s claim file first."""
+    try:
+        os.close(os.open(folder / f"{job}.claim", os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+    except FileExistsError:
+        return False
+    return True
+
+
+def _run(folder: Path, job: str, config) -> None:
+    """Run ``job`` and mark it done (also when it fails: the run then compiles what it needs)."""
+    try:
+        RUNNERS[job](config)
+    except Exception:   # noqa: BLE001 - a warm-up's failure must not stop the run
+        pass
+    finally:
+        (folder / f"{job}.done").touch()
+
+
+class Warmup:
+    """The worker of a first run (see module docstring); :meth:`finish` before simulating."""
+
+    def __init__(self, folder: Path, process: subprocess.Popen, config):
+        self.folder = folder
+        self.process = process
+        self.config = config
+
+    def finish(self) -> None:
+        """Run here the jobs the worker has not claimed yet (the last ones first), wait for the
+        ones it holds (at most :data:`WAIT_LIMIT_S`), and clean up."""
+        try:
+            for job in reversed(JOBS):
+                if _claim(self.folder, job):
+                    _run(self.folder, job, self.config)
+            deadline = time.monotonic() + WAIT_LIMIT_S
+            while not all((self.folder / f"{job}.done").exists() for job in JOBS):
+                if self.process.poll() is not None or time.monotonic() > deadline:
+                    break
+                time.sleep(0.02)
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        """End the worker (if still running) and remove the claims folder."""
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def start(config, config_path, model: str = ""):
+    """The worker compiling :data:`JOBS` for ``config`` (read from ``config_path``, with
+    ``[model] kind`` replaced by ``model`` when given), or None when not :func:`needed`."""
+    if not needed(config):
+        return None
+    folder = Path(tempfile.mkdtemp(prefix="preform-jit-"))
+    argv = [sys.executable, "-m", "preform._jit", str(folder), str(config_path), model]
+    try:
+        process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                   stderr=subprocess.DEVNULL, close_fds=True)
+    except OSError:
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return Warmup(folder, process, config)
+
+
+def main(argv=None) -> int:
+    """The worker: ``python -m preform._jit FOLDER CONFIG [MODEL]``."""
+    folder, config_path, *rest = sys.argv[1:] if argv is None else argv
+    from .config import load_config
+
+    config = load_config(config_path)
+    model = rest[0] if rest else ""
+    if model:
+        config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
+    for job in JOBS:
+        if _claim(Path(folder), job):
+            _run(Path(folder), job, config)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
