@@ -34,9 +34,6 @@ from pathlib import Path
 
 import numpy as np
 
-#: the jobs, in the order the run needs their kernels
-JOBS = ("kinematic", "fields")
-
 #: longest wait (s) for the worker's jobs before this process compiles what it needs itself
 WAIT_LIMIT_S = 300.0
 
@@ -99,7 +96,67 @@ def job_fields(config):
     _compile_map_kernels(config)
 
 
+#: each job's function of the run's config, in the order the run needs their kernels
 RUNNERS = {"kinematic": job_kinematic, "fields": job_fields}
+#: the jobs, in that order
+JOBS = tuple(RUNNERS)
+
+
+# ------------------------------------------------------------------------------ compile log
+#: the job this process is running (for the compile log), if any
+_RUNNING: list = []
+
+#: environment variable naming a file to which every process of the run appends one JSON line per
+#: numba compilation (``benchmarks/bench_pipeline.py --jit``, ``tests/test_jit.py``)
+LOG_ENV = "PREFORM_JIT_LOG"
+
+
+class CompileLog:
+    """While entered and ``$PREFORM_JIT_LOG`` is set: numba's ``numba:compile`` events (raised for
+    a compilation, not for a cache load) appended to that file, one JSON line each: ``pid``,
+    ``role`` (``main`` or ``worker``), ``job`` (the warm-up job running, "" for the run's own
+    work), ``kernel`` (module and name), ``depth`` (0 for a kernel
+    called from Python, 1 and more for one compiled inside another's compilation), ``start_s``
+    (``time.time()``), ``wall_s`` and ``cpu_s`` (this process's CPU time over the compilation,
+    the nested ones included)."""
+
+    def __init__(self, role: str):
+        self.role = role
+        self.path = os.environ.get(LOG_ENV, "")
+        self.listener = None
+
+    def __enter__(self):
+        if not self.path:
+            return self
+        import json
+
+        from numba.core import event
+
+        log = self
+
+        class Listener(event.Listener):
+            stack: list = []
+
+            def on_start(self, ev):
+                self.stack.append((time.time(), time.perf_counter(), time.process_time()))
+
+            def on_end(self, ev):
+                t_wall, t0, c0 = self.stack.pop()
+                fn = ev.data["dispatcher"].py_func
+                line = {"pid": os.getpid(), "role": log.role, "job": _RUNNING[-1] if _RUNNING else "", "kernel": f"{fn.__module__}.{fn.__qualname__}",
+                        "depth": len(self.stack), "start_s": t_wall, "wall_s": time.perf_counter() - t0,
+                        "cpu_s": time.process_time() - c0}
+                with open(log.path, "a") as f:
+                    f.write(json.dumps(line) + "\n")
+
+        self.event, self.listener = event, Listener()
+        event.register("numba:compile", self.listener)
+        return self
+
+    def __exit__(self, *exc):
+        if self.listener is not None:
+            self.event.unregister("numba:compile", self.listener)
+        return False
 
 
 # ------------------------------------------------------------------------------ coordination
@@ -112,33 +169,37 @@ def _claim(folder: Path, job: str) -> bool:
     return True
 
 
-def _run(folder: Path, job: str, config) -> None:
-    """Run ``job`` and mark it done (also when it fails: the run then compiles what it needs)."""
+def _run(folder: Path, job: str, config, runners=None) -> None:
+    """Run ``job`` (``runners[job](config)``, :data:`RUNNERS` by default) and mark it done (also
+    when it fails: the run then compiles what it needs)."""
+    _RUNNING.append(job)
     try:
-        RUNNERS[job](config)
+        (RUNNERS if runners is None else runners)[job](config)
     except Exception:   # noqa: BLE001 - a warm-up's failure must not stop the run
         pass
     finally:
+        _RUNNING.pop()
         (folder / f"{job}.done").touch()
 
 
 class Warmup:
     """The worker of a first run (see module docstring); :meth:`finish` before simulating."""
 
-    def __init__(self, folder: Path, process: subprocess.Popen, config):
+    def __init__(self, folder: Path, process: subprocess.Popen, config, runners=None):
         self.folder = folder
         self.process = process
         self.config = config
+        self.runners = RUNNERS if runners is None else runners
 
     def finish(self) -> None:
         """Run here the jobs the worker has not claimed yet (the last ones first), wait for the
         ones it holds (at most :data:`WAIT_LIMIT_S`), and clean up."""
         try:
-            for job in reversed(JOBS):
+            for job in reversed(list(self.runners)):
                 if _claim(self.folder, job):
-                    _run(self.folder, job, self.config)
+                    _run(self.folder, job, self.config, self.runners)
             deadline = time.monotonic() + WAIT_LIMIT_S
-            while not all((self.folder / f"{job}.done").exists() for job in JOBS):
+            while not all((self.folder / f"{job}.done").exists() for job in self.runners):
                 if self.process.poll() is not None or time.monotonic() > deadline:
                     break
                 time.sleep(0.02)
@@ -182,9 +243,10 @@ def main(argv=None) -> int:
     model = rest[0] if rest else ""
     if model:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
-    for job in JOBS:
-        if _claim(Path(folder), job):
-            _run(Path(folder), job, config)
+    with CompileLog("worker"):
+        for job in JOBS:
+            if _claim(Path(folder), job):
+                _run(Path(folder), job, config)
     return 0
 
 

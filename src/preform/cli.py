@@ -143,7 +143,9 @@ class _CompileNote:
 
 
 def cmd_run(args) -> int:
-    with _CompileNote():
+    from ._jit import CompileLog
+
+    with _CompileNote(), CompileLog("main"):
         return _cmd_run(args)
 
 
