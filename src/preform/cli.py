@@ -125,6 +125,9 @@ class _CompileNote:
             said = False
 
             def on_start(self, ev):
+                self.say()
+
+            def say(self):
                 if not self.said:
                     self.said = True
                     print(COMPILING, file=sys.stderr, flush=True)
@@ -136,6 +139,11 @@ class _CompileNote:
         event.register("numba:compile", self.listener)
         return self
 
+    def say(self):
+        """Print the note now (once), e.g. when another process compiles for this one."""
+        if self.listener is not None:
+            self.listener.say()
+
     def __exit__(self, *exc):
         if self.listener is not None:
             self.event.unregister("numba:compile", self.listener)
@@ -145,11 +153,11 @@ class _CompileNote:
 def cmd_run(args) -> int:
     from ._jit import CompileLog
 
-    with _CompileNote(), CompileLog("main"):
-        return _cmd_run(args)
+    with _CompileNote() as note, CompileLog("main"):
+        return _cmd_run(args, note)
 
 
-def _cmd_run(args) -> int:
+def _cmd_run(args, note=None) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
@@ -163,6 +171,8 @@ def _cmd_run(args) -> int:
 
     # a first run: the stepper's and the field kernels compile in a worker meanwhile
     warmup = _jit.start(config, args.config, args.model or "")
+    if warmup is not None and note is not None:
+        note.say()
     try:
         mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
     except BaseException:
