@@ -79,3 +79,8 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     late = ("preform._kernels.kinematic.", "preform._kernels.fields.")
     run_compiled = sorted(d["kernel"] for d in lines if not d["job"] and d["kernel"].startswith(late))
     assert run_compiled == []
+    # the next run is not a first run: no worker
+    code = ("import sys; from preform import _jit; from preform.config import load_config; "
+            "sys.exit(1 if _jit.needed(load_config(sys.argv[1])) else 0)")
+    again = subprocess.run([sys.executable, "-c", code, str(config)], env=env, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr

@@ -38,28 +38,33 @@ import numpy as np
 WAIT_LIMIT_S = 300.0
 
 
-def kernels_cached(module) -> bool:
-    """Whether numba's on-disk cache holds every ``cache=True`` kernel of ``module`` (their index
-    files exist: numba then loads them instead of compiling)."""
-    found = False
-    for value in vars(module).values():
-        cache = getattr(value, "_cache", None)
+def kernels_cached(kernels) -> bool:
+    """Whether numba's on-disk cache holds each of the ``cache=True`` kernels (their index files
+    exist: numba then loads them instead of compiling)."""
+    for kernel in kernels:
+        cache = getattr(kernel, "_cache", None)
         index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
-        if index is not None:
-            found = True
-            if not os.path.exists(index):
-                return False
-    return found
+        if index is None or not os.path.exists(index):
+            return False
+    return True
+
+
+def entry_kernels():
+    """The kernels the jobs' code calls from Python last (each compiles the helpers it calls):
+    when they are cached, so is what the jobs would compile. Not a whole module's kernels: some
+    (``tangency_gap``, ``smooth_normals_batch``, ...) a kinematic run never calls."""
+    from ._kernels import fields, kinematic
+
+    return (kinematic.advance_fell_points, kinematic.lifted_points, kinematic.braid_cosines_batch,
+            kinematic.laid_yarn_angles, fields.clip_polylines, fields.pool_sums)
 
 
 def needed(config) -> bool:
     """Whether a run of ``config`` is a first run worth a worker: a kinematic model and numba's
-    cache without the kinematic kernels (later runs load them)."""
+    cache without the stepper's or the field kernels (later runs load them)."""
     if config.model.kind != "kinematic" or os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
         return False
-    from ._kernels import kinematic
-
-    return not kernels_cached(kinematic)
+    return not kernels_cached(entry_kernels())
 
 
 # ------------------------------------------------------------------------------------- jobs
