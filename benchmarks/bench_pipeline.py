@@ -7,7 +7,9 @@ Two ways:
   stages of its summary (start, load and check, simulate, map, write, pictures), and the medians.
   ``--fresh`` makes every run a first run in a fresh environment: an empty numba cache
   (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
-  compile and the mandrel and the field mesh are built again.
+  compile and the mandrel and the field mesh are built again. ``--jit`` adds each run's numba
+  compile time per process (the command's own and the first-run worker's, ``preform._jit``;
+  numba's compile events, not cache loads) and, at the end, the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
   map (field mesh from the cache), write the data files, pictures (3-D renders in the worker
@@ -104,7 +106,7 @@ def api(args):
 
 
 def command(args):
-    walls, summaries = [], []
+    walls, cpus, summaries, compiles = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeat):
             env = dict(os.environ)
@@ -112,22 +114,61 @@ def command(args):
                 env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp, prefix="numba-")
                 env["PREFORM_CACHE_DIR"] = tempfile.mkdtemp(dir=tmp, prefix="preform-")
             out = Path(tmp) / f"run{i}"
+            log = Path(tmp) / f"jit{i}.jsonl"
+            if args.jit:
+                env["PREFORM_JIT_LOG"] = str(log)
             t0 = time.perf_counter()
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             done = subprocess.run([sys.executable, "-m", "preform.cli", "run", args.toml, "--out", str(out),
                                    "--no-progress"], env=env, capture_output=True, text=True)
             wall = time.perf_counter() - t0
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
             if done.returncode != 0:
                 sys.exit(f"run {i} failed ({done.returncode}):\n{done.stderr}")
             summary = json.loads((out / "summary.json").read_text())
             walls.append(wall)
+            cpus.append(cpu)
             summaries.append(summary)
             stages = summary["stages_s"]
-            print(f"run {i}: {wall:.2f} s wall (summary {summary['wall_time_s']:.2f} s: "
+            print(f"run {i}: {wall:.2f} s wall, {cpu:.1f} s CPU (summary {summary['wall_time_s']:.2f} s: "
                   + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()) + ")", flush=True)
+            if args.jit:
+                compiles.append(jit_lines(log))
     keys = summaries[0]["stages_s"]
-    print(f"median of {args.repeat}{' fresh' if args.fresh else ''} runs: {statistics.median(walls):.2f} s wall "
+    print(f"median of {args.repeat}{' fresh' if args.fresh else ''} runs: {statistics.median(walls):.2f} s wall, "
+          f"{statistics.median(cpus):.1f} s CPU "
           f"(summary {statistics.median(s['wall_time_s'] for s in summaries):.2f} s: "
           + ", ".join(f"{k} {statistics.median(s['stages_s'][k] for s in summaries):.2f}" for k in keys) + ")")
+    if args.jit:
+        jit_table(compiles)
+
+
+def jit_lines(log):
+    """The top-level compilations of one run (``preform._jit.CompileLog`` lines, depth 0: a
+    kernel called from Python, the kernels it calls included); prints their totals per process."""
+    lines = [json.loads(x) for x in log.read_text().splitlines()] if log.exists() else []
+    top = [d for d in lines if d["depth"] == 0]
+    for role in ("main", "worker"):
+        mine = [d for d in top if d["role"] == role]
+        if mine:
+            print(f"    JIT {role}: {sum(d['wall_s'] for d in mine):.2f} s wall, "
+                  f"{sum(d['cpu_s'] for d in mine):.2f} s CPU, {len(mine)} kernels", flush=True)
+    return top
+
+
+def jit_table(runs):
+    """Per kernel over the runs: median CPU and wall seconds of its compilation and where it ran."""
+    by_kernel = {}
+    for top in runs:
+        for d in top:
+            by_kernel.setdefault(d["kernel"], []).append(d)
+    print(f"compilations (median over {len(runs)} runs; process / warm-up job):")
+    rows = sorted(by_kernel.items(), key=lambda kv: -statistics.median(d["cpu_s"] for d in kv[1]))
+    for kernel, ds in rows:
+        where = sorted({f"{d['role']}/{d['job'] or 'run'}" for d in ds})
+        print(f"  {statistics.median(d['cpu_s'] for d in ds):5.2f} s CPU {statistics.median(d['wall_s'] for d in ds):5.2f} s wall"
+              f"  {kernel}  [{', '.join(where)}; {len(ds)}x]")
 
 
 def main(argv=None):
@@ -139,6 +180,8 @@ def main(argv=None):
     ap.add_argument("--command", action="store_true", help="time `preform run` in fresh processes")
     ap.add_argument("--fresh", action="store_true",
                     help="with --command: empty numba and preform caches for every run (a first run)")
+    ap.add_argument("--jit", action="store_true",
+                    help="with --command: numba's compile time per process and per kernel")
     args = ap.parse_args(argv)
     (command if args.command else api)(args)
 

@@ -125,6 +125,9 @@ class _CompileNote:
             said = False
 
             def on_start(self, ev):
+                self.say()
+
+            def say(self):
                 if not self.said:
                     self.said = True
                     print(COMPILING, file=sys.stderr, flush=True)
@@ -136,6 +139,11 @@ class _CompileNote:
         event.register("numba:compile", self.listener)
         return self
 
+    def say(self):
+        """Print the note now (once), e.g. when another process compiles for this one."""
+        if self.listener is not None:
+            self.listener.say()
+
     def __exit__(self, *exc):
         if self.listener is not None:
             self.event.unregister("numba:compile", self.listener)
@@ -143,11 +151,13 @@ class _CompileNote:
 
 
 def cmd_run(args) -> int:
-    with _CompileNote():
-        return _cmd_run(args)
+    from ._jit import CompileLog
+
+    with _CompileNote() as note, CompileLog("main"):
+        return _cmd_run(args, note)
 
 
-def _cmd_run(args) -> int:
+def _cmd_run(args, note=None) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
@@ -157,7 +167,20 @@ def _cmd_run(args) -> int:
     startup = max(0.0, started - process_started()) if args.whole_process else None
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
-    mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+    from . import _jit
+
+    # a first run: the stepper's and the field kernels compile in a worker meanwhile
+    warmup = _jit.start(config, args.config, args.model or "")
+    if warmup is not None and note is not None:
+        note.say()
+    try:
+        mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+    except BaseException:
+        if warmup is not None:
+            warmup.stop()
+        raise
+    if warmup is not None:
+        warmup.finish()
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
                        force=args.force, geometry=(mandrel, centerline, []), started=started,

@@ -48,15 +48,39 @@ def edge_table(F, n_vertices, side_edge, order):
             order[p] = 3 * f + k
             upper[p] = max(a, b)
             fill[lo] = p + 1
+    widest = 0
+    for v in range(n_vertices):
+        widest = max(widest, ptr[v + 1] - ptr[v])
+    scratch_h = np.empty(widest if widest > INSERTION_MAX else 0, dtype=np.int64)
+    scratch_u = np.empty_like(scratch_h)
     for v in range(n_vertices):
         s = ptr[v]
         e = ptr[v + 1]
         if e - s > INSERTION_MAX:
-            perm = np.argsort(upper[s:e], kind="mergesort")      # stable
-            h_sorted = order[s:e][perm]
-            u_sorted = upper[s:e][perm]
-            order[s:e] = h_sorted
-            upper[s:e] = u_sorted
+            # bottom-up merge sort of order[s:e] by upper[s:e], stable (the left run wins ties);
+            # written out here rather than np.argsort(kind="mergesort") and fancy indexing,
+            # which compile numba's generic sort and shape-error formatting (about 3 s)
+            n = e - s
+            width = 1
+            while width < n:
+                for lo in range(0, n, 2 * width):
+                    mid = min(lo + width, n)
+                    hi = min(lo + 2 * width, n)
+                    i = lo
+                    j = mid
+                    for t in range(lo, hi):
+                        if j >= hi or (i < mid and upper[s + i] <= upper[s + j]):
+                            scratch_h[t] = order[s + i]
+                            scratch_u[t] = upper[s + i]
+                            i += 1
+                        else:
+                            scratch_h[t] = order[s + j]
+                            scratch_u[t] = upper[s + j]
+                            j += 1
+                for t in range(n):
+                    order[s + t] = scratch_h[t]
+                    upper[s + t] = scratch_u[t]
+                width *= 2
         else:
             for i in range(s + 1, e):
                 h = order[i]

@@ -100,6 +100,10 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
         unmapped (float64, m, yarn length that lies beyond
         a boundary edge of an open mesh or was not located)
     """
+    # np.bool_, not a bare True / False: numba types a bare one as a literal and compiles _walk
+    # once for each value (about 1 s more on a first run); the branch costs nothing here
+    LOCATE = np.bool_(False)
+    ACCUMULATE = np.bool_(True)
     length = np.zeros((n_faces, 2))
     moment = np.zeros((n_faces, 2, 6))
     first = np.zeros((n_faces, 2, 3))
@@ -117,7 +121,7 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
             if f < 0:  # locate the start point: walk there from a nearby centroid
                 s = seed_face[i]
                 f, _ = _walk(plane_normal, plane_offset, neighbour, s, centroid[s, 0], centroid[s, 1],
-                             centroid[s, 2], x0, y0, z0, g, length, moment, first, False,
+                             centroid[s, 2], x0, y0, z0, g, length, moment, first, LOCATE,
                              max_hops)
             if f < 0:
                 dx = x1 - x0
@@ -126,9 +130,79 @@ def clip_polylines(points, offsets, group, seed_face, centroid, plane_normal, pl
                 unmapped += np.sqrt(dx * dx + dy * dy + dz * dz)
                 continue
             f, lost = _walk(plane_normal, plane_offset, neighbour, f, x0, y0, z0, x1, y1, z1, g,
-                            length, moment, first, True, max_hops)
+                            length, moment, first, ACCUMULATE, max_hops)
             unmapped += lost
     return length, moment, first, unmapped
+
+
+#: below this many entries a range is finished by insertion sort (numba's ``SMALL_QUICKSORT``)
+_SMALL_SORT = 15
+
+
+@njit(cache=True)
+def cell_order(keys):
+    """``np.argsort(keys)`` of an int64 array as numba compiles it (its quicksort: median-of-three
+    pivot, the larger part pushed on a stack, ranges below ``_SMALL_SORT`` by insertion sort), step
+    for step, so equal keys come out in numba's order and the pooled sums keep their summation
+    order. Written out here as one function: numba's generic sort compiles seven (about 1 s on a
+    first run)."""
+    n = keys.shape[0]
+    R = np.arange(n)
+    if n < 2:
+        return R
+    stack_lo = np.empty(100, dtype=np.int64)
+    stack_hi = np.empty(100, dtype=np.int64)
+    stack_lo[0] = 0
+    stack_hi[0] = n - 1
+    top = 1
+    while top > 0:
+        top -= 1
+        low = stack_lo[top]
+        high = stack_hi[top]
+        while high - low >= _SMALL_SORT:
+            mid = (low + high) >> 1
+            if keys[R[mid]] < keys[R[low]]:
+                R[low], R[mid] = R[mid], R[low]
+            if keys[R[high]] < keys[R[mid]]:
+                R[high], R[mid] = R[mid], R[high]
+            if keys[R[mid]] < keys[R[low]]:
+                R[low], R[mid] = R[mid], R[low]
+            pivot = keys[R[mid]]
+            R[high], R[mid] = R[mid], R[high]
+            i = low
+            j = high - 1
+            while True:
+                while i < high and keys[R[i]] < pivot:
+                    i += 1
+                while j >= low and pivot < keys[R[j]]:
+                    j -= 1
+                if i >= j:
+                    break
+                R[i], R[j] = R[j], R[i]
+                i += 1
+                j -= 1
+            R[i], R[high] = R[high], R[i]
+            if high - i > i - low:
+                if high > i:
+                    stack_lo[top] = i + 1
+                    stack_hi[top] = high
+                    top += 1
+                high = i - 1
+            else:
+                if i > low:
+                    stack_lo[top] = low
+                    stack_hi[top] = i - 1
+                    top += 1
+                low = i + 1
+        for i in range(low + 1, high + 1):
+            k = R[i]
+            v = keys[k]
+            j = i
+            while j > low and v < keys[R[j - 1]]:
+                R[j] = R[j - 1]
+                j -= 1
+            R[j] = k
+    return R
 
 
 @njit(cache=True)
@@ -150,19 +224,30 @@ def pool_sums(centroids, sources, normals, radius, values, cos_crease):
     out = np.zeros((nf, nc))
     if nf == 0:
         return out
-    cell = radius.max()
+    # the grid's cell, origin and extent by plain loops (min and max are exact, so these are
+    # the values of radius.max() and the columns' min / max; the array methods on column views
+    # compile numba's generic reductions for two layouts, about 2 s on a first run)
+    cell = radius[0]
+    for f in range(1, nf):
+        cell = max(cell, radius[f])
     lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        lo[a] = min(centroids[0, a], sources[0, a])
+        hi[a] = max(centroids[0, a], sources[0, a])
+        for f in range(1, nf):
+            lo[a] = min(lo[a], centroids[f, a], sources[f, a])
+            hi[a] = max(hi[a], centroids[f, a], sources[f, a])
     dims = np.empty(3, dtype=np.int64)
     for a in range(3):
-        lo[a] = min(centroids[:, a].min(), sources[:, a].min())
-        dims[a] = int((max(centroids[:, a].max(), sources[:, a].max()) - lo[a]) / cell) + 1
+        dims[a] = int((hi[a] - lo[a]) / cell) + 1
     idx = np.empty((nf, 3), dtype=np.int64)
     keys = np.empty(nf, dtype=np.int64)
     for f in range(nf):
         for a in range(3):
             idx[f, a] = int((sources[f, a] - lo[a]) / cell)
         keys[f] = idx[f, 0] + dims[0] * (idx[f, 1] + dims[1] * idx[f, 2])
-    order = np.argsort(keys)
+    order = cell_order(keys)
     sorted_keys = keys[order]
     cidx = np.empty(3, dtype=np.int64)
     for f in range(nf):
@@ -175,8 +260,17 @@ def pool_sums(centroids, sources, normals, radius, values, cos_crease):
             for cy in range(max(0, cidx[1] - reach), min(dims[1], cidx[1] + reach + 1)):
                 for cx in range(max(0, cidx[0] - reach), min(dims[0], cidx[0] + reach + 1)):
                     key = cx + dims[0] * (cy + dims[1] * cz)
-                    start = np.searchsorted(sorted_keys, key)
-                    q = start
+                    # q: the first index with sorted_keys[q] >= key, np.searchsorted(sorted_keys,
+                    # key) by bisection (numba's searchsorted compiles its generic comparisons,
+                    # complex numbers included: about 1.5 s on a first run)
+                    q = 0
+                    top = nf
+                    while q < top:
+                        mid = (q + top) // 2
+                        if sorted_keys[mid] < key:
+                            q = mid + 1
+                        else:
+                            top = mid
                     while q < nf and sorted_keys[q] == key:
                         g = order[q]
                         q += 1
