@@ -37,6 +37,12 @@ class QualitySettings:
     field_reach_margin: float = 0.02
     #: uncovered faces inside the braided region above this share of its faces
     max_hole_share: float = 0.005
+    #: a snapshot's crossing out of balance by more than this fraction of the snapshot's largest
+    #: tension (its tensions along the written segments plus ``external_force_N``; issue 14)
+    max_snapshot_imbalance: float = 1e-3
+    #: a snapshot's crossing outside the friction cone by more than this fraction of its larger
+    #: tension (Psi, issue 4): its friction bounds did not settle
+    max_snapshot_psi: float = 1e-3
 
 
 QUALITY = QualitySettings()
@@ -136,10 +142,66 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
                          2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
+def snapshot_checks(snap, mu: float) -> tuple[float, float]:
+    """(largest imbalance / the snapshot's largest tension, largest Psi / tension) of a
+    convergence-zone snapshot, from its own arrays as a reader of ``convergence.pvd`` sees them.
+
+    At a crossing point i of a yarn (``contact_id >= 0``, not the yarn's first or last point) the
+    segments below and above pull with tensions f_lo, f_hi along the unit vectors u_lo, u_hi to
+    the neighbouring points; the crossing's two points (one per yarn, the same contact id) and
+    their ``external_force_N`` must sum to zero. The friction law (issue 4): with cos(beta) =
+    u_lo . u_hi, ``Psi = |f_lo - f_hi| sqrt((1 - cos beta) / 2) - mu (f_lo + f_hi) sqrt((1 + cos
+    beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone)."""
+    P = np.asarray(snap.points, dtype=float)
+    off = np.asarray(snap.offsets, dtype=np.int64)
+    cid = np.asarray(snap.contact_id, dtype=np.int64)
+    ten = np.asarray(snap.tension_N, dtype=float)
+    yarn = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    j = np.arange(len(P))
+    inner = (cid >= 0) & (j > off[yarn]) & (j < off[yarn + 1] - 1)
+    j, k = j[inner], yarn[inner]
+    if not len(j) or not len(ten):
+        return 0.0, 0.0
+    lo, hi = P[j - 1] - P[j], P[j + 1] - P[j]
+    u_lo = lo / np.linalg.norm(lo, axis=1)[:, None]
+    u_hi = hi / np.linalg.norm(hi, axis=1)[:, None]
+    f_lo, f_hi = ten[j - k - 1], ten[j - k]
+    force = f_lo[:, None] * u_lo + f_hi[:, None] * u_hi + snap.external_forces()[j]
+    ids, at = np.unique(cid[j], return_inverse=True)
+    net = np.zeros((len(ids), 3))
+    np.add.at(net, at, force)
+    imbalance = np.linalg.norm(net, axis=1) / float(np.max(ten))
+    cb = np.clip(np.einsum("ij,ij->i", u_lo, u_hi), -1.0, 1.0)
+    psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0)
+           - mu * (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)) / np.maximum(f_lo, f_hi)
+    return float(imbalance.max()), float(psi.max())
+
+
+def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY) -> list[str]:
+    """Reasons to doubt the written convergence-zone snapshots: crossings out of balance or
+    outside the friction cone beyond ``settings``' thresholds (:func:`snapshot_checks`)."""
+    reasons = []
+    for snap in snapshots:
+        imbalance, psi = snapshot_checks(snap, mu)
+        if imbalance > settings.max_snapshot_imbalance:
+            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s has crossings out "
+                           f"of balance by up to {imbalance:.2g} of its largest tension (above "
+                           f"{settings.max_snapshot_imbalance:g}; convergence.pvd)")
+        if psi > settings.max_snapshot_psi:
+            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s has crossings "
+                           f"outside the friction cone by up to {psi:.2g} of their tension (above "
+                           f"{settings.max_snapshot_psi:g}): its friction bounds did not settle "
+                           f"(convergence.pvd)")
+    return reasons
+
+
 def assess(result, settings: QualitySettings = QUALITY) -> dict:
-    """The verdict on a Result from its history and yarn flags (see module docstring)."""
+    """The verdict on a Result from its history, yarn flags and convergence-zone snapshots (see
+    module docstring)."""
     reasons = []
     if result.steps:
         reasons += history_reasons(result.history, settings)
     reasons += yarn_reasons(result.yarns.flags, settings)
+    if result.snapshots and result.config is not None:
+        reasons += snapshot_reasons(result.snapshots, float(result.config.yarn.friction), settings)
     return verdict(reasons)
