@@ -57,7 +57,10 @@ tensions on the ring deflections: an outer fixed point (the frontal iteration) r
 from the balanced geometry and solves again until they change by less than
 ``friction_tolerance`` relative to the tensions; the residual history of a solve is that change per
 iteration. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
-snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``. With ``consistent_bounds`` a
+snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``; one that has made no progress
+over two iterations after ``snapshot_damping_after`` moves each bound only ``snapshot_damping``
+of the way to its new value from then on (x+ = x + w (G(x) - x): a plain iteration that cycles
+between stick and slip states settles when averaged). With ``consistent_bounds`` a
 time step iterates to ``consistent_tolerance`` instead, from the bounds of its start geometry,
 Anderson-mixing the bounds and top tensions once they change by less than ``mixing_start``
 (``_BoundMixing``): the plain iteration converges linearly at ~0.965 an iteration, the mixed
@@ -392,6 +395,9 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     net.bound = np.where(fresh, bound0, state.bound[:m])
     net.f_top = f_top0
     mixer = _BoundMixing(fr.bound_mixing if consistent else 0, fr.mixing_start)
+    # a snapshot's final solve (a tolerance and iterations given, not a time step's lag)
+    damped = not consistent and friction_tol is not None and fr.snapshot_damping < 1.0
+    cycling = False
     history = []
     newton = 0
     residual = np.inf
@@ -422,7 +428,14 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
             state.bound[:m] = bound1
             return SolveReport(it, max(float(residual), change), np.array(history),
                                net.f_top.copy(), newton, lagged=True, **_trace(net))
-        net.bound, net.f_top = mixer(net.bound, net.f_top, bound1, f_top1, change)
+        if damped and not cycling and it >= fr.snapshot_damping_after:
+            cycling = history[-1] >= history[-3]     # no progress over two iterations
+        if cycling:
+            # an iteration cycling between stick and slip states: part steps to the new bounds
+            w = fr.snapshot_damping
+            net.bound, net.f_top = net.bound + w * (bound1 - net.bound), net.f_top + w * (f_top1 - net.f_top)
+        else:
+            net.bound, net.f_top = mixer(net.bound, net.f_top, bound1, f_top1, change)
     raise SimulationError(
         f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
         f"force imbalance (residual) {residual:.3g} after {newton} Newton steps (tolerance "

@@ -102,6 +102,12 @@ class FrontalSettings:
     #: convergence of a snapshot's final solve: a change below 1e-4 of f_int + f_ext leaves Psi a
     #: factor 5 below the 1e-3 x tension the written crossings must meet
     snapshot_tolerance: float = 1e-4
+    #: a snapshot's final solve whose change has not fallen over two iterations, after
+    #: snapshot_damping_after of them, moves the bounds this fraction of the way to the new ones
+    #: from then on: the plain iteration can cycle between stick and slip states (the bent
+    #: tube's start-up: 100 iterations at 2-3e-3); a contracting one is left plain
+    snapshot_damping: float = 0.5
+    snapshot_damping_after: int = 10
     #: m of yarn, smoothing eps of |x| in the friction term sqrt(x^2 + eps^2) - eps: a sticking
     #: yarn gives eps r / sqrt(1 - r^2) at the used fraction r of its bound; Newton's cost falls
     #: steeply with it, sliding yarns move millimetres per step
