@@ -945,6 +945,20 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                        sweep_stats=(int(stats[0]), int(stats[1])))
 
 
+def _accept(state, res, centres, fr):
+    """Write a relaxation's result into the zone's state (first m rows): positions, material,
+    tensions, bounds; the slip states (material slid beyond ``fr.slip_report`` from the friction
+    centres) and the friction offsets (that slide, capped at ``fr.memory_cap``)."""
+    m = state.m
+    state.pos[:m] = res.pos
+    state.material[:m] = res.s
+    state.tension[:m] = res.tension
+    state.bound[:m] = res.bounds
+    slide = res.s - centres
+    state.slip[:m] = np.where(np.abs(slide) > fr.slip_report, np.sign(slide), 0)
+    state.offset[:m] = np.clip(slide, -fr.memory_cap, fr.memory_cap)
+
+
 def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max_iter,
                   finish):
     """``solve_zone``'s frontal iteration behind a guide ring (``RelaxSettings.ring_frontal``):
@@ -977,14 +991,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
                 top_tensions=ring_top_tensions(state, bc))
     if not res.residual < rsc.tol:
         return None
-    state.pos[:m] = res.pos
-    state.material[:m] = res.s
-    state.tension[:m] = res.tension
-    state.bound[:m] = res.bounds
-    slide = res.s - centres
-    state.slip[:m] = np.where(np.abs(slide) > fr.slip_report, np.sign(slide), 0)
-    cap = fr.memory_cap
-    state.offset[:m] = np.clip(slide, -cap, cap)
+    _accept(state, res, centres, fr)
     if finish:
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
@@ -1111,14 +1118,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
             f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
     fr = settings.frontal
-    state.pos[:m] = res.pos
-    state.material[:m] = res.s
-    state.tension[:m] = res.tension
-    state.bound[:m] = res.bounds
-    slide = res.s - centres
-    state.slip[:m] = np.where(np.abs(slide) > fr.slip_report, np.sign(slide), 0)
-    cap = fr.memory_cap
-    state.offset[:m] = np.clip(slide, -cap, cap)
+    _accept(state, res, centres, fr)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
                                lagged=not rs.consistent_bounds)
