@@ -180,3 +180,33 @@ class Anderson:
         gamma = np.linalg.solve(G + (1e-12 * np.trace(G) + 1e-300) * np.eye(G.shape[0]),
                                 dR.T @ r)
         return gx - (dX + dR) @ gamma
+
+
+def pattern_keys(low, perm):
+    """The keys ``column * m + row`` of the lower block pattern of a matrix with the lattice's
+    pattern (each crossing coupled to its neighbours below, ``low`` (m, 2), -1 for none) in the
+    order ``perm``, unsorted, diagonal first; and (pc, plo, link): each crossing's position, its
+    neighbours' positions (-1 for none) and which neighbours exist."""
+    m = low.shape[0]
+    pinv = np.empty(m, dtype=np.int64)
+    pinv[perm] = np.arange(m)
+    link = low >= 0
+    pc = np.broadcast_to(pinv[:, None], low.shape)
+    plo = np.where(link, pinv[np.maximum(low, 0)], -1)
+    rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
+    cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
+    return cols * m + rows, pc, plo, link
+
+
+def block_fill(low, perm):
+    """Blocks of the factor L below the diagonal of a matrix with the lattice's pattern in the
+    order perm (``ldl_symbolic`` on the unique keys of ``pattern_keys``)."""
+    from preform._kernels import relax as RK
+
+    m = low.shape[0]
+    uniq = np.unique(pattern_keys(low, perm)[0])
+    Ap = np.zeros(m + 1, dtype=np.int64)
+    np.add.at(Ap, uniq // m + 1, 1)
+    Lnz, etree = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    return RK.ldl_symbolic(m, np.cumsum(Ap), (uniq % m).astype(np.int64),
+                           np.empty(m, dtype=np.int64), Lnz, etree)

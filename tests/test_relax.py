@@ -440,20 +440,7 @@ def test_band_dissection_orders_with_little_fill(captured):
     lat = R.lattice_of(st)
 
     def fill(perm):
-        pinv = np.empty(m, dtype=np.int64)
-        pinv[perm] = np.arange(m)
-        lo = lat.low
-        link = lo >= 0
-        pc = np.broadcast_to(pinv[:, None], lo.shape)
-        plo = np.where(link, pinv[np.maximum(lo, 0)], -1)
-        rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
-        cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
-        uniq = np.unique(cols * m + rows)
-        Ap = np.zeros(m + 1, dtype=np.int64)
-        np.add.at(Ap, uniq // m + 1, 1)
-        Lnz, etree = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-        return RK.ldl_symbolic(m, np.cumsum(Ap), (uniq % m).astype(np.int64),
-                               np.empty(m, dtype=np.int64), Lnz, etree)
+        return naive.block_fill(lat.low, perm)
 
     blk = R._BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))

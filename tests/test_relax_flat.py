@@ -13,6 +13,7 @@ import numpy as np
 import pymetis
 import pytest
 
+from naive_relax import block_fill, pattern_keys
 from preform._kernels import relax as RK
 
 
@@ -75,25 +76,6 @@ def slow_dissection(low, up, u, v, leaf, window):
         return order(a) + order(b) + sorted(sep, key=lambda c: u[c])
 
     return np.array(order(list(range(len(u)))), dtype=np.int64)
-
-
-def block_fill(low, perm):
-    """Blocks of the factor L below the diagonal of a matrix with the lattice's pattern (every
-    crossing coupled to its neighbours below) in the order perm (``ldl_symbolic``)."""
-    m = low.shape[0]
-    pinv = np.empty(m, dtype=np.int64)
-    pinv[perm] = np.arange(m)
-    link = low >= 0
-    pc = np.broadcast_to(pinv[:, None], low.shape)
-    plo = np.where(link, pinv[np.maximum(low, 0)], -1)
-    rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
-    cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
-    uniq = np.unique(cols * m + rows)
-    Ap = np.zeros(m + 1, dtype=np.int64)
-    np.add.at(Ap, uniq // m + 1, 1)
-    Lnz, etree = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-    return RK.ldl_symbolic(m, np.cumsum(Ap), (uniq % m).astype(np.int64),
-                           np.empty(m, dtype=np.int64), Lnz, etree)
 
 
 @pytest.mark.parametrize("width, rows, leaf, window", [(12, 7, 4, 0.15), (24, 12, 4, 0.15),
@@ -285,14 +267,8 @@ def _pattern_by_unique(low, perm):
     """The block pattern by NumPy's unique on the keys column * m + row (the form
     ``block_pattern`` replaces): Ap, Ai, slot_diag, slot_below, below_first."""
     m = low.shape[0]
-    pinv = np.empty(m, dtype=np.int64)
-    pinv[perm] = np.arange(m)
-    link = low >= 0
-    pc = np.broadcast_to(pinv[:, None], low.shape)
-    plo = np.where(link, pinv[np.maximum(low, 0)], -1)
-    rows = np.concatenate([pinv, np.minimum(pc, plo)[link]])
-    cols = np.concatenate([pinv, np.maximum(pc, plo)[link]])
-    uniq, inv = np.unique(cols * m + rows, return_inverse=True)
+    keys, pc, plo, link = pattern_keys(low, perm)
+    uniq, inv = np.unique(keys, return_inverse=True)
     slot_below = np.full(low.shape, -1, dtype=np.int64)
     slot_below[link] = inv[m:]
     Ap = np.zeros(m + 1, dtype=np.int64)
