@@ -764,6 +764,29 @@ def _inverse3(A, out):
     return True
 
 
+@njit(cache=True, inline="always")
+def _reach(i, k, etree, marker, elim, y_idx, nnz_y):
+    """Append to y_idx[nnz_y:] the rows of row k's pattern reached from i up the elimination tree
+    (unmarked rows below k, marked on the way), in topological order (QDLDL's ``QDLDL_factor``);
+    returns the new count."""
+    marker[i] = True
+    elim[0] = i
+    ne = 1
+    j = etree[i]
+    while j != -1 and j < k:
+        if marker[j]:
+            break
+        marker[j] = True
+        elim[ne] = j
+        ne += 1
+        j = etree[j]
+    while ne:
+        ne -= 1
+        y_idx[nnz_y] = elim[ne]
+        nnz_y += 1
+    return nnz_y
+
+
 @njit(cache=True, fastmath=True)
 def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
                 y, D):
@@ -800,21 +823,7 @@ def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim
                 for b in range(3):
                     y[i, a, b] = Ax[p, a, b]
             if not marker[i]:
-                marker[i] = True
-                elim[0] = i
-                ne = 1
-                j = etree[i]
-                while j != -1 and j < k:
-                    if marker[j]:
-                        break
-                    marker[j] = True
-                    elim[ne] = j
-                    ne += 1
-                    j = etree[j]
-                while ne:
-                    ne -= 1
-                    y_idx[nnz_y] = elim[ne]
-                    nnz_y += 1
+                nnz_y = _reach(i, k, etree, marker, elim, y_idx, nnz_y)
         for t in range(nnz_y - 1, -1, -1):
             ci = y_idx[t]
             end = next_space[ci]
@@ -1500,21 +1509,7 @@ def ldl_numeric5(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, eli
                 for b in range(nb):
                     y[i, a, b] = Ax[p, a, b]
             if not marker[i]:
-                marker[i] = True
-                elim[0] = i
-                ne = 1
-                j = etree[i]
-                while j != -1 and j < k:
-                    if marker[j]:
-                        break
-                    marker[j] = True
-                    elim[ne] = j
-                    ne += 1
-                    j = etree[j]
-                while ne:
-                    ne -= 1
-                    y_idx[nnz_y] = elim[ne]
-                    nnz_y += 1
+                nnz_y = _reach(i, k, etree, marker, elim, y_idx, nnz_y)
         for t in range(nnz_y - 1, -1, -1):
             ci = y_idx[t]
             end = next_space[ci]
