@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .mesh import hash_slot
+from .mesh import empty_table, hash_slot
 
 #: a vertex with more incident half-edges than this sorts them with a merge sort, not insertion
 INSERTION_MAX = 32
@@ -141,10 +141,8 @@ def first_of_each_face(F, keep):
     three vertices (either winding): the faces ``np.unique(np.sort(F, axis=1), axis=0,
     return_index=True)`` keeps. An open-addressing hash table on the sorted triple."""
     m = F.shape[0]
-    size = 1
-    while size < 2 * m:
-        size *= 2
-    table = np.full(size, -1, dtype=np.int64)
+    table = empty_table(m)
+    size = table.shape[0]
     sorted_f = np.empty((m, 3), dtype=np.int64)
     for f in range(m):
         a = F[f, 0]

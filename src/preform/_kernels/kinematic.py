@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .mesh import face_cross
+
 WALK_TANGENT = 0     # walked until the free yarn became tangent (g = 0)
 WALK_CONCAVE = 1     # g started to fall: a concave stretch the yarn cannot follow (bridge)
 WALK_BUDGET = 2      # walked the allowed length without reaching tangency
@@ -73,18 +75,7 @@ def barycentric(V, T, f, x, y, z):
 @njit(cache=True)
 def face_double_area(V, T, f):
     """Twice the area of face f, |(p1 - p0) x (p2 - p0)|."""
-    p0 = T[f, 0]
-    p1 = T[f, 1]
-    p2 = T[f, 2]
-    ux = V[p1, 0] - V[p0, 0]
-    uy = V[p1, 1] - V[p0, 1]
-    uz = V[p1, 2] - V[p0, 2]
-    wx = V[p2, 0] - V[p0, 0]
-    wy = V[p2, 1] - V[p0, 1]
-    wz = V[p2, 2] - V[p0, 2]
-    qx = uy * wz - uz * wy
-    qy = uz * wx - ux * wz
-    qz = ux * wy - uy * wx
+    qx, qy, qz = face_cross(V, T, f)
     return np.sqrt(qx * qx + qy * qy + qz * qz)
 
 

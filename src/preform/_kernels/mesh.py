@@ -494,6 +494,17 @@ def hash_slot(x, y, z, size):
     return np.int64(h & np.uint64(size - 1))
 
 
+@njit(cache=True, inline="always")
+def empty_table(n):
+    """An open-addressing table for n keys: int64 slots, all -1 (empty), its size the smallest
+    power of two at least 2 n (at most half full, so every probe ends; ``hash_slot`` masks by
+    size - 1)."""
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    return np.full(size, -1, dtype=np.int64)
+
+
 @njit(cache=True)
 def weld_exact(V, inverse):
     """Distinct rows of V (n, 3) float64 in order of first appearance: writes the index of each
@@ -501,10 +512,8 @@ def weld_exact(V, inverse):
     appearance. Rows are equal when their coordinates are (so 0.0 and -0.0 are one value), through
     an open-addressing hash table on the coordinates' bits."""
     n = V.shape[0]
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    table = np.full(size, -1, dtype=np.int64)
+    table = empty_table(n)
+    size = table.shape[0]
     first = np.empty(n, dtype=np.int64)
     bits = np.empty(3, dtype=np.float64)
     ibits = bits.view(np.uint64)
@@ -792,10 +801,8 @@ def grid_neighbours_exist(P, cell):
     caller keeps ``|x| / cell`` far below 2^52 so that the division rounds by far less than a cube.
     """
     n = P.shape[0]
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    table = np.full(size, -1, dtype=np.int64)
+    table = empty_table(n)
+    size = table.shape[0]
     cube = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
         for c in range(3):

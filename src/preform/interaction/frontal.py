@@ -428,12 +428,13 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
             state.bound[:m] = bound1
             return SolveReport(it, max(float(residual), change), np.array(history),
                                net.f_top.copy(), newton, lagged=True, **_trace(net))
-        if damped and not cycling and it >= fr.snapshot_damping_after:
+        if damped and not cycling and it >= max(fr.snapshot_damping_after, 3):
             cycling = history[-1] >= history[-3]     # no progress over two iterations
         if cycling:
             # an iteration cycling between stick and slip states: part steps to the new bounds
             w = fr.snapshot_damping
-            net.bound, net.f_top = net.bound + w * (bound1 - net.bound), net.f_top + w * (f_top1 - net.f_top)
+            net.bound = net.bound + w * (bound1 - net.bound)
+            net.f_top = net.f_top + w * (f_top1 - net.f_top)
         else:
             net.bound, net.f_top = mixer(net.bound, net.f_top, bound1, f_top1, change)
     raise SimulationError(
