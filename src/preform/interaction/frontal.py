@@ -360,11 +360,20 @@ def _newton_step_inplace(net, E, nnz):
 
 
 def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = DEFAULT, tol=None,
-                       friction_tol=None, max_iter=None, where="", centre=None) -> SolveReport:
+                       friction_tol=None, max_iter=None, where="", centre=None,
+                       start=None) -> SolveReport:
     """Bring every crossing of ``state`` to balance with its friction law (module docstring),
     updating ``state`` in place: positions, material coordinates, tensions, friction bounds, slip
     states and friction offsets of the crossings. The top tensions of the result are
     ``SolveReport.f_top``. ``state.material_fell`` must be anchored (``fell_material``).
+
+    ``state`` as handed in is the step's *posed* state: it defines the problem, i.e. the friction
+    bounds a new crossing (``state.bound`` not finite) starts with and the top tensions ``f_top``
+    (both ``_Network.bounds`` of its positions and tensions), which the first frontal iteration
+    holds. ``start``: ``(pos (m, 3), material (m, 2))``, the solver's initial iterate only
+    (default: the posed positions and material). With the bounds and top tensions held, E has one
+    minimum (its Hessian is positive definite), so the result of a time step does not depend on
+    ``start`` beyond the balance tolerance (``tests/test_start_independence.py``).
     ``centre`` (m, 2): where each yarn's friction term is centred (default:
     ``friction_centres(state)``). ``tol``, ``friction_tol``, ``max_iter``: the balance
     tolerance, the frontal tolerance and the frontal iterations (default: ``settings``'
@@ -385,15 +394,18 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
                           dtype=float)
     if m == 0:
         return SolveReport(0, 0.0, np.zeros(0), net.bounds()[2])
-    # start: the bounds of the last step (new crossings: of the start geometry); with consistent
-    # bounds those of the start geometry for all (the step's boundary moved since the last
-    # step: near the fell and top points they are closer to the step's own, and the
+    # the problem: the bounds of the last step (new crossings: of the posed geometry); with
+    # consistent bounds those of the posed geometry for all (the step's boundary moved since the
+    # last step: near the fell and top points they are closer to the step's own, and the
     # iteration needs 18-29 iterations instead of 31-33 on 48-carrier steps)
     net.tension[:] = state.tension[:m]
     bound0, _, f_top0 = net.bounds()
     fresh = ~np.isfinite(state.bound[:m]) | consistent
     net.bound = np.where(fresh, bound0, state.bound[:m])
     net.f_top = f_top0
+    if start is not None:
+        # the solver's initial iterate (the posed state stays the problem's)
+        state.pos[:m], state.material[:m] = start[0][:m], start[1][:m]
     mixer = _BoundMixing(fr.bound_mixing if consistent else 0, fr.mixing_start)
     # a snapshot's final solve (a tolerance and iterations given, not a time step's lag)
     damped = not consistent and friction_tol is not None and fr.snapshot_damping < 1.0

@@ -360,20 +360,20 @@ class InteractionZone:
         frontal_kernels.radial_normals(st.m, st.pos, st.normal)
         self.pose_end = pose_end
         centre = frontal.friction_centres(st)
-        # what a failed solve leaves moved
-        start = st.pos[: st.m].copy(), st.material[: st.m].copy()
-        # what a solve sets, for the step solved again with every crossing's plane
-        solved = {name: getattr(st, name)[: st.m].copy()
-                  for name in ("pos", "material", "tension", "bound", "slip", "offset")}
+        # the posed state: what defines the step's problem (the solvers take the bounds of new
+        # crossings and the top tensions from it) and what a solve sets, for the step solved
+        # again with every crossing's plane or in stages
+        posed = {name: getattr(st, name)[: st.m].copy()
+                 for name in ("pos", "material", "tension", "bound", "slip", "offset")}
         try:
             wall, clear = self._with_near_wall(bc)
             self.last_report = self.solve_zone(st, wall, settings=self.settings, where=where,
                                                centre=centre)
-            if clear is not None and self._left_clearance(start[0], clear):
+            if clear is not None and self._left_clearance(posed["pos"], clear):
                 # a crossing without its plane moved as far as it was from the mandrel (it
                 # may have reached the wall): the step again with every crossing's plane
                 self.wall_resolves += 1
-                for name, value in solved.items():
+                for name, value in posed.items():
                     getattr(st, name)[: st.m] = value
                 wall = self._with_wall(bc)
                 self.last_report = self.solve_zone(st, wall, settings=self.settings,
@@ -382,8 +382,7 @@ class InteractionZone:
         except SimulationError:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
                 raise
-            st.pos[: st.m], st.material[: st.m] = start
-            bc = self._staged(t0, t1, bc, where, centre, fell_start)
+            bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
         self.f_top = self.last_report.f_top
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
@@ -412,13 +411,17 @@ class InteractionZone:
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
 
-    def _staged(self, t0, t1, bc, where, centre, fell_start):
+    def _staged(self, t0, t1, bc, where, centre, fell_start, posed):
         """The step solved again with its boundary moved in the ``boundary_stages`` (fell points
         from where the last step left them, supply or ring points from their last places, each
-        solve warm-started from the last; the same friction centres ``centre``): where the
-        boundary's move in one go takes Newton out of its reach. ``fell_start``: the fell
-        points' material the last step left ("laid" anchoring; "tension" anchors the stages'
-        start itself). Sets ``last_report``; returns the final boundary (with the wall)."""
+        solve started from the last one's result; the same friction centres ``centre``): where
+        the boundary's move in one go takes Newton out of its reach. Every stage is posed from
+        ``posed`` (the step's posed state: positions, material, tensions, bounds, slip states,
+        offsets), the last stage's result being only its start, so the last stage is the step's
+        own problem and lands where a direct solve that converged would. ``fell_start``: the
+        fell points' material the last step left ("laid" anchoring; "tension" anchors the
+        stages' start itself). Sets ``last_report``; returns the final boundary (with the
+        wall)."""
         st = self.state
         m = self.machine
         stages = self.settings.zone.boundary_stages
@@ -434,13 +437,20 @@ class InteractionZone:
         # the fell points' material moves with them: from the last step's anchoring to the
         # step's own (``fell_anchor``), so the last stage is the step's problem itself
         fell_end = st.material_fell.copy()
+        for name, value in posed.items():        # what the failed solve left moved
+            getattr(st, name)[: st.m] = value
         if self.settings.zone.fell_material == "tension":
             fell_start = frontal.fell_material(st, at(0.0), self.settings)
+        start = posed["pos"], posed["material"]
         for lam in stages:
             bcl = at(lam) if lam < 1.0 else bc
             st.material_fell[:] = fell_start + lam * (fell_end - fell_start)
+            for name, value in posed.items():
+                getattr(st, name)[: st.m] = value
             bcl = self._with_wall(bcl)
-            report = self.solve_zone(st, bcl, settings=self.settings, where=where, centre=centre)
+            report = self.solve_zone(st, bcl, settings=self.settings, where=where, centre=centre,
+                                     start=start)
+            start = st.pos[: st.m].copy(), st.material[: st.m].copy()
         self.staged += 1
         self.last_report = report
         return bcl

@@ -960,7 +960,7 @@ def _accept(state, res, centres, fr):
 
 
 def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max_iter,
-                  finish):
+                  finish, start=None):
     """``solve_zone``'s frontal iteration behind a guide ring (``RelaxSettings.ring_frontal``):
     ``max_iter`` solves at most (Newton's frontal iterations), the bounds and ring top tensions
     taken anew from each converged geometry until they change by less than ``friction_tol``
@@ -971,7 +971,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     where the bounds have converged. Otherwise the relaxation's state is the result, the
     newest bounds (of its converged geometry) lagged, as Newton's after ``max_iter``
     iterations. None (state untouched) where a relaxation did not converge: then Newton's
-    alone."""
+    alone. ``start``: the initial iterate (``solve_zone``)."""
     from . import frontal
     fr = settings.frontal
     friction_tol = fr.friction_tolerance if friction_tol is None else friction_tol
@@ -985,7 +985,8 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner, consistent_bounds=True,
                               bound_iterations=max_iter - 1, friction_tol=friction_tol,
                               **({} if tol is None else dict(tol=float(tol))))
-    res = relax(lattice_of(state), state.pos[:m], state.material[:m], state.material_fell,
+    pos0, s0 = (state.pos, state.material) if start is None else start
+    res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rsc, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
@@ -1058,7 +1059,7 @@ def ring_top_tensions(state, bc):
 
 def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", centre=None,
                tol=None, friction_tol=None, max_iter=None,
-               relax_settings: RelaxSettings | None = None):
+               relax_settings: RelaxSettings | None = None, start=None):
     """The zone solver with ``frontal.solve_zone_inplace``'s contract (``InteractionZone``'s
     ``solve_zone``; ``[model] solver = "relax"``): brings ``state`` to balance in place
     (positions, material, tensions, friction bounds, slip states, friction offsets) and returns a
@@ -1074,14 +1075,17 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``,
     counted in ``FALLBACKS``). Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
-    ``relax_settings.tol``).
+    ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
+    the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
+    ``(pos (m, 3), material (m, 2))`` is only the initial iterate (default: the posed one), as in
+    ``frontal.solve_zone_inplace``.
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
     if ((max_iter is not None or friction_tol is not None) and bc.has_ring
             and rs.ring_frontal and not settings.frontal.consistent_bounds):
         report = _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol,
-                               max_iter, finish=friction_tol is not None)
+                               max_iter, finish=friction_tol is not None, start=start)
         if report is not None:
             return report
     if max_iter is not None or friction_tol is not None or settings.frontal.consistent_bounds:
@@ -1089,7 +1093,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         # (docs/decisions.md), Newton's frontal iteration solves them
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
-                                          where=where, centre=centre)
+                                          where=where, centre=centre, start=start)
     if tol is not None:
         rs = dataclasses.replace(rs, tol=float(tol))
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
@@ -1100,7 +1104,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     bounds, ft = start_bounds(state, bc, settings)
     if m == 0:
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
-    res = relax(lattice_of(state), state.pos[:m], state.material[:m], state.material_fell,
+    pos0, s0 = (state.pos, state.material) if start is None else start
+    res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
@@ -1110,7 +1115,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
-                                                centre=centres)
+                                                centre=centres, start=start)
             FALLBACKS[0] += 1
             return report
         raise SimulationError(
