@@ -56,12 +56,18 @@ The bounds depend on the tensions and the deflections (Amontons: the normal forc
 tensions on the ring deflections: an outer fixed point (the frontal iteration) re-evaluates them
 from the balanced geometry and solves again until they change by less than
 ``friction_tolerance`` relative to the tensions; the residual history of a solve is that change per
-iteration. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
+iteration. The first iteration holds the bounds and top tensions of the step's *posed* state
+(the state handed in: the last step's converged state plus the crossings created from it): an
+existing crossing keeps the bound of the last step's converged geometry, a new one takes that of
+its creation geometry, and ``f_top`` is that of the posed geometry (behind a guide ring: Capstan
+over the posed deflection). With those held E has one minimum, so the step's result does not
+depend on the solver's initial iterate (``start``), only on the posed state, to the balance
+tolerance. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
 snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``; one that has made no progress
 over two iterations after ``snapshot_damping_after`` moves each bound only ``snapshot_damping``
 of the way to its new value from then on (x+ = x + w (G(x) - x): a plain iteration that cycles
 between stick and slip states settles when averaged). With ``consistent_bounds`` a
-time step iterates to ``consistent_tolerance`` instead, from the bounds of its start geometry,
+time step iterates to ``consistent_tolerance`` instead, from the bounds of its posed geometry,
 Anderson-mixing the bounds and top tensions once they change by less than ``mixing_start``
 (``_BoundMixing``): the plain iteration converges linearly at ~0.965 an iteration, the mixed
 one in 18-29 iterations on 48-carrier steps; the step is then the fixed point of the equations

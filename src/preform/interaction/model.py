@@ -16,7 +16,10 @@ Each step (``step``):
 3. the contact normals become the radial directions of the crossings (held during the solve), and
    the frontal solver (``interaction/frontal.py``) brings all crossings to balance with the fell
    points of the step's end, each yarn sticking (its material at the crossing stays) or slipping
-   on its friction bound;
+   on its friction bound. The state after 1-3 is the step's *posed* state: it defines the
+   step's problem (friction centres, the bounds of new crossings, the top tensions), and the
+   solver starts from it; a solve started elsewhere (``solve_zone``'s ``start``, the stages of
+   ``_staged``) lands on the same state, to the balance tolerance;
 4. a crossing that lies closer to the mandrel than ``deposit_height`` yarn thicknesses (the
    solver keeps the crossings outside the mandrel's tangent planes, ``frontal.Boundary.plane``)
    is deposited: it becomes the

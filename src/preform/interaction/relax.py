@@ -1012,9 +1012,10 @@ def lattice_of(state) -> Lattice:
 
 
 def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
-    """(bounds (m, 2), f_top (2n,)) a step starts from, as ``frontal.solve_zone_inplace`` takes
-    them: each crossing's bound of the last step, a new crossing's of the start geometry with its
-    start tensions; the top tensions of the start geometry (guide ring: Capstan)."""
+    """(bounds (m, 2), f_top (2n,)) of a step's problem, as ``frontal.solve_zone_inplace`` takes
+    them from the posed ``state``: each crossing's bound of the last step, a new crossing's of
+    the posed geometry with its posed tensions; the top tensions of the posed geometry (guide
+    ring: Capstan). Not of the solver's initial iterate (``solve_zone``'s ``start``)."""
     from .._kernels import frontal as FK
     m, ny = state.m, state.n_yarns
     lat = lattice_of(state)
