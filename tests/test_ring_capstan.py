@@ -52,7 +52,7 @@ def test_flow_capstan_tensions_lie_in_the_cone_and_follow_the_slide(tmp_path):
         if i < 5:
             continue
         # the solve's top tensions lie in the Capstan cone. A step's single frontal iteration
-        # takes them at the step's start geometry (``frontal.solve_zone_inplace``), eta here is
+        # takes them at the step's posed geometry (``frontal.solve_zone_inplace``), eta here is
         # the solved one: they differ by mu_r x the change of eta in the step, up to 0.07 rad
         # where a crossing was created at the top of the yarn and moved by centimetres in its
         # first solve (the exact law at one geometry: ``test_top_tensions_kernel``)
