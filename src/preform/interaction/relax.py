@@ -1068,7 +1068,10 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
 
     A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
     held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
-    into ``state.bound`` for the next step. A call that asks for the frontal iteration of the
+    into ``state.bound`` for the next step. With ``FrontalSettings.max_iterations`` k > 1 it is up
+    to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
+    the same friction centres), until the bounds change by less than ``friction_tolerance``, as
+    Newton's frontal iteration. A call that asks for the frontal iteration of the
     bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
     to 1e-3) is Newton's (``frontal.solve_zone_inplace``; behind a guide ring the
     relaxation's with consistent bounds first, ``_ring_frontal``), as is a step the relaxation
@@ -1099,6 +1102,15 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         rs = dataclasses.replace(rs, tol=float(tol))
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
         rs = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
+    fr = settings.frontal
+    # ``max_iterations`` frontal iterations a step, as Newton's: each relaxation posed by the
+    # last one's converged state (its bounds and top tensions), until they change by less than
+    # ``friction_tolerance``; not reaching it is the lag, not a failure
+    passes = fr.max_iterations > 1 and not rs.consistent_bounds
+    if passes:
+        rs = dataclasses.replace(rs, consistent_bounds=True,
+                                 bound_iterations=fr.max_iterations - 1,
+                                 friction_tol=fr.friction_tolerance)
     m = state.m
     centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
                        dtype=float)
@@ -1111,7 +1123,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
     ITERATIONS.append(res.iterations)
-    if not res.converged:
+    if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
@@ -1123,8 +1135,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
             f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
-    fr = settings.frontal
     _accept(state, res, centres, fr)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
-                               lagged=not rs.consistent_bounds)
+                               lagged=not (rs.consistent_bounds and res.converged))

@@ -92,9 +92,11 @@ class FrontalSettings:
     #: convergence of the outer iteration: change of the bounds and top tensions between
     #: iterations, relative to the tensions; bounds Psi / (f_int + f_ext) of the result
     friction_tolerance: float = 1e-6
-    #: outer iterations per time step: the bounds lag the geometry by up to a step (an explicit
-    #: update of a state variable; history.csv's residual says by how much), and a second
-    #: iteration costs as much as the first for a change of 0.02 % in the convergence length
+    #: outer iterations per time step (Newton and the relaxation): the bounds lag the geometry by
+    #: up to a step (an explicit update of a state variable; history.csv's residual says by how
+    #: much). Each iteration costs about a solve; on 48-carrier case A runs the lag of 1 moves H
+    #: by ~0.15 % (up to 1.2 %) and the braid angle by up to 0.6 deg from the time-step-converged
+    #: run whatever the step, 3 by 0.09 % and 0.14 deg (docs/decisions-bounds14c.md)
     max_iterations: int = 1
     #: outer iterations of a snapshot's final solve (the exported crossings meet Psi to
     #: snapshot_tolerance where the iteration converges within them, else to its last change)
