@@ -225,6 +225,12 @@ class RelaxSettings:
     #: scalar iteration there: 218-241 iterations on the friction-0.5 steps of 16 and 48
     #: carriers, and the start-up steps of a case A run it does not converge on at all)
     scalar_retry: bool = False
+    #: a step the block preconditioner stalls on is solved again with the "full" one (it has
+    #: the stick stiffness along stuck yarns) before it goes to Newton: with 3 frontal
+    #: iterations a step (``FrontalSettings.max_iterations``) a third of the 48-carrier steps
+    #: stall, and this makes them 2.5x the lagged run's time instead of 6x
+    #: (docs/decisions-bounds14c.md); off, so that the default's results stay as they were
+    full_retry: bool = False
     #: largest move of a crossing in one block update, as a fraction of its shortest segment
     #: (the whole update is scaled down to it: the stiffness holds for moves small against
     #: the segments)
@@ -590,14 +596,16 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
                         **kw):
     """``_relax_held``; where the block preconditioner stalls (no new lowest residual in
     ``block_stall`` iterations: steps with friction 0.5 and jammed crossings, where it moves
-    the crossings too far) and ``scalar_retry``, the step again from the same start with the
-    scalar one, the iterations and times of both counted."""
+    the crossings too far) and ``full_retry`` (or ``scalar_retry``), the step again from the
+    same start with the "full" (or the scalar) one, the iterations and times of both counted
+    (``fallback_scalar`` set for either)."""
     res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, settings=settings,
                       **kw)
-    if res.converged or settings.preconditioner != "block" or not settings.scalar_retry:
+    retry = "full" if settings.full_retry else "scalar" if settings.scalar_retry else None
+    if res.converged or settings.preconditioner != "block" or retry is None:
         return res
     again = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
-                        settings=dataclasses.replace(settings, preconditioner="scalar"), **kw)
+                        settings=dataclasses.replace(settings, preconditioner=retry), **kw)
     again.iterations += res.iterations
     again.history = np.concatenate([res.history, again.history])
     for key, v in res.times.items():
