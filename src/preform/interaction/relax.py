@@ -229,7 +229,8 @@ class RelaxSettings:
     #: the stick stiffness along stuck yarns) before it goes to Newton: with 3 frontal
     #: iterations a step (``FrontalSettings.max_iterations``) a third of the 48-carrier steps
     #: stall, and this makes them 2.5x the lagged run's time instead of 6x
-    #: (docs/decisions-bounds14c.md); off, so that the default's results stay as they were
+    #: (docs/decisions.md, "A time step's problem posed by its posed state"); off, so that
+    #: the default's results stay as they were
     full_retry: bool = False
     #: largest move of a crossing in one block update, as a fraction of its shortest segment
     #: (the whole update is scaled down to it: the stiffness holds for moves small against

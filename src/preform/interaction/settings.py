@@ -96,7 +96,8 @@ class FrontalSettings:
     #: up to a step (an explicit update of a state variable; history.csv's residual says by how
     #: much). Each iteration costs about a solve; on 48-carrier case A runs the lag of 1 moves H
     #: by ~0.15 % (up to 1.2 %) and the braid angle by up to 0.6 deg from the time-step-converged
-    #: run whatever the step, 3 by 0.09 % and 0.14 deg (docs/decisions-bounds14c.md)
+    #: run whatever the step, 3 by 0.09 % and 0.14 deg (docs/decisions.md, "A time step's
+    #: problem posed by its posed state")
     max_iterations: int = 1
     #: outer iterations of a snapshot's final solve (the exported crossings meet Psi to
     #: snapshot_tolerance where the iteration converges within them, else to its last change)
