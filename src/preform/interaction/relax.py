@@ -564,17 +564,18 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
                               f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
                               settings=settings, model=model)
+    m = lat.m
     if not settings.consistent_bounds or not res.converged:
+        if res.converged and m:
+            # bounds held at the last step's (lagged): how far they are from those of the
+            # converged geometry, the change Newton's frontal loop reports after its one
+            # iteration (history.csv's residual)
+            res.bound_change = _lag_change(lat, res, bounds, top_tensions, f_top)[0]
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
-    m = lat.m
     change = np.inf
     for _ in range(settings.bound_iterations):
-        if top_tensions is not None:
-            f_top = np.asarray(top_tensions(res.pos), dtype=float)
-        change = _bound_change(lat, res.bounds, bounds, res.tension, res.f_top) if m else 0.0
-        if top_tensions is not None:
-            change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
+        change, f_top = _lag_change(lat, res, bounds, top_tensions, f_top) if m else (0.0, f_top)
         if change < settings.friction_tol:
             break
         bounds = res.bounds
@@ -616,6 +617,18 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
     again.sweep_stats = tuple(a + b for a, b in zip(again.sweep_stats, res.sweep_stats))
     again.fallback_scalar = True
     return again
+
+
+def _lag_change(lat, res, held, top_tensions, f_top):
+    """(change, top tensions): the relative change from the held bounds ``held`` and top
+    tensions ``res.f_top`` to those of the converged geometry of ``res`` (:func:`_bound_change`;
+    the top tensions' relative to themselves, behind a guide ring, where ``top_tensions`` gives
+    them; else ``f_top`` is returned as it is)."""
+    change = _bound_change(lat, res.bounds, held, res.tension, res.f_top)
+    if top_tensions is not None:
+        f_top = np.asarray(top_tensions(res.pos), dtype=float)
+        change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
+    return change, f_top
 
 
 def _bound_change(lat, new, old, tension, f_top):
