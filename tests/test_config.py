@@ -467,3 +467,16 @@ def test_model_solver_key(tmp_path):
     assert cfg.model.solver == "newton" and dump_config(cfg)["model"]["solver"] == "newton"
     config_error(tmp_path, "solver", "cholesky", '"newton"', '"relax"',
                  model={"solver": "cholesky"})
+
+
+def test_model_frontal_iterations_key(tmp_path):
+    """``[model] frontal_iterations``: 1 by default (the bounds lag by a step), an integer from 1
+    to 20 accepted and echoed (the checkpoint's inputs then differ), anything else refused with
+    the key, the value and the range named."""
+    assert load_config(make_case(tmp_path)).model.frontal_iterations == 1
+    cfg = load_config(make_case(tmp_path, model={"kind": "interaction", "frontal_iterations": 3}))
+    assert cfg.model.frontal_iterations == 3
+    assert dump_config(cfg)["model"]["frontal_iterations"] == 3
+    for bad in (0, 21, 2.5, "3", True):
+        config_error(tmp_path, "frontal_iterations", "from 1 to 20",
+                     model={"frontal_iterations": bad})

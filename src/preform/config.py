@@ -106,6 +106,11 @@ class ModelConfig:
     #: ``interaction/relax.py``: Newton's equations, ~10x faster at 144 carriers) | "newton"
     #: (the reference: damped Newton on the step's energy)
     solver: str = "relax"
+    #: friction-bound updates per time step of the interaction model
+    #: (``FrontalSettings.max_iterations``): 1 lags the bounds by one step; 3 brings H within
+    #: ~0.1 % and the braid angle within ~0.15 deg of the time-step-converged run, at 1.6-2.5x
+    #: the time (docs/decisions.md, "A time step's problem posed by its posed state")
+    frontal_iterations: int = 1
 
 
 @dataclass(frozen=True)
@@ -203,7 +208,7 @@ KEYS = {
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
-    "model": ("kind", "time_step", "start", "seed", "solver"),
+    "model": ("kind", "time_step", "start", "seed", "solver", "frontal_iterations"),
     "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
@@ -709,7 +714,22 @@ def _model(sec: _Section) -> ModelConfig:
         start=sec.choice("start", STARTS, default=ModelConfig.start),
         seed=sec.integer("seed", "a non-negative integer", default=ModelConfig.seed, minimum=0),
         solver=sec.choice("solver", SOLVERS, default=ModelConfig.solver),
+        frontal_iterations=_frontal_iterations(sec),
     )
+
+
+#: most friction-bound updates a time step may ask for (10 converge the run in the time step
+#: on 48-carrier case A; more only cost time)
+MAX_FRONTAL_ITERATIONS = 20
+
+
+def _frontal_iterations(sec: _Section) -> int:
+    what = f"an integer from 1 to {MAX_FRONTAL_ITERATIONS} (friction-bound updates a time step)"
+    value = sec.integer("frontal_iterations", what, default=ModelConfig.frontal_iterations,
+                        minimum=1)
+    if value > MAX_FRONTAL_ITERATIONS:
+        raise sec.error("frontal_iterations", value, f"expected {what}")
+    return value
 
 
 def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
@@ -785,7 +805,7 @@ def _dump_sections(config: Config) -> dict:
                     "braid_length": p.braid_length,
                     "pose_lead": "auto" if p.pose_lead is None else p.pose_lead},
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed,
-                  "solver": mo.solver},
+                  "solver": mo.solver, "frontal_iterations": mo.frontal_iterations},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots,
                                             "input_mesh_fields": out.input_mesh_fields},

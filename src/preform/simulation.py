@@ -11,6 +11,7 @@ computed up to the last good step, with ``status`` saying so. The model is chose
 from __future__ import annotations
 
 import dataclasses
+import functools
 import signal
 import sys
 import threading
@@ -76,12 +77,26 @@ def load_geometry(config, load_mandrel=None):
 
 def make_zone(config, machine, mandrel):
     """A fresh zone of ``[model] kind`` (``ZONES``), the interaction zone with the solver of
-    ``[model] solver`` (``SOLVERS``); ``mandrel`` (mandrel frame) for its contact and deposition
-    tests."""
+    ``[model] solver`` (``SOLVERS``) and ``[model] frontal_iterations`` friction-bound updates a
+    step; ``mandrel`` (mandrel frame) for its contact and deposition tests."""
     cls = zone_class(config.model.kind)
     if config.model.kind != "interaction":
         return cls(config, machine, mandrel)
-    return cls(config, machine, mandrel, solve_zone=solver_of(config.model.solver))
+    solve = solver_of(config.model.solver)
+    iterations = config.model.frontal_iterations
+    if iterations == 1:
+        return cls(config, machine, mandrel, solve_zone=solve)
+    from .interaction import relax
+    from .interaction.settings import DEFAULT
+
+    settings = dataclasses.replace(
+        DEFAULT, frontal=dataclasses.replace(DEFAULT.frontal, max_iterations=iterations))
+    if solve is relax.solve_zone:
+        # nearly consistent bounds make the top rows stick, where the block preconditioner
+        # stalls: the "full" one (stick stiffness along a stuck yarn) before Newton
+        solve = functools.partial(relax.solve_zone,
+                                  relax_settings=relax.RelaxSettings(full_retry=True))
+    return cls(config, machine, mandrel, settings=settings, solve_zone=solve)
 
 
 def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:
