@@ -1,21 +1,26 @@
-"""The numba kernels of a first run compiled on the second core while this process loads the mandrel.
+"""The work of a first run that a warm run does not do, done on the second core while this
+process loads the mandrel: compiling numba kernels, and building the field mesh.
 
 On a first run in an environment (numba's on-disk cache lacks the kinematic kernels), ``preform
 run`` compiles kernels for most of its first 20-30 s: the intake and check kernels
 (``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks the mandrel, then the
 stepper's (``_kernels.kinematic`` and the centerline projection) and the field kernels
-(``_kernels.fields``). The first group is needed at once, the others only after it, so
-:func:`start` launches a worker process that compiles the others meanwhile by running small
-representative jobs (:data:`JOBS`, in the order the run needs them). The kernels are
+(``_kernels.fields``); its map then builds the field mesh, which later runs read from the preform
+cache. The first group is needed at once, the rest only after it, so :func:`start` launches a
+worker process that runs small representative jobs meanwhile (:data:`JOBS`, in the order the run
+needs what they make): ``projection`` (the centerline projection, which the checks need too:
+compiled first, the command loads it), ``stepper``, ``analysis`` (the laid yarn's angles),
+``fields`` and ``field_mesh`` (the run's own field mesh, into the preform cache). The kernels are
 ``cache=True``: the worker writes them to the cache and this process loads them when it gets
 there instead of compiling them.
 
 The jobs are claimed through files created exclusively in a folder of the two processes: the
 worker claims them from the front; :meth:`Warmup.finish` (called once the mandrel is loaded and
-checked) claims what the worker has not reached and runs it here, then waits for the jobs the
-worker holds. A job is the run's own code on a small cylinder (the same calls, so the same
-argument types and the same compiled specialisations), so nothing here knows the kernels' types;
-a job that fails only means that the run compiles what it needs itself.
+checked) claims what the worker has not reached, from the back, and runs it here, then waits for
+the jobs the worker holds: whichever process is free takes the next job. A compile job is the
+run's own code on a small cylinder (the same calls, so the same argument types and the same
+compiled specialisations), so nothing here knows the kernels' types; a job that fails, or a
+worker that dies, only means that the run does that work itself.
 
 The worker is a fresh interpreter (``python -m preform._jit``), not a fork: embree's thread pool
 and numba's state in this process are not fork-safe once started.
@@ -132,12 +137,14 @@ def job_field_mesh(config, mandrel=None):
     instead of building it after the simulation. ``mandrel``: the run's (in the command); the
     worker reads it from the cache, where the command stored it on loading, and leaves the job
     to the run when it is not there yet. Nothing to do without the cache or with ``[[layer]]``
-    tables (the layers' field mesh is built on the way)."""
+    tables (the layers' field mesh is built on the way), nor where the cache cannot be written
+    (the map would build it a second time)."""
     from types import SimpleNamespace
 
     from .io.cache import cache_dir, cached_field_mesh, cached_mandrel
 
-    if cache_dir() is None or config.layers:
+    folder = cache_dir()
+    if folder is None or config.layers or not (folder.is_dir() and os.access(folder, os.W_OK)):
         return
     if mandrel is None:
         mc = config.mandrel
