@@ -9,8 +9,9 @@ stepper's (``_kernels.kinematic`` and the centerline projection) and the field k
 cache. The first group is needed at once, the rest only after it, so :func:`start` launches a
 worker process that runs small representative jobs meanwhile (:data:`JOBS`, in the order the run
 needs what they make): ``projection`` (the centerline projection, which the checks need too:
-compiled first, the command loads it), ``stepper``, ``analysis`` (the laid yarn's angles),
-``fields`` and ``field_mesh`` (the run's own field mesh, into the preform cache). The kernels are
+compiled first, the command loads it), ``stepper``, ``analysis`` (the laid yarn's angles), then
+what the map needs: ``clip`` and ``pool`` (the field kernels) and ``field_mesh`` (the run's own
+field mesh, into the preform cache). The kernels are
 ``cache=True``: the worker writes them to the cache and this process loads them when it gets
 there instead of compiling them.
 
@@ -123,12 +124,26 @@ def job_analysis(config, mandrel=None):
                       mandrel_friction(small), tol.slip_curvature, s=s)
 
 
-def job_fields(config, mandrel=None):
-    """Two helices mapped onto a small cylinder (``pipeline._compile_map_kernels``): the field
-    kernels."""
-    from .pipeline import _compile_map_kernels
+def job_clip(config, mandrel=None):
+    """Two helices clipped to the faces of a small cylinder (``fields.clip_yarns`` as
+    ``fields.map_to_surface`` calls it, on ``pipeline.small_map_case``): the clipping kernels."""
+    from .fields import clip_yarns, face_geometry
+    from .pipeline import small_map_case
 
-    _compile_map_kernels(config)
+    result, (V, F, _, _) = small_map_case(config)
+    normals, _, centroids = face_geometry(V, F)
+    clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
+
+
+def job_pool(config, mandrel=None):
+    """The neighbourhood sums of the same small cylinder's faces (``fields.pool`` as
+    ``fields.map_to_surface`` calls it): the pooling kernels."""
+    from .fields import face_geometry, pool
+    from .pipeline import small_map_case
+
+    _, (V, F, _, h) = small_map_case(config)
+    normals, areas, centroids = face_geometry(V, F)
+    pool(centroids, normals, 2.0 * h, areas[:, None])
 
 
 def job_field_mesh(config, mandrel=None):
@@ -155,9 +170,11 @@ def job_field_mesh(config, mandrel=None):
 
 
 #: each job's function of the run's config (and the run's mandrel, when the command runs it), in
-#: the order the run needs what they make
+#: the order the run needs what they make; the last three are the map's, each 1-2 s of CPU, where
+#: the worker (from the front) and the command (from the back) meet: small jobs there keep the
+#: two processes' finishing times within about one job of each other
 RUNNERS = {"projection": job_projection, "stepper": job_stepper, "analysis": job_analysis,
-           "fields": job_fields, "field_mesh": job_field_mesh}
+           "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
 #: the jobs, in that order
 JOBS = tuple(RUNNERS)
 
