@@ -177,9 +177,6 @@ RUNNERS = {"projection": job_projection, "stepper": job_stepper, "analysis": job
            "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
 #: the jobs, in that order
 JOBS = tuple(RUNNERS)
-#: the jobs the simulation needs (the command waits for them before simulating; the map's may go
-#: on in the worker meanwhile)
-FIRST = ("projection", "stepper", "analysis")
 
 
 # ------------------------------------------------------------------------------ compile log
@@ -213,7 +210,7 @@ class CompileLog:
     called from Python, 1 and more for one compiled inside another's compilation), ``start_s``
     (``time.time()``), ``wall_s`` and ``cpu_s`` (this process's CPU time over the compilation,
     the nested ones included). The warm-up jobs add their own lines (``event`` "job": ``job``,
-    ``start_s``, ``wall_s``, ``cpu_s``) and :meth:`Warmup.stop` one once the worker has ended
+    ``start_s``, ``wall_s``, ``cpu_s``) and :meth:`Warmup.finish` one when it returns
     (``event`` "finished", ``start_s``)."""
 
     def __init__(self, role: str):
@@ -280,73 +277,33 @@ def _run(folder: Path, job: str, config, runners=None, mandrel=None) -> None:
 
 
 class Warmup:
-    """The worker of a first run (see module docstring): :meth:`before_simulation` once the
-    mandrel is loaded and checked, :meth:`before_map` after the simulation (or :meth:`finish`,
-    both at once); :meth:`stop` in any case.
+    """The worker of a first run (see module docstring); :meth:`finish` before simulating."""
 
-    ``first``: the jobs the simulation needs (by default all of them); the others (the map's) may
-    go on in the worker while this process simulates."""
-
-    def __init__(self, folder: Path, process: subprocess.Popen, config, runners=None, first=None):
+    def __init__(self, folder: Path, process: subprocess.Popen, config, runners=None):
         self.folder = folder
         self.process = process
         self.config = config
         self.runners = RUNNERS if runners is None else runners
-        self.first = tuple(self.runners) if first is None else tuple(first)
-        self.mandrel = None
-        self.stopped = False
-
-    def before_simulation(self, mandrel=None) -> None:
-        """Until the jobs the simulation needs are done: run here the last job nobody has
-        claimed, else wait for the worker (at most :data:`WAIT_LIMIT_S`, and only while it
-        runs). ``mandrel``: the run's (for the field mesh). The worker keeps what is left."""
-        self.mandrel = mandrel
-        try:
-            self._work(self.first)
-        except BaseException:
-            self.stop()
-            raise
-        if self.process.poll() is not None or self._done(self.runners):
-            self.stop()
-
-    def before_map(self) -> None:
-        """Run here the jobs left unclaimed, wait for the ones the worker holds, and clean up."""
-        try:
-            self._work(self.runners)
-        finally:
-            self.stop()
 
     def finish(self, mandrel=None) -> None:
-        """:meth:`before_simulation` and :meth:`before_map` at once: every job done here or waited
-        for, and cleaned up."""
-        self.mandrel = mandrel
+        """Run here the jobs the worker has not claimed yet (the last ones first; ``mandrel``: the
+        run's, for the field mesh), wait for the ones it holds (at most :data:`WAIT_LIMIT_S`, and
+        only while it runs), and clean up."""
         try:
-            self._work(self.runners)
+            for job in reversed(list(self.runners)):
+                if _claim(self.folder, job):
+                    _run(self.folder, job, self.config, self.runners, mandrel)
+            deadline = time.monotonic() + WAIT_LIMIT_S
+            while not all((self.folder / f"{job}.done").exists() for job in self.runners):
+                if self.process.poll() is not None or time.monotonic() > deadline:
+                    break
+                time.sleep(0.02)
         finally:
             self.stop()
-
-    def _done(self, jobs) -> bool:
-        return all((self.folder / f"{job}.done").exists() for job in jobs)
-
-    def _work(self, jobs) -> None:
-        """Until ``jobs`` are done: the last unclaimed job here, else wait for the worker."""
-        if self.stopped:
-            return
-        deadline = time.monotonic() + WAIT_LIMIT_S
-        while not self._done(jobs):
-            job = next((j for j in reversed(list(self.runners)) if _claim(self.folder, j)), None)
-            if job is not None:
-                _run(self.folder, job, self.config, self.runners, self.mandrel)
-            elif self.process.poll() is not None or time.monotonic() > deadline:
-                break
-            else:
-                time.sleep(0.02)
+            _log({"event": "finished", "start_s": time.time()})
 
     def stop(self) -> None:
         """End the worker (if still running) and remove the claims folder."""
-        if self.stopped:
-            return
-        self.stopped = True
         if self.process.poll() is None:
             self.process.terminate()
             try:
@@ -355,7 +312,6 @@ class Warmup:
                 self.process.kill()
                 self.process.wait()
         shutil.rmtree(self.folder, ignore_errors=True)
-        _log({"event": "finished", "start_s": time.time()})
 
 
 def start(config, config_path, model: str = ""):
@@ -375,7 +331,7 @@ def launch(config, config_path, model: str = ""):
     except OSError:
         shutil.rmtree(folder, ignore_errors=True)
         return None
-    return Warmup(folder, process, config, first=FIRST)
+    return Warmup(folder, process, config)
 
 
 class _Stopped(Exception):

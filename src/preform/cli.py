@@ -175,16 +175,16 @@ def _cmd_run(args, note=None) -> int:
         note.say()
     try:
         mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
-        if warmup is not None:
-            warmup.before_simulation(mandrel)
-        _print_notes(notes)
-        outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                           force=args.force, geometry=(mandrel, centerline, []), started=started,
-                           background_pictures=True, startup_s=startup,
-                           before_map=None if warmup is None else warmup.before_map)
-    finally:
+    except BaseException:
         if warmup is not None:
             warmup.stop()
+        raise
+    if warmup is not None:
+        warmup.finish(mandrel)
+    _print_notes(notes)
+    outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
+                       force=args.force, geometry=(mandrel, centerline, []), started=started,
+                       background_pictures=True, startup_s=startup)
     _print_notes(outcome.notes)
     result = outcome.result
     summary = written_summary(out_dir)

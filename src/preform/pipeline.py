@@ -192,7 +192,7 @@ def with_rtm_fields(result, fields):
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None, background_pictures=False, startup_s=None, before_map=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
@@ -202,9 +202,6 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         written (``io.write_results(background=True)``; ``preform run`` does)
     startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
         listed as the stage ``start`` when given
-    before_map : called before the map (and before simulating a run with layers): the first-run
-        worker's jobs the simulation does not need (``preform._jit.Warmup.before_map``); with it
-        no field warm-up is forked
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
@@ -219,8 +216,6 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
 
     t0 = time.perf_counter() if started is None else started
     if config.layers:
-        if before_map is not None:
-            before_map()
         return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
                           geometry=geometry, started=t0, background_pictures=background_pictures,
                           startup_s=startup_s)
@@ -234,7 +229,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         stages = {} if startup_s is None else {"start": float(startup_s)}
         stages["load_and_check"] = time.perf_counter() - t0
         t = time.perf_counter()
-        warmup = start_kernel_warmup(config) if background_pictures and before_map is None else None
+        warmup = start_kernel_warmup(config) if background_pictures else None
         try:
             result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
                               checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
@@ -245,8 +240,6 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         if warmup is not None:   # its failure only means the map compiles the kernels itself
             warmup.finish()
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
-        if before_map is not None:   # the map's kernels and field mesh, from the worker
-            before_map()
         # the field mesh depends only on the mandrel and the settings: kept in the cache
         fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
         fields = with_rtm_fields(result, fields)
