@@ -9,7 +9,8 @@ Two ways:
   (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
   compile and the mandrel and the field mesh are built again. ``--jit`` adds each run's numba
   compile time per process (the command's own and the first-run worker's, ``preform._jit``;
-  numba's compile events, not cache loads) and, at the end, the table per kernel (medians).
+  numba's compile events, not cache loads) with the warm-up jobs each process ran, and at the
+  end the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
   map (field mesh from the cache), write the data files, pictures (3-D renders in the worker

@@ -127,8 +127,10 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     config = tmp_path / "short.toml"
     config.write_text(toml)
     log = tmp_path / "jit.jsonl"
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PREFORM_CACHE_DIR=str(tmp_path / "cache"),
-               PREFORM_JIT_LOG=str(log), PYTHONPATH=os.pathsep.join(sys.path))
+               PREFORM_JIT_LOG=str(log), PYTHONPATH=os.pathsep.join(sys.path), TMPDIR=str(scratch))
     done = subprocess.run([sys.executable, "-m", "preform.cli", "run", str(config), "--out", str(tmp_path / "out"),
                            "--no-progress"], env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr
@@ -156,6 +158,9 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     entries = list((tmp_path / "cache").glob("field_mesh-*.npz"))
     assert len(finished) == 1 and len(entries) == 1
     assert entries[0].stat().st_mtime <= finished[0]
+    # nothing left in the temporary folder (the claims folder) or as a temporary cache entry
+    assert list(scratch.iterdir()) == []
+    assert [p.name for p in tmp_path.rglob("*") if ".tmp" in p.name] == []
     # the next run is not a first run: no worker
     code = ("import sys; from preform import _jit; from preform.config import load_config; "
             "sys.exit(1 if _jit.needed(load_config(sys.argv[1])) else 0)")
