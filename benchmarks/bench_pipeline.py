@@ -9,7 +9,8 @@ Two ways:
   (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
   compile and the mandrel and the field mesh are built again. ``--jit`` adds each run's numba
   compile time per process (the command's own and the first-run worker's, ``preform._jit``;
-  numba's compile events, not cache loads) and, at the end, the table per kernel (medians).
+  numba's compile events, not cache loads) with the warm-up jobs each process ran, and at the
+  end the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
   map (field mesh from the cache), write the data files, pictures (3-D renders in the worker
@@ -146,14 +147,17 @@ def command(args):
 
 def jit_lines(log):
     """The top-level compilations of one run (``preform._jit.CompileLog`` lines, depth 0: a
-    kernel called from Python, the kernels it calls included); prints their totals per process."""
+    kernel called from Python, the kernels it calls included); prints their totals per process
+    and the warm-up jobs each process ran (wall seconds)."""
     lines = [json.loads(x) for x in log.read_text().splitlines()] if log.exists() else []
-    top = [d for d in lines if d["depth"] == 0]
+    top = [d for d in lines if d.get("event", "compile") == "compile" and d["depth"] == 0]
     for role in ("main", "worker"):
         mine = [d for d in top if d["role"] == role]
-        if mine:
+        jobs = ", ".join(f"{d['job']} {d['wall_s']:.2f}" for d in lines if d.get("event") == "job" and d["role"] == role)
+        if mine or jobs:
             print(f"    JIT {role}: {sum(d['wall_s'] for d in mine):.2f} s wall, "
-                  f"{sum(d['cpu_s'] for d in mine):.2f} s CPU, {len(mine)} kernels", flush=True)
+                  f"{sum(d['cpu_s'] for d in mine):.2f} s CPU, {len(mine)} kernels; jobs (s wall): {jobs or '-'}",
+                  flush=True)
     return top
 
 

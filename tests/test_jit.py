@@ -45,6 +45,71 @@ def test_a_failing_job_is_marked_done_and_does_not_raise(tmp_path):
     assert (folder / "x.done").exists()
 
 
+def test_a_dead_worker_costs_nothing_but_time(tmp_path):
+    ran = []
+    runners = {name: (lambda config, name=name: ran.append(name)) for name in ("a", "b")}
+    assert _jit._claim(tmp_path, "a")      # the worker took "a" and died before finishing it
+    _jit.Warmup(tmp_path, finished_process(), config=None, runners=runners).finish()
+    assert ran == ["b"]                    # no wait for "a": the run compiles it itself
+    assert not tmp_path.exists()
+
+
+def test_a_stopped_worker_leaves_nothing_behind(tmp_path, monkeypatch):
+    """``Warmup.stop`` (the command failed, e.g. a broken STL) ends a compiling worker through
+    SIGTERM: it leaves by its ``finally`` blocks, so neither its claims folder nor a temporary
+    file of numba's or the preform cache stays."""
+    import time
+
+    from preform.config import load_config
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setenv("PREFORM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(sys.path))
+    toml = ROOT / "examples" / "case_a.toml"
+    warmup = _jit.launch(load_config(toml), toml)
+    deadline = time.monotonic() + 120
+    while not (warmup.folder / "projection.claim").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)                        # compiling by now
+    assert warmup.process.poll() is None
+    warmup.stop()
+    assert warmup.process.returncode == 143    # left by SIGTERM's handler, not killed
+    assert not warmup.folder.exists()
+    left = [p.name for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert left == []
+
+
+def test_the_worker_field_mesh_is_the_one_the_run_builds(tmp_path, monkeypatch):
+    """The field-mesh job in the worker reads the mandrel the command stored in the cache and
+    writes the field mesh the run's map would build itself, byte for byte, under the key the
+    map looks up."""
+    from types import SimpleNamespace
+
+    from preform.config import load_config
+    from preform.fields import field_mesh
+    from preform.geometry.mandrel import load_mandrel
+    from preform.io.cache import cached_field_mesh, cached_mandrel
+
+    monkeypatch.setenv("PREFORM_CACHE_DIR", str(tmp_path / "cache"))
+    config = load_config(ROOT / "examples" / "case_a.toml")
+    mc = config.mandrel
+    assert cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body, build=False) is None
+    _jit.job_field_mesh(config)            # no mandrel in the cache yet: nothing done
+    assert not list((tmp_path / "cache").glob("field_mesh-*"))
+    cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)      # the command loads it (stored)
+    _jit.job_field_mesh(config)            # the worker's way
+    (entry,) = (tmp_path / "cache").glob("field_mesh-*.npz")
+    stamp = entry.stat().st_mtime_ns
+    mandrel = load_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body)
+    run = SimpleNamespace(config=config, mandrel=mandrel)
+    built = field_mesh(run)                # what the map would build without the cache
+    got = cached_field_mesh(run)           # what the map reads
+    assert entry.stat().st_mtime_ns == stamp                    # read, not built again
+    for a, b in zip(got[:3], built[:3]):
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    assert got[3] == built[3]
+
+
 def test_no_worker_for_the_interaction_model():
     from preform.config import load_config
     import dataclasses
@@ -62,13 +127,16 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     config = tmp_path / "short.toml"
     config.write_text(toml)
     log = tmp_path / "jit.jsonl"
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PREFORM_CACHE_DIR=str(tmp_path / "cache"),
-               PREFORM_JIT_LOG=str(log), PYTHONPATH=os.pathsep.join(sys.path))
+               PREFORM_JIT_LOG=str(log), PYTHONPATH=os.pathsep.join(sys.path), TMPDIR=str(scratch))
     done = subprocess.run([sys.executable, "-m", "preform.cli", "run", str(config), "--out", str(tmp_path / "out"),
                            "--no-progress"], env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr
     assert "compiling the numba kernels" in done.stderr        # the run says that it compiles
-    lines = [json.loads(line) for line in log.read_text().splitlines()]
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    lines = [d for d in events if d["event"] == "compile"]
     compiled = {d["kernel"] for d in lines}
     assert "preform._kernels.kinematic.advance_fell_points" in compiled
     assert "preform._kernels.fields.pool_sums" in compiled
@@ -79,6 +147,20 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     late = ("preform._kernels.kinematic.", "preform._kernels.fields.")
     run_compiled = sorted(d["kernel"] for d in lines if not d["job"] and d["kernel"].startswith(late))
     assert run_compiled == []
+    # every job ran once, in one of the two processes; the command compiled the centerline
+    # projection (needed by its checks and by the stepper) only through the worker
+    jobs = sorted(d["job"] for d in events if d["event"] == "job")
+    assert jobs == sorted(_jit.JOBS)
+    assert not [d for d in lines if d["role"] == "main" and d["kernel"].endswith(".project_to_polyline")]
+    # the field mesh in the cache was built by a job before the simulation, and the map used it
+    # (it would have written the entry again after the simulation had it been missing)
+    finished = [d["start_s"] for d in events if d["event"] == "finished"]
+    entries = list((tmp_path / "cache").glob("field_mesh-*.npz"))
+    assert len(finished) == 1 and len(entries) == 1
+    assert entries[0].stat().st_mtime <= finished[0]
+    # nothing left in the temporary folder (the claims folder) or as a temporary cache entry
+    assert list(scratch.iterdir()) == []
+    assert [p.name for p in tmp_path.rglob("*") if ".tmp" in p.name] == []
     # the next run is not a first run: no worker
     code = ("import sys; from preform import _jit; from preform.config import load_config; "
             "sys.exit(1 if _jit.needed(load_config(sys.argv[1])) else 0)")

@@ -1,21 +1,27 @@
-"""The numba kernels of a first run compiled on the second core while this process loads the mandrel.
+"""The work of a first run that a warm run does not do, done on the second core while this
+process loads the mandrel: compiling numba kernels, and building the field mesh.
 
 On a first run in an environment (numba's on-disk cache lacks the kinematic kernels), ``preform
 run`` compiles kernels for most of its first 20-30 s: the intake and check kernels
 (``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks the mandrel, then the
 stepper's (``_kernels.kinematic`` and the centerline projection) and the field kernels
-(``_kernels.fields``). The first group is needed at once, the others only after it, so
-:func:`start` launches a worker process that compiles the others meanwhile by running small
-representative jobs (:data:`JOBS`, in the order the run needs them). The kernels are
+(``_kernels.fields``); its map then builds the field mesh, which later runs read from the preform
+cache. The first group is needed at once, the rest only after it, so :func:`start` launches a
+worker process that runs small representative jobs meanwhile (:data:`JOBS`, in the order the run
+needs what they make): ``projection`` (the centerline projection, which the checks need too:
+compiled first, the command loads it), ``stepper``, ``analysis`` (the laid yarn's angles), then
+what the map needs: ``clip`` and ``pool`` (the field kernels) and ``field_mesh`` (the run's own
+field mesh, into the preform cache). The kernels are
 ``cache=True``: the worker writes them to the cache and this process loads them when it gets
 there instead of compiling them.
 
 The jobs are claimed through files created exclusively in a folder of the two processes: the
 worker claims them from the front; :meth:`Warmup.finish` (called once the mandrel is loaded and
-checked) claims what the worker has not reached and runs it here, then waits for the jobs the
-worker holds. A job is the run's own code on a small cylinder (the same calls, so the same
-argument types and the same compiled specialisations), so nothing here knows the kernels' types;
-a job that fails only means that the run compiles what it needs itself.
+checked) claims what the worker has not reached, from the back, and runs it here, then waits for
+the jobs the worker holds: whichever process is free takes the next job. A compile job is the
+run's own code on a small cylinder (the same calls, so the same argument types and the same
+compiled specialisations), so nothing here knows the kernels' types; a job that fails, or a
+worker that dies, only means that the run does that work itself.
 
 The worker is a fresh interpreter (``python -m preform._jit``), not a fork: embree's thread pool
 and numba's state in this process are not fork-safe once started.
@@ -82,27 +88,93 @@ def small_case(config):
     return dataclasses.replace(config, process=process, layers=()), mandrel, centerline
 
 
-def job_kinematic(config):
-    """A few steps of the kinematic stepper and the result's analysis (braid angles of the laid
-    yarn) on :func:`small_case`: the stepper's, the projection's and the analysis kernels."""
+def job_projection(config, mandrel=None):
+    """The centerline projection of points (``Centerline.project``): the first kernel that both the
+    command's checks and the stepper need, so the worker compiles it first and the command loads
+    it instead of compiling it a second time at the same moment."""
+    _, cylinder, centerline = small_case(config)
+    centerline.project(cylinder.vertices)
+
+
+def job_stepper(config, mandrel=None):
+    """Three steps of the kinematic stepper on :func:`small_case`: the mandrel's arrays, the
+    projection, ray and walk kernels."""
     from .simulation import make_stepper
 
-    small, mandrel, centerline = small_case(config)
-    stepper = make_stepper(small, mandrel, centerline)
-    stepper.run(progress=False, max_steps=3)
-    stepper.result("done", "", 0.0)
+    small, cylinder, centerline = small_case(config)
+    make_stepper(small, cylinder, centerline).run(progress=False, max_steps=3)
 
 
-def job_fields(config):
-    """Two helices mapped onto a small cylinder (``pipeline._compile_map_kernels``): the field
-    kernels."""
-    from .pipeline import _compile_map_kernels
+def job_analysis(config, mandrel=None):
+    """The laid yarn's braid angles (``analysis.braid_angles_at`` for the history,
+    ``analysis.laid_braid_angles`` for the yarn paths), as a result computes them, on two
+    points of :func:`small_case`'s surface."""
+    from .analysis import braid_angles_at, laid_braid_angles, mandrel_friction
+    from .kinematic import SurfaceArrays
+    from .tolerances import tol
 
-    _compile_map_kernels(config)
+    small, cylinder, centerline = small_case(config)
+    arrays = SurfaceArrays.from_mandrel(cylinder)
+    faces = np.array([0, 1], dtype=np.int64)
+    points = np.ascontiguousarray(np.asarray(cylinder.vertices)[np.asarray(cylinder.faces)[faces]].mean(axis=1))
+    s, _ = centerline.project(points)
+    directions = np.ascontiguousarray(points[::-1] - points)
+    braid_angles_at(arrays, centerline, points, faces, s, directions)
+    laid_braid_angles(arrays, None, centerline, points, faces, np.array([0, 2], dtype=np.int64),
+                      mandrel_friction(small), tol.slip_curvature, s=s)
 
 
-#: each job's function of the run's config, in the order the run needs their kernels
-RUNNERS = {"kinematic": job_kinematic, "fields": job_fields}
+def job_clip(config, mandrel=None):
+    """Two helices clipped to the faces of a small cylinder (``fields.clip_yarns`` as
+    ``fields.map_to_surface`` calls it, on ``pipeline.small_map_case``): the clipping kernels."""
+    from .fields import clip_yarns, face_geometry
+    from .pipeline import small_map_case
+
+    result, (V, F, _, _) = small_map_case(config)
+    normals, _, centroids = face_geometry(V, F)
+    clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
+
+
+def job_pool(config, mandrel=None):
+    """The neighbourhood sums of the same small cylinder's faces (``fields.pool`` as
+    ``fields.map_to_surface`` calls it): the pooling kernels."""
+    from .fields import face_geometry, pool
+    from .pipeline import small_map_case
+
+    _, (V, F, _, h) = small_map_case(config)
+    normals, areas, centroids = face_geometry(V, F)
+    pool(centroids, normals, 2.0 * h, areas[:, None])
+
+
+def job_field_mesh(config, mandrel=None):
+    """The run's field mesh (the mandrel remeshed to the field edge length, a second or more)
+    built into the preform cache (``io.cache.cached_field_mesh``), so that the run's map reads it
+    instead of building it after the simulation. ``mandrel``: the run's (in the command); the
+    worker reads it from the cache, where the command stored it on loading, and leaves the job
+    to the run when it is not there yet. Nothing to do without the cache or with ``[[layer]]``
+    tables (the layers' field mesh is built on the way), nor where the cache cannot be written
+    (the map would build it a second time)."""
+    from types import SimpleNamespace
+
+    from .io.cache import cache_dir, cached_field_mesh, cached_mandrel
+
+    folder = cache_dir()
+    if folder is None or config.layers or not (folder.is_dir() and os.access(folder, os.W_OK)):
+        return
+    if mandrel is None:
+        mc = config.mandrel
+        mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body, build=False)
+        if mandrel is None:
+            return
+    cached_field_mesh(SimpleNamespace(config=config, mandrel=mandrel))
+
+
+#: each job's function of the run's config (and the run's mandrel, when the command runs it), in
+#: the order the run needs what they make; the last three are the map's, each 1-2 s of CPU, where
+#: the worker (from the front) and the command (from the back) meet: small jobs there keep the
+#: two processes' finishing times within about one job of each other
+RUNNERS = {"projection": job_projection, "stepper": job_stepper, "analysis": job_analysis,
+           "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
 #: the jobs, in that order
 JOBS = tuple(RUNNERS)
 
@@ -110,20 +182,36 @@ JOBS = tuple(RUNNERS)
 # ------------------------------------------------------------------------------ compile log
 #: the job this process is running (for the compile log), if any
 _RUNNING: list = []
+#: this process's role in the log (``main`` or ``worker``), set by :class:`CompileLog`
+_ROLE: list = []
 
 #: environment variable naming a file to which every process of the run appends one JSON line per
-#: numba compilation (``benchmarks/bench_pipeline.py --jit``, ``tests/test_jit.py``)
+#: numba compilation and per warm-up job (``benchmarks/bench_pipeline.py --jit``,
+#: ``tests/test_jit.py``)
 LOG_ENV = "PREFORM_JIT_LOG"
+
+
+def _log(line: dict) -> None:
+    """Append ``line`` (with this process's pid and role) to ``$PREFORM_JIT_LOG``, if set."""
+    path = os.environ.get(LOG_ENV, "")
+    if path:
+        import json
+
+        line = {"pid": os.getpid(), "role": _ROLE[-1] if _ROLE else "", **line}
+        with open(path, "a") as f:
+            f.write(json.dumps(line) + "\n")
 
 
 class CompileLog:
     """While entered and ``$PREFORM_JIT_LOG`` is set: numba's ``numba:compile`` events (raised for
     a compilation, not for a cache load) appended to that file, one JSON line each: ``pid``,
-    ``role`` (``main`` or ``worker``), ``job`` (the warm-up job running, "" for the run's own
-    work), ``kernel`` (module and name), ``depth`` (0 for a kernel
+    ``role`` (``main`` or ``worker``), ``event`` ("compile"), ``job`` (the warm-up job running,
+    "" for the run's own work), ``kernel`` (module and name), ``depth`` (0 for a kernel
     called from Python, 1 and more for one compiled inside another's compilation), ``start_s``
     (``time.time()``), ``wall_s`` and ``cpu_s`` (this process's CPU time over the compilation,
-    the nested ones included)."""
+    the nested ones included). The warm-up jobs add their own lines (``event`` "job": ``job``,
+    ``start_s``, ``wall_s``, ``cpu_s``) and :meth:`Warmup.finish` one when it returns
+    (``event`` "finished", ``start_s``)."""
 
     def __init__(self, role: str):
         self.role = role
@@ -131,13 +219,10 @@ class CompileLog:
         self.listener = None
 
     def __enter__(self):
+        _ROLE.append(self.role)
         if not self.path:
             return self
-        import json
-
         from numba.core import event
-
-        log = self
 
         class Listener(event.Listener):
             stack: list = []
@@ -148,17 +233,17 @@ class CompileLog:
             def on_end(self, ev):
                 t_wall, t0, c0 = self.stack.pop()
                 fn = ev.data["dispatcher"].py_func
-                line = {"pid": os.getpid(), "role": log.role, "job": _RUNNING[-1] if _RUNNING else "", "kernel": f"{fn.__module__}.{fn.__qualname__}",
-                        "depth": len(self.stack), "start_s": t_wall, "wall_s": time.perf_counter() - t0,
-                        "cpu_s": time.process_time() - c0}
-                with open(log.path, "a") as f:
-                    f.write(json.dumps(line) + "\n")
+                _log({"event": "compile", "job": _RUNNING[-1] if _RUNNING else "",
+                      "kernel": f"{fn.__module__}.{fn.__qualname__}", "depth": len(self.stack),
+                      "start_s": t_wall, "wall_s": time.perf_counter() - t0,
+                      "cpu_s": time.process_time() - c0})
 
         self.event, self.listener = event, Listener()
         event.register("numba:compile", self.listener)
         return self
 
     def __exit__(self, *exc):
+        _ROLE.pop()
         if self.listener is not None:
             self.event.unregister("numba:compile", self.listener)
         return False
@@ -174,17 +259,21 @@ def _claim(folder: Path, job: str) -> bool:
     return True
 
 
-def _run(folder: Path, job: str, config, runners=None) -> None:
-    """Run ``job`` (``runners[job](config)``, :data:`RUNNERS` by default) and mark it done (also
-    when it fails: the run then compiles what it needs)."""
+def _run(folder: Path, job: str, config, runners=None, mandrel=None) -> None:
+    """Run ``job`` (``runners[job](config)``, :data:`RUNNERS` by default; ``mandrel=`` too when
+    given) and mark it done (also when it fails: the run then does the work itself)."""
     _RUNNING.append(job)
+    start, t0, c0 = time.time(), time.perf_counter(), time.process_time()
     try:
-        (RUNNERS if runners is None else runners)[job](config)
+        runner = (RUNNERS if runners is None else runners)[job]
+        runner(config) if mandrel is None else runner(config, mandrel=mandrel)
     except Exception:   # noqa: BLE001 - a warm-up's failure must not stop the run
         pass
     finally:
         _RUNNING.pop()
         (folder / f"{job}.done").touch()
+        _log({"event": "job", "job": job, "start_s": start, "wall_s": time.perf_counter() - t0,
+              "cpu_s": time.process_time() - c0})
 
 
 class Warmup:
@@ -196,13 +285,14 @@ class Warmup:
         self.config = config
         self.runners = RUNNERS if runners is None else runners
 
-    def finish(self) -> None:
-        """Run here the jobs the worker has not claimed yet (the last ones first), wait for the
-        ones it holds (at most :data:`WAIT_LIMIT_S`), and clean up."""
+    def finish(self, mandrel=None) -> None:
+        """Run here the jobs the worker has not claimed yet (the last ones first; ``mandrel``: the
+        run's, for the field mesh), wait for the ones it holds (at most :data:`WAIT_LIMIT_S`, and
+        only while it runs), and clean up."""
         try:
             for job in reversed(list(self.runners)):
                 if _claim(self.folder, job):
-                    _run(self.folder, job, self.config, self.runners)
+                    _run(self.folder, job, self.config, self.runners, mandrel)
             deadline = time.monotonic() + WAIT_LIMIT_S
             while not all((self.folder / f"{job}.done").exists() for job in self.runners):
                 if self.process.poll() is not None or time.monotonic() > deadline:
@@ -210,6 +300,7 @@ class Warmup:
                 time.sleep(0.02)
         finally:
             self.stop()
+            _log({"event": "finished", "start_s": time.time()})
 
     def stop(self) -> None:
         """End the worker (if still running) and remove the claims folder."""
@@ -224,10 +315,14 @@ class Warmup:
 
 
 def start(config, config_path, model: str = ""):
-    """The worker compiling :data:`JOBS` for ``config`` (read from ``config_path``, with
+    """The worker running :data:`JOBS` for ``config`` (read from ``config_path``, with
     ``[model] kind`` replaced by ``model`` when given), or None when not :func:`needed`."""
-    if not needed(config):
-        return None
+    return launch(config, config_path, model) if needed(config) else None
+
+
+def launch(config, config_path, model: str = ""):
+    """The worker (:func:`main`, a fresh interpreter) and its claims folder, as a :class:`Warmup`;
+    None when it cannot be started."""
     folder = Path(tempfile.mkdtemp(prefix="preform-jit-"))
     argv = [sys.executable, "-m", "preform._jit", str(folder), str(config_path), model]
     try:
@@ -239,20 +334,44 @@ def start(config, config_path, model: str = ""):
     return Warmup(folder, process, config)
 
 
-def main(argv=None) -> int:
-    """The worker: ``python -m preform._jit FOLDER CONFIG [MODEL]``."""
-    folder, config_path, *rest = sys.argv[1:] if argv is None else argv
-    from .config import load_config
+class _Stopped(Exception):
+    """SIGTERM in the worker. An Exception, so that numba's and the preform cache's writes remove
+    their temporary files on the way out (they clean up on Exception); the worker then claims
+    no further job."""
 
-    config = load_config(config_path)
-    model = rest[0] if rest else ""
-    if model:
-        config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
-    with CompileLog("worker"):
-        for job in JOBS:
-            if _claim(Path(folder), job):
-                _run(Path(folder), job, config)
-    return 0
+
+def _on_sigterm(signum, frame):
+    _STOPPED.append(signum)
+    raise _Stopped("stopped")
+
+
+#: the signal that stopped the worker, once it has
+_STOPPED: list = []
+
+
+def main(argv=None) -> int:
+    """The worker: ``python -m preform._jit FOLDER CONFIG [MODEL]``; exit code 0, or 128 + the
+    signal's number when stopped."""
+    folder, config_path, *rest = sys.argv[1:] if argv is None else argv
+    import signal
+
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        from .config import load_config
+
+        config = load_config(config_path)
+        model = rest[0] if rest else ""
+        if model:
+            config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
+        with CompileLog("worker"):
+            for job in JOBS:
+                if _STOPPED:
+                    break
+                if _claim(Path(folder), job):
+                    _run(Path(folder), job, config)
+    except _Stopped:
+        pass
+    return 128 + _STOPPED[0] if _STOPPED else 0
 
 
 if __name__ == "__main__":

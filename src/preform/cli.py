@@ -180,7 +180,7 @@ def _cmd_run(args, note=None) -> int:
             warmup.stop()
         raise
     if warmup is not None:
-        warmup.finish()
+        warmup.finish(mandrel)
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
                        force=args.force, geometry=(mandrel, centerline, []), started=started,

@@ -135,6 +135,16 @@ def _compile_map_kernels(config):
     The cylinder's own triangles are the field mesh, so nothing here remeshes or casts rays
     (embree's thread pool, started in the parent, is not to be used after a fork)."""
     from .fields import map_to_surface
+
+    result, mesh = small_map_case(config)
+    map_to_surface(result, mesh=mesh)
+    return []
+
+
+def small_map_case(config):
+    """(result, mesh) for ``fields.map_to_surface(result, mesh=mesh)``: two helices on a cylinder
+    of 5 cm radius with ``config``'s yarn, the cylinder's own triangles as the field mesh (the
+    arrays of the types a run's map passes, so the same kernel specialisations)."""
     from .geometry import centerline_from_points, shapes
     from .geometry.mandrel import mandrel_from_arrays
     from .result import YarnPaths
@@ -152,8 +162,7 @@ def _compile_map_kernels(config):
                                 "yarns": yarns})()
     V = np.ascontiguousarray(mandrel.vertices, dtype=np.float64)
     F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
-    map_to_surface(result, mesh=(V, F, np.arange(len(F), dtype=np.int64), 0.02))
-    return []
+    return result, (V, F, np.arange(len(F), dtype=np.int64), 0.02)
 
 
 def start_kernel_warmup(config):

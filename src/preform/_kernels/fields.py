@@ -25,8 +25,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import INNER
 
-@njit(cache=True)
+
+@njit(**INNER)
 def _walk(plane_normal, plane_offset, neighbour, f, x0, y0, z0, x1, y1, z1, group,
           length, moment, first, accumulate, max_hops):
     """Walk the segment (x0, y0, z0) -> (x1, y1, z1) starting in face f.

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import INNER
 from .mesh import face_cross
 
 WALK_TANGENT = 0     # walked until the free yarn became tangent (g = 0)
@@ -31,7 +32,7 @@ WALK_LIFTOFF = -1    # g >= 0 at the start: the yarn stays put (unilateral conta
 _MAX_SUBSTEPS = 100000
 
 
-@njit(cache=True)
+@njit(**INNER)
 def face_basis(V, T, f):
     """The parts of ``barycentric`` that depend on face f only: its first corner p0, the edge
     vectors a = p1 - p0, b = p2 - p0, their dots d00 = a.a, d01 = a.b, d11 = b.b and
@@ -52,7 +53,7 @@ def face_basis(V, T, f):
     return V[i0, 0], V[i0, 1], V[i0, 2], ax, ay, az, bx, by, bz, d00, d01, d11, den
 
 
-@njit(cache=True)
+@njit(**INNER)
 def barycentric_in(q, x, y, z):
     """Barycentric coordinates of (x, y, z) in the plane of the face with ``q = face_basis(...)``."""
     p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den = q
@@ -72,7 +73,7 @@ def barycentric(V, T, f, x, y, z):
     return barycentric_in(face_basis(V, T, f), x, y, z)
 
 
-@njit(cache=True)
+@njit(**INNER)
 def face_double_area(V, T, f):
     """Twice the area of face f, |(p1 - p0) x (p2 - p0)|."""
     qx, qy, qz = face_cross(V, T, f)
@@ -86,7 +87,7 @@ def smooth_normal(V, T, CN, f, x, y, z):
     return blended_normal(CN, f, b0, b1, b2)
 
 
-@njit(cache=True)
+@njit(**INNER)
 def blended_normal(CN, f, b0, b1, b2):
     """Unit smooth normal of face f at barycentric coordinates (b0, b1, b2)."""
     nx = b0 * CN[f, 0, 0] + b1 * CN[f, 1, 0] + b2 * CN[f, 2, 0]
@@ -103,7 +104,7 @@ def tangency_gap(V, T, CN, f, x, y, z, gx, gy, gz):
     return (gx - x) * nx + (gy - y) * ny + (gz - z) * nz
 
 
-@njit(cache=True)
+@njit(**INNER)
 def walk_direction(FN, f, x, y, z, gx, gy, gz):
     """Unit projection of (G - x) onto the plane of face f; zeros if degenerate."""
     dx = gx - x
@@ -122,7 +123,7 @@ def walk_direction(FN, f, x, y, z, gx, gy, gz):
     return dx / s, dy / s, dz / s
 
 
-@njit(cache=True)
+@njit(**INNER)
 def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
     """Distance along the in-plane unit direction d from x to the boundary of face f.
 
@@ -133,7 +134,7 @@ def exit_distance(V, T, FN, f, x, y, z, dx, dy, dz):
     return exit_distance_at(V, T, FN, f, b0, b1, b2, face_double_area(V, T, f), dx, dy, dz)
 
 
-@njit(cache=True)
+@njit(**INNER)
 def exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz):
     """``exit_distance`` from the point's barycentric coordinates (b0, b1, b2) on face f and the
     face's double area, when the walk already has them."""
@@ -170,7 +171,7 @@ def exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz):
     return best, edge
 
 
-@njit(cache=True)
+@njit(**INNER)
 def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez):
     """Smallest-bracket end ``t`` in [0, h] with ``g(x + t d) >= 0``, given g(0) = g_lo < 0 <= g_hi = g(h).
 
@@ -337,7 +338,7 @@ def lifted_points(V, T, CN, faces, points, clearance, out):
 # reference (``tests/naive_analysis.py``) in order, so the results agree to the last bit.
 
 
-@njit(cache=True)
+@njit(**INNER)
 def centerline_tangent(S, CT, s):
     """Unit tangent at arc length s of a polyline with arc lengths S (n,), vertex tangents CT (n, 3)."""
     n = S.shape[0]
@@ -359,7 +360,7 @@ def centerline_tangent(S, CT, s):
     return tx / tn, ty / tn, tz / tn
 
 
-@njit(cache=True)
+@njit(**INNER)
 def braid_angle_cos(dx, dy, dz, tx, ty, tz, nx, ny, nz):
     """cos of the braid angle, |d_p . t_p| / (|d_p| |t_p|) (1 where either projection vanishes
     gives 0), of direction d against tangent t, both projected normal to n."""

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import INNER
+
 
 @njit(cache=True)
 def corner_normals(T, FN, angles, vert_ptr, vert_faces, vert_corner, cos_crease):
@@ -277,7 +279,7 @@ def _box_d2(px, py, pz, box, k):
     return (dx * dx + dy * dy) + dz * dz
 
 
-@njit(cache=True)
+@njit(**INNER)
 def nearest_sample(px, py, pz, Q, lo, hi, left, box, stack):
     """Index of the sample of Q nearest to p (the lowest of equal ones); ``stack`` (>= 2 x tree
     depth + 2,) int64 scratch."""

@@ -218,11 +218,12 @@ def _mandrel_key(path: Path, data: bytes, unit, body) -> str:
                     str(path), unit, body, data)
 
 
-def cached_mandrel(path, unit: str = "m", body=None):
+def cached_mandrel(path, unit: str = "m", body=None, build: bool = True):
     """``preform.geometry.load_mandrel(path, unit, body)`` through the cache: the repaired
     mandrel (arrays, repair sentences) depends only on the STL's bytes, its path (the sentences
     name it), the unit, the body and the code. An STL that cannot be read goes to
-    ``load_mandrel``, which says what is wrong with it."""
+    ``load_mandrel``, which says what is wrong with it. ``build=False``: None instead of loading
+    when the cache has no entry (or cannot be used)."""
     import dataclasses
 
     from ..geometry.mandrel import Mandrel, load_mandrel
@@ -234,7 +235,7 @@ def cached_mandrel(path, unit: str = "m", body=None):
     except OSError:
         data = None
     if data is None:
-        return load_mandrel(path, unit=unit, body=body)
+        return load_mandrel(path, unit=unit, body=body) if build else None
     key = _mandrel_key(path, data, unit, body)
     arrays = [f.name for f in dataclasses.fields(Mandrel) if f.name not in ("source", "repairs")]
 
@@ -255,6 +256,8 @@ def cached_mandrel(path, unit: str = "m", body=None):
         repairs = json.loads(bytes(hit.pop("repairs")).decode("utf-8"))
         if isinstance(repairs, list) and all(isinstance(r, str) for r in repairs):
             return Mandrel(**hit, source=str(path), repairs=tuple(repairs))
+    if not build:
+        return None
     mandrel = load_mandrel(path, unit=unit, body=body)
     values = {name: getattr(mandrel, name) for name in arrays}
     if all(isinstance(v, np.ndarray) for v in values.values()):   # a Mandrel of plain arrays only
