@@ -101,8 +101,9 @@ solved by the Newton reference (``solve_zone``, ``newton_fallback``) or raises
 
 Behind a guide ring ``solve_zone`` also gives the frontal iterations of the bounds that a
 snapshot asks for (its ring passes and its final solve) to the relaxation with consistent
-bounds (``ring_frontal``); the final one is finished by Newton's frontal iteration from that
-result, whose wall penalty puts the wall force into the written files (``frontal.point_forces``).
+bounds (``ring_frontal``), and without a ring a snapshot's final solve (``snapshot_frontal``);
+the final one is finished by Newton's frontal iteration from that result, whose wall penalty
+puts the wall force into the written files (``frontal.point_forces``).
 """
 
 from __future__ import annotations
@@ -271,6 +272,12 @@ class RelaxSettings:
     #: by Newton's (module docstring); off: Newton's alone (a bent-tube snapshot 1.4 s against
     #: 2.1-2.3 s, its crossings within 0.4 mm of Newton's alone)
     ring_frontal: bool = True
+    #: without a guide ring a snapshot's frontal iterations likewise (its pass and its final
+    #: solve by the relaxation with consistent bounds and the ring preconditioner, which has the
+    #: stick stiffness along a stuck yarn; the final one finished by Newton's frontal
+    #: iteration); off: Newton's alone (SuperLU without the cholmod extra: case A's full-size
+    #: run with 20 snapshots 185 s against 111 s with the final solves alone by the relaxation)
+    snapshot_frontal: bool = True
 
 
 @dataclass
@@ -983,7 +990,8 @@ def _accept(state, res, centres, fr):
 
 def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max_iter,
                   finish, start=None):
-    """``solve_zone``'s frontal iteration behind a guide ring (``RelaxSettings.ring_frontal``):
+    """``solve_zone``'s frontal iteration of a snapshot (``RelaxSettings.ring_frontal`` behind a
+    guide ring, ``snapshot_frontal`` without one; the ring preconditioner in both):
     ``max_iter`` solves at most (Newton's frontal iterations), the bounds and ring top tensions
     taken anew from each converged geometry until they change by less than ``friction_tol``
     (``relax`` with consistent bounds). With ``finish`` (a snapshot's final solve, which
@@ -1095,8 +1103,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     the same friction centres), until the bounds change by less than ``friction_tolerance``, as
     Newton's frontal iteration. A call that asks for the frontal iteration of the
     bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
-    to 1e-3) is Newton's (``frontal.solve_zone_inplace``; behind a guide ring the
-    relaxation's with consistent bounds first, ``_ring_frontal``), as is a step the relaxation
+    to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent
+    bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide ring by
+    ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation
     does not converge on (``relax_settings.max_iter`` reached, or the block preconditioner
     stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``,
     counted in ``FALLBACKS``). Behind a guide ring the relaxation uses
@@ -1108,8 +1117,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
-    if ((max_iter is not None or friction_tol is not None) and bc.has_ring
-            and rs.ring_frontal and not settings.frontal.consistent_bounds):
+    frontal_iteration = max_iter is not None or friction_tol is not None
+    by_relaxation = rs.ring_frontal if bc.has_ring else rs.snapshot_frontal
+    if frontal_iteration and by_relaxation and not settings.frontal.consistent_bounds:
         report = _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol,
                                max_iter, finish=friction_tol is not None, start=start)
         if report is not None:
