@@ -158,3 +158,21 @@ def capture_step(s, speed):
     FK.radial_normals(st.m, st.pos, st.normal)
     z.pose_end = pose_end
     return st, z._with_wall(bc), z.f_top.copy(), frontal.friction_centres(st).copy()
+
+
+def snapshot_solves(st, bc, centre, newton_only):
+    """A snapshot's final solve (``friction_tol`` given) of the posed ``st`` through
+    ``relax.solve_zone``, with the default settings and with ``newton_only`` (the
+    ``RelaxSettings`` that send it to Newton's frontal iteration alone), on copies:
+    ((state, report) by default, (state, report) by Newton alone)."""
+    from preform.interaction import relax as R
+    from preform.interaction.settings import DEFAULT
+
+    fr = DEFAULT.frontal
+    out = []
+    for settings in (None, newton_only):
+        x = st.copy()
+        report = R.solve_zone(x, bc, centre=centre, max_iter=fr.snapshot_iterations,
+                              friction_tol=fr.snapshot_tolerance, relax_settings=settings)
+        out.append((x, report))
+    return out

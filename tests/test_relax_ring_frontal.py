@@ -17,7 +17,7 @@ import pytest
 
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
-from simcase import advanced_stepper, capture_step, case_b_like_config
+from simcase import advanced_stepper, capture_step, case_b_like_config, snapshot_solves
 
 # the balance of every solve to 1e-10 of the tensions (``tests/test_relax_ring.py``)
 TIGHT = 1e-10
@@ -69,17 +69,10 @@ def test_snapshot_solve_behind_a_ring_is_finished_by_newton(ring_step):
     tolerance in its first frontal iteration; without ``ring_frontal`` Newton takes them from
     the step's start."""
     st, bc, s_old = ring_step(0.25)
-    fr = DEFAULT.frontal
-    with_relax = st.copy()
-    rep = R.solve_zone(with_relax, bc, centre=s_old, max_iter=fr.snapshot_iterations,
-                       friction_tol=fr.snapshot_tolerance)
-    newton = st.copy()
-    ref = R.solve_zone(newton, bc, centre=s_old, max_iter=fr.snapshot_iterations,
-                       friction_tol=fr.snapshot_tolerance,
-                       relax_settings=R.RelaxSettings(ring_frontal=False))
+    (_, rep), (_, ref) = snapshot_solves(st, bc, s_old, R.RelaxSettings(ring_frontal=False))
     assert rep.iterations == 1 and not rep.lagged
     assert ref.iterations > 1 and not ref.lagged
-    assert rep.residual < fr.snapshot_tolerance
+    assert rep.residual < DEFAULT.frontal.snapshot_tolerance
 
 
 def test_structure_is_shared_only_by_the_same_lattice(ring_step):

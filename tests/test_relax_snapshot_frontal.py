@@ -18,9 +18,9 @@ import pytest
 
 import preform as pf
 from preform import quality
-from preform.interaction import frontal, relax as R
+from preform.interaction import relax as R
 from preform.interaction.settings import DEFAULT
-from simcase import advanced_stepper, capture_step
+from simcase import advanced_stepper, capture_step, snapshot_solves
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,17 +54,11 @@ def test_snapshot_solve_without_a_ring_lands_on_newtons(step):
     slip states (measured all 264; 2 % allowed for crossings at the stick/slip edge)."""
     st, bc, s_old = step
     m = st.m
-    fr = DEFAULT.frontal
-    relaxed = st.copy()
-    rep = R.solve_zone(relaxed, bc, centre=s_old, max_iter=fr.snapshot_iterations,
-                       friction_tol=fr.snapshot_tolerance)
-    newton = st.copy()
-    ref = R.solve_zone(newton, bc, centre=s_old, max_iter=fr.snapshot_iterations,
-                       friction_tol=fr.snapshot_tolerance,
-                       relax_settings=R.RelaxSettings(snapshot_frontal=False))
+    (relaxed, rep), (newton, ref) = snapshot_solves(st, bc, s_old,
+                                                     R.RelaxSettings(snapshot_frontal=False))
     assert rep.iterations == 1 and not rep.lagged
     assert ref.iterations > 1 and not ref.lagged
-    assert rep.residual < fr.snapshot_tolerance
+    assert rep.residual < DEFAULT.frontal.snapshot_tolerance
     assert np.abs(relaxed.pos[:m] - newton.pos[:m]).max() < 1e-4
     assert np.sum(relaxed.slip[:m] != newton.slip[:m]) <= 0.02 * 2 * m
 
