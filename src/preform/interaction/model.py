@@ -376,8 +376,7 @@ class InteractionZone:
                 # a crossing without its plane moved as far as it was from the mandrel (it
                 # may have reached the wall): the step again with every crossing's plane
                 self.wall_resolves += 1
-                for name, value in posed.items():
-                    getattr(st, name)[: st.m] = value
+                _restore(st, posed)
                 wall = self._with_wall(bc)
                 self.last_report = self.solve_zone(st, wall, settings=self.settings,
                                                    where=where, centre=centre)
@@ -440,16 +439,14 @@ class InteractionZone:
         # the fell points' material moves with them: from the last step's anchoring to the
         # step's own (``fell_anchor``), so the last stage is the step's problem itself
         fell_end = st.material_fell.copy()
-        for name, value in posed.items():        # what the failed solve left moved
-            getattr(st, name)[: st.m] = value
+        _restore(st, posed)                        # what the failed solve left moved
         if self.settings.zone.fell_material == "tension":
             fell_start = frontal.fell_material(st, at(0.0), self.settings)
         start = posed["pos"], posed["material"]
         for lam in stages:
             bcl = at(lam) if lam < 1.0 else bc
             st.material_fell[:] = fell_start + lam * (fell_end - fell_start)
-            for name, value in posed.items():
-                getattr(st, name)[: st.m] = value
+            _restore(st, posed)
             bcl = self._with_wall(bcl)
             report = self.solve_zone(st, bcl, settings=self.settings, where=where, centre=centre,
                                      start=start)
@@ -796,6 +793,13 @@ class InteractionZone:
                     st.material_fell[k] = st.material[c, side]
         st.remove(np.array(dead, dtype=np.int64))
         return deposits
+
+
+def _restore(st, posed):
+    """Write a step's posed arrays (``InteractionZone.step``: name -> the first m rows) back into
+    the zone state ``st``, in place."""
+    for name, value in posed.items():
+        getattr(st, name)[: st.m] = value
 
 
 def _near_cache(st):
