@@ -3,8 +3,8 @@
 The numba kernels of ``_kernels.mesh``, ``_kernels.edges`` and ``_kernels.sections`` exist for
 STLs of 1-2 M faces; on a first run each costs 0.15-0.8 s to compile, while on a mandrel of some
 10 k faces its NumPy form takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` the
-intake (``geometry.repair``), the centerline-inside check (``checks``) and the section tracer
-(``geometry.centerline``) call these functions instead. Each returns what its kernel writes,
+intake (``geometry.repair``) and the section tracer (``geometry.centerline``) call these
+functions instead. Each returns what its kernel writes,
 bit for bit (the tests compare both on the same meshes), so the size of a mesh changes how
 long its intake takes, never its result.
 """
@@ -205,3 +205,51 @@ def edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offs
     keep = dup.copy()
     keep[~dup] = go
     return r[keep]
+
+
+def centroids_and_reach(V, F):
+    """Face centroids (m, 3) and each face's largest centroid-to-corner distance (m,)
+    (``_kernels.mesh.centroids_and_reach``)."""
+    tri = V[F]
+    centroids = tri.mean(axis=1)
+    return centroids, np.sqrt(((tri - centroids[:, None]) ** 2).sum(axis=2).max(axis=1))
+
+
+def chain_loops(ids, n_nodes):
+    """Closed loops of the segment graph ``ids`` (n, 2) (``_kernels.sections.chain_loops``, the
+    same walk with dictionaries): (loop_nodes, loop_offsets (n_loops + 1,), src (n_nodes,) the
+    index 2 k + end of the segment end whose coordinates a node keeps, its last appearance)."""
+    adjacency: dict[int, list[int]] = {}
+    for a, b in ids.tolist():
+        if a != b:
+            adjacency.setdefault(a, []).append(b)
+            adjacency.setdefault(b, []).append(a)
+    real = np.repeat(ids[:, 0] != ids[:, 1], 2)
+    src = np.full(n_nodes, -1, dtype=np.int64)
+    np.maximum.at(src, ids.reshape(-1)[real], np.arange(2 * len(ids))[real])
+    nodes, offsets = [], [0]
+    seen = set()
+    for start in adjacency:
+        if start in seen:
+            continue
+        walk = [start]
+        seen.add(start)
+        prev, cur = -1, start
+        closed = False
+        while True:
+            nxt = [q for q in adjacency[cur] if q != prev]
+            if not nxt:
+                break
+            q = nxt[0]
+            if q == start:
+                closed = True
+                break
+            if q in seen:
+                break
+            seen.add(q)
+            walk.append(q)
+            prev, cur = cur, q
+        if closed and len(walk) >= 3:
+            nodes += walk
+            offsets.append(len(nodes))
+    return np.array(nodes, dtype=np.int64), np.array(offsets, dtype=np.int64), src
