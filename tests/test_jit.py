@@ -35,6 +35,30 @@ def test_finish_runs_the_unclaimed_jobs_here_and_waits_for_the_claimed_ones(tmp_
     assert not tmp_path.exists()           # the claims folder is removed
 
 
+def test_lead_runs_a_job_here_then_waits_for_the_workers_first(tmp_path):
+    """Before the mandrel is loaded: the command runs the lead jobs while the worker holds its
+    first job, then waits for that one; nothing once it is done."""
+    import threading
+
+    ran = []
+    runners = {name: (lambda config, name=name: ran.append(name)) for name in ("first", "b", "c")}
+    assert _jit._claim(tmp_path, "first")                       # the worker holds it
+    worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        done = threading.Timer(0.5, (tmp_path / "first.done").touch)
+        done.start()
+        warmup = _jit.Warmup(tmp_path, worker, config=None, runners=runners)
+        warmup.lead(jobs=("c",))
+        assert ran == ["c"] and (tmp_path / "first.done").exists()
+        warmup.lead(jobs=("b",))                                 # the first job is done: nothing
+        assert ran == ["c"]
+        warmup.finish()
+        assert ran == ["c", "b"]
+    finally:
+        worker.kill()
+        worker.wait()
+
+
 def test_a_failing_job_is_marked_done_and_does_not_raise(tmp_path):
     def broken(config):
         raise RuntimeError("no compiler today")
