@@ -14,6 +14,8 @@ from preform._kernels.edges import (INSERTION_MAX, directed_neighbors, edge_tabl
 from preform._kernels.mesh import long_side_faces, triangle_moments
 from preform.geometry import small_mesh
 
+KERNELS = small_mesh.IntakeSettings(kernel_faces=0)
+
 
 def meshes():
     """A sliver cylinder, a jittered sphere with some faces flipped, random triangles (repeated
@@ -93,27 +95,6 @@ def test_edge_table_is_numpy_unique_of_the_edge_keys():
             np.testing.assert_array_equal(order, ref_order)
 
 
-def numpy_face_neighbors(faces):
-    """The sort-based form (``geometry.mandrel.face_neighbors`` before the kernel)."""
-    nf = len(faces)
-    a = faces.reshape(-1)
-    b = np.roll(faces, -1, axis=1).reshape(-1)
-    nv = int(faces.max()) + 1
-    key = a * nv + b
-    twin = b * nv + a
-    order = np.argsort(key, kind="stable")
-    sorted_keys = key[order]
-    pos = np.minimum(np.searchsorted(sorted_keys, twin), len(sorted_keys) - 1)
-    found = sorted_keys[pos] == twin
-    dup = np.zeros(len(key), dtype=bool)
-    same = sorted_keys[1:] == sorted_keys[:-1]
-    dup[order[1:][same]] = True
-    dup[order[:-1][same]] = True
-    out = np.where(found, order[pos] // 3, -1)
-    out[dup] = -1
-    return out.reshape(nf, 3)
-
-
 def test_face_neighbors_equal_the_sort_based_form():
     from preform.geometry.mandrel import face_neighbors
 
@@ -121,13 +102,13 @@ def test_face_neighbors_equal_the_sort_based_form():
         _, F = arrays(m)
         collapsed = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])      # a repeated vertex too
         for faces in (F, collapsed):
-            np.testing.assert_array_equal(face_neighbors(faces), numpy_face_neighbors(faces))
+            np.testing.assert_array_equal(face_neighbors(faces, KERNELS), small_mesh.face_neighbors(faces))
             side = np.empty(3 * len(faces), dtype=np.int64)
             order = np.empty(3 * len(faces), dtype=np.int64)
             _, count = edge_table(faces, int(faces.max()) + 1, side, order)
             out = np.empty(3 * len(faces), dtype=np.int64)
             directed_neighbors(faces, order, count, out)
-            np.testing.assert_array_equal(out.reshape(-1, 3), numpy_face_neighbors(faces))
+            np.testing.assert_array_equal(out.reshape(-1, 3), small_mesh.face_neighbors(faces))
 
 
 def test_first_of_each_face_is_numpy_unique_return_index():

@@ -3,10 +3,11 @@
 The numba kernels of ``_kernels.mesh``, ``_kernels.edges`` and ``_kernels.sections`` exist for
 STLs of 1-2 M faces; on a first run each costs 0.15-0.8 s to compile, while on a mandrel of some
 10 k faces its NumPy form takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` the
-intake (``geometry.repair``) and the section tracer (``geometry.centerline``) call these
-functions instead. Each returns what its kernel writes,
-bit for bit (the tests compare both on the same meshes), so the size of a mesh changes how
-long its intake takes, never its result.
+intake (``geometry.repair``), a mandrel's own arrays (``geometry.mandrel``), the section tracer
+(``geometry.centerline``) and the centerline-inside check (``checks``) call these functions
+instead. Each returns what its kernel writes, bit for bit (the tests compare both on the same
+meshes; the winding numbers to round-off), so the size of a mesh changes how long its intake
+takes, never its result.
 """
 
 from __future__ import annotations
@@ -207,6 +208,23 @@ def edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offs
     return r[keep]
 
 
+def winding_numbers(V, F, P):
+    """The generalised winding number of the closed surface (V, F) at each point of P (k, 3)
+    (``_kernels.mesh.winding_numbers``): Van Oosterom and Strackee's solid angles over 4 pi, the
+    kernel's terms summed in face order (``np.cumsum``, a running sum). Equal to the kernel's to
+    round-off, not bit for bit: NumPy's arctan2 is not libm's (measured 4e-17 on case A)."""
+    corners = np.ascontiguousarray(V[F].transpose(1, 2, 0))      # (corner, axis, face)
+    out = np.empty(len(P))
+    for k, p in enumerate(P):
+        a, b, c = corners - p[:, None]
+        la, lb, lc = (np.sqrt((x * x).sum(axis=0)) for x in (a, b, c))
+        det = (a * np.cross(b, c, axis=0)).sum(axis=0)
+        den = la * lb * lc + (a * b).sum(axis=0) * lc + (a * c).sum(axis=0) * lb + (b * c).sum(axis=0) * la
+        total = np.cumsum(2.0 * np.arctan2(det, den))
+        out[k] = (total[-1] if len(total) else 0.0) / (4.0 * np.pi)
+    return out
+
+
 def centroids_and_reach(V, F):
     """Face centroids (m, 3) and each face's largest centroid-to-corner distance (m,)
     (``_kernels.mesh.centroids_and_reach``)."""
@@ -253,3 +271,70 @@ def chain_loops(ids, n_nodes):
             nodes += walk
             offsets.append(len(nodes))
     return np.array(nodes, dtype=np.int64), np.array(offsets, dtype=np.int64), src
+
+
+# ------------------------------------------------------------------- a mandrel's own arrays
+def face_neighbors(F):
+    """(m, 3) the face across edge k (corners k, k + 1) of each face of F, -1 if none or when the
+    directed edge is used twice (``_kernels.edges.directed_neighbors`` on ``edge_table``): a
+    stable sort of the directed edge keys searched for each twin key."""
+    a = F.reshape(-1)
+    b = np.roll(F, -1, axis=1).reshape(-1)
+    nv = int(F.max()) + 1
+    key = a * nv + b
+    twin = b * nv + a
+    order = np.argsort(key, kind="stable")
+    sorted_keys = key[order]
+    pos = np.minimum(np.searchsorted(sorted_keys, twin), len(sorted_keys) - 1)
+    found = sorted_keys[pos] == twin
+    dup = np.zeros(len(key), dtype=bool)
+    same = sorted_keys[1:] == sorted_keys[:-1]
+    dup[order[1:][same]] = True
+    dup[order[:-1][same]] = True
+    out = np.where(found, order[pos] // 3, -1)
+    out[dup] = -1
+    return out.reshape(-1, 3)
+
+
+def corner_cosines(V, F):
+    """(m, 3) cosine of the interior angle at every corner (``_kernels.mesh.corner_cosines``):
+    ``u.w / max(|u| |w|, 1e-300)``, u and w the sides from corner k to corners k + 1, k + 2."""
+    p = V[F]
+    out = np.empty((len(F), 3))
+    for k in range(3):
+        u = p[:, (k + 1) % 3] - p[:, k]
+        w = p[:, (k + 2) % 3] - p[:, k]
+        out[:, k] = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1),
+                                                             1e-300)
+    return out
+
+
+def corners_by_vertex(F, n_vertices):
+    """The corners around each vertex (``_kernels.mesh.corners_by_vertex``): (vert_ptr (n + 1,),
+    vert_faces, vert_corner (3 m,)), CSR by vertex, faces ascending (a stable argsort)."""
+    flat = F.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_vertices))])
+    return ptr, order // 3, order % 3
+
+
+def corner_normals(T, FN, angles, vert_ptr, vert_faces, vert_corner, cos_crease):
+    """Crease-split, angle-weighted unit normals (m, 3, 3) at every corner
+    (``_kernels.mesh.corner_normals``): corner (f, k) sums ``angle * FN[g]`` over the faces g
+    around its vertex with ``FN[g].FN[f] >= cos_crease``, in the CSR order (``np.bincount``
+    adds its weights in order, as the kernel's running sums do); FN[f] where the sum is zero."""
+    corner_vertex = T.reshape(-1)
+    degree = vert_ptr[corner_vertex + 1] - vert_ptr[corner_vertex]
+    corner = np.repeat(np.arange(len(corner_vertex)), degree)
+    first = np.cumsum(degree) - degree
+    p = np.repeat(vert_ptr[corner_vertex], degree) + np.arange(len(corner)) - np.repeat(first, degree)
+    g, f = vert_faces[p], corner // 3
+    c = (FN[g, 0] * FN[f, 0] + FN[g, 1] * FN[f, 1]) + FN[g, 2] * FN[f, 2]
+    keep = c >= cos_crease
+    corner, g, p = corner[keep], g[keep], p[keep]
+    w = angles[g, vert_corner[p]]
+    s = [np.bincount(corner, weights=w * FN[g, i], minlength=len(corner_vertex)) for i in range(3)]
+    norm = np.sqrt((s[0] * s[0] + s[1] * s[1]) + s[2] * s[2])
+    summed = np.stack(s, axis=1) / np.where(norm > 0.0, norm, 1.0)[:, None]
+    out = np.where((norm > 0.0)[:, None], summed, FN[np.arange(len(corner_vertex)) // 3])
+    return out.reshape(-1, 3, 3)
