@@ -1,5 +1,5 @@
 """Small meshes' intake (issue 15): below ``IntakeSettings.kernel_faces`` the repair, the mandrel's
-arrays and the section tracer take the NumPy forms of the numba kernels (``geometry.small_mesh``).
+arrays, the section index and the centerline-inside check take the NumPy forms of the numba kernels (``geometry.small_mesh``).
 Both paths give the same arrays, bit for bit, the same report or the same refusal, on clean,
 damaged and refused meshes; and a first load and check of a shipped mandrel compiles none of
 those kernels."""
@@ -193,7 +193,6 @@ INTAKE_KERNELS = {
              "edge_ray_batch", "edge_ray_hits", "centroids_and_reach", "face_cross_normals", "corner_cosines",
              "corners_by_vertex", "corner_normals"),
     "edges": ("merge_clusters", "first_of_each_face", "orient_bodies", "edge_table", "directed_neighbors"),
-    "sections": ("chain_loops",),
 }
 
 
@@ -204,10 +203,10 @@ def test_a_first_load_of_case_a_compiles_no_intake_kernel(tmp_path):
     code = ("import json, sys\n"
             "from preform.config import load_config\n"
             "from preform.pipeline import checked_geometry\n"
-            "from preform._kernels import edges, mesh, sections\n"
+            "from preform._kernels import edges, mesh\n"
             "checked_geometry(load_config(sys.argv[1]))\n"
             "names = json.loads(sys.argv[2])\n"
-            "mods = {'mesh': mesh, 'edges': edges, 'sections': sections}\n"
+            "mods = {'mesh': mesh, 'edges': edges}\n"
             "print(json.dumps({f'{m}.{k}': len(getattr(mods[m], k).signatures) for m in names for k in names[m]}))\n")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PREFORM_CACHE_DIR=str(tmp_path / "cache"),
                PYTHONPATH=os.pathsep.join(sys.path))
