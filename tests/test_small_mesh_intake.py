@@ -157,17 +157,19 @@ def test_self_intersection_rays_are_identical(seed):
 
 
 def test_sections_are_identical_on_both_paths():
-    """Section perimeters along case A's centerline by the NumPy forms and by the kernels."""
+    """Section perimeters along case A's centerline by the NumPy forms (loops chained in Python,
+    then, past ``python_sections`` sections of the mesh, by the kernel) and by the kernels."""
     from preform.geometry import load_mandrel
     from preform.geometry.centerline import read_centerline_csv, section_perimeters
 
-    mandrel = load_mandrel(ROOT / "mandrels" / "case_a.stl")
     centerline = read_centerline_csv(ROOT / "mandrels" / "case_a_centerline.csv")
     s = np.linspace(0.01, 0.99, 40) * centerline.length
-    by_numpy = section_perimeters(mandrel, centerline, s, NUMPY)
-    mandrel = load_mandrel(ROOT / "mandrels" / "case_a.stl")       # a fresh section index
-    by_kernels = section_perimeters(mandrel, centerline, s, KERNELS)
-    assert by_numpy.tobytes() == by_kernels.tobytes() and np.all(by_numpy > 0)
+    by_kernels = section_perimeters(load_mandrel(ROOT / "mandrels" / "case_a.stl"), centerline, s, KERNELS)
+    assert np.all(by_kernels > 0)
+    for settings in (NUMPY, IntakeSettings(kernel_faces=10**12, python_sections=15)):
+        mandrel = load_mandrel(ROOT / "mandrels" / "case_a.stl")     # a fresh section index
+        assert section_perimeters(mandrel, centerline, s, settings).tobytes() == by_kernels.tobytes()
+        assert mandrel.sections.metadata["_preform_sections_cut"] == len(s)
 
 
 def test_mandrel_arrays_are_identical_on_both_paths():
@@ -193,6 +195,7 @@ INTAKE_KERNELS = {
              "edge_ray_batch", "edge_ray_hits", "centroids_and_reach", "face_cross_normals", "corner_cosines",
              "corners_by_vertex", "corner_normals"),
     "edges": ("merge_clusters", "first_of_each_face", "orient_bodies", "edge_table", "directed_neighbors"),
+    "sections": ("chain_loops",),
 }
 
 
@@ -203,10 +206,10 @@ def test_a_first_load_of_case_a_compiles_no_intake_kernel(tmp_path):
     code = ("import json, sys\n"
             "from preform.config import load_config\n"
             "from preform.pipeline import checked_geometry\n"
-            "from preform._kernels import edges, mesh\n"
+            "from preform._kernels import edges, mesh, sections\n"
             "checked_geometry(load_config(sys.argv[1]))\n"
             "names = json.loads(sys.argv[2])\n"
-            "mods = {'mesh': mesh, 'edges': edges}\n"
+            "mods = {'mesh': mesh, 'edges': edges, 'sections': sections}\n"
             "print(json.dumps({f'{m}.{k}': len(getattr(mods[m], k).signatures) for m in names for k in names[m]}))\n")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PREFORM_CACHE_DIR=str(tmp_path / "cache"),
                PYTHONPATH=os.pathsep.join(sys.path))

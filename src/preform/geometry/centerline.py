@@ -338,7 +338,8 @@ def _section_loops(mesh, origin, normal, settings=INTAKE):
     centroid lies within their own centroid-to-corner distance of the plane are cut, found by
     ``_faces_near_plane``: on a 2 M-face mandrel a section then costs about a millisecond instead
     of 77 ms for the whole mesh. The cut is ``plane_segments`` on those faces' corners.
-    ``settings``: which meshes (by face count) the centroids' kernel serves.
+    ``settings``: which meshes (by face count) take the NumPy forms, and how many of a small
+    mesh's sections chain their loops in Python (counted in ``metadata``).
     """
     normal = np.asarray(normal, dtype=float)
     origin = np.asarray(origin, dtype=float)
@@ -351,19 +352,23 @@ def _section_loops(mesh, origin, normal, settings=INTAKE):
     segments = plane_segments(corners, corners @ normal - level, normal, origin)
     if segments is None:
         return []
-    return chain_segments(segments)
+    cut = mesh.metadata.get("_preform_sections_cut", 0)
+    mesh.metadata["_preform_sections_cut"] = cut + 1
+    return chain_segments(segments, kernels=settings.kernels(len(mesh.faces)) or cut >= settings.python_sections)
 
 
-def chain_segments(segments, rel_tol=1e-9):
+def chain_segments(segments, rel_tol=1e-9, kernels=True):
     """Join segments (n, 2, 3) that share end points into closed loops; open chains are dropped.
 
     End points closer than ``rel_tol * 1e3`` of the segments' extent are one node (rounded
-    coordinates); the walk over the nodes is ``_kernels.sections.chain_loops``. Each loop is
-    (k + 1, 3), its first point repeated last. (Its Python form, ``tests/naive_sections.py``,
-    takes 1 ms a section of 500 segments: 0.2-0.3 s a run for an automatic centerline's few
-    hundred sections, against 0.5 s of compiling once, so every mesh takes the kernel.)
+    coordinates); the walk over the nodes is ``_kernels.sections.chain_loops`` with ``kernels``,
+    else the same walk in Python (``small_mesh.chain_loops``). Each loop is (k + 1, 3), its first
+    point repeated last.
     """
-    from .._kernels.sections import chain_loops
+    if kernels:
+        from .._kernels.sections import chain_loops
+    else:
+        chain_loops = small_mesh.chain_loops
 
     if len(segments) == 0:
         return []

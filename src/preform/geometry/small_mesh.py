@@ -1,6 +1,6 @@
 """NumPy forms of the mesh intake and check kernels, for small meshes (issue 15).
 
-The numba kernels of ``_kernels.mesh`` and ``_kernels.edges`` exist for STLs of 1-2 M faces; on a
+The numba kernels of ``_kernels.mesh``, ``edges`` and ``sections`` exist for STLs of 1-2 M faces; on a
 first run each costs 0.15-0.8 s to compile, while on a mandrel of some 10 k faces its NumPy form
 takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` the
 intake (``geometry.repair``), a mandrel's own arrays (``geometry.mandrel``), the section index
@@ -21,9 +21,10 @@ import numpy as np
 class IntakeSettings:
     """Which meshes the intake and the checks hand to the numba kernels."""
 
-    #: meshes with at least this many faces use the kernels, smaller ones these NumPy forms:
-    #: about where the NumPy forms' time equals the kernels' compile time (decisions-intake15.md)
+    #: smaller meshes take the NumPy forms: there their extra time equals one kernel's compile time
     kernel_faces: int = 200_000
+    #: a small mesh's first sections chain in Python (a CSV-centerline run cuts ~90, at 0.5-1 ms)
+    python_sections: int = 100
 
     def kernels(self, n_faces) -> bool:
         """Whether a mesh of ``n_faces`` faces uses the numba kernels."""
@@ -231,6 +232,46 @@ def centroids_and_reach(V, F):
     tri = V[F]
     centroids = tri.mean(axis=1)
     return centroids, np.sqrt(((tri - centroids[:, None]) ** 2).sum(axis=2).max(axis=1))
+
+
+def chain_loops(ids, n_nodes):
+    """Closed loops of the segment graph ``ids`` (n, 2) (``_kernels.sections.chain_loops``, the
+    same walk with dictionaries): (loop_nodes, loop_offsets (n_loops + 1,), src (n_nodes,) the
+    index 2 k + end of the segment end whose coordinates a node keeps, its last appearance)."""
+    adjacency: dict[int, list[int]] = {}
+    for a, b in ids.tolist():
+        if a != b:
+            adjacency.setdefault(a, []).append(b)
+            adjacency.setdefault(b, []).append(a)
+    real = np.repeat(ids[:, 0] != ids[:, 1], 2)
+    src = np.full(n_nodes, -1, dtype=np.int64)
+    np.maximum.at(src, ids.reshape(-1)[real], np.arange(2 * len(ids))[real])
+    nodes, offsets = [], [0]
+    seen = set()
+    for start in adjacency:
+        if start in seen:
+            continue
+        walk = [start]
+        seen.add(start)
+        prev, cur = -1, start
+        closed = False
+        while True:
+            nxt = [q for q in adjacency[cur] if q != prev]
+            if not nxt:
+                break
+            q = nxt[0]
+            if q == start:
+                closed = True
+                break
+            if q in seen:
+                break
+            seen.add(q)
+            walk.append(q)
+            prev, cur = cur, q
+        if closed and len(walk) >= 3:
+            nodes += walk
+            offsets.append(len(nodes))
+    return np.array(nodes, dtype=np.int64), np.array(offsets, dtype=np.int64), src
 
 
 # ------------------------------------------------------------------- a mandrel's own arrays
