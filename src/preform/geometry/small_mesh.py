@@ -1,13 +1,13 @@
 """NumPy forms of the mesh intake and check kernels, for small meshes (issue 15).
 
-The numba kernels of ``_kernels.mesh``, ``edges`` and ``sections`` exist for STLs of 1-2 M faces; on a
-first run each costs 0.15-0.8 s to compile, while on a mandrel of some 10 k faces its NumPy form
-takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` the
-intake (``geometry.repair``), a mandrel's own arrays (``geometry.mandrel``), the section index
-(``geometry.centerline``) and the centerline-inside check (``checks``) call these functions
-instead. Each returns what its kernel writes, bit for bit (the tests compare both on the same
-meshes; the winding numbers to round-off), so the size of a mesh changes how long its intake
-takes, never its result.
+The numba kernels of ``_kernels.mesh``, ``edges`` and ``sections`` exist for STLs of 1-2 M faces;
+on a first run each costs 0.15-0.8 s to compile, while on a mandrel of some 10 k faces its NumPy
+form takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` faces the intake
+(``geometry.repair``), a mandrel's own arrays (``geometry.mandrel``), the section index and a
+mesh's first sections (``geometry.centerline``) and the centerline-inside check (``checks``) call
+these functions instead. Each returns what its kernel writes, bit for bit (the tests compare both
+on the same meshes; the winding numbers to round-off), so the size of a mesh changes how long its
+intake takes, never its result.
 """
 
 from __future__ import annotations
