@@ -8,12 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from preform._kernels.edges import (INSERTION_MAX, directed_neighbors, edge_table, first_of_each_face,
                                     orient_bodies)
 from preform._kernels.mesh import long_side_faces, triangle_moments
+from preform.geometry import small_mesh
+
+KERNELS = small_mesh.IntakeSettings(kernel_faces=0)
 
 
 def meshes():
@@ -80,13 +81,6 @@ def test_surface_moments_of_the_masked_faces_are_the_full_arrays_rows():
     np.testing.assert_array_equal(s, second[keep])
 
 
-def numpy_edge_table(F, n):
-    a, b = F, np.roll(F, -1, axis=1)
-    key = (np.minimum(a, b) * np.int64(n) + np.maximum(a, b)).reshape(-1)
-    uniq, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    return uniq, inverse.reshape(-1), count, np.argsort(inverse.reshape(-1), kind="stable")
-
-
 def test_edge_table_is_numpy_unique_of_the_edge_keys():
     for m in meshes():
         V, F = arrays(m)
@@ -94,32 +88,11 @@ def test_edge_table_is_numpy_unique_of_the_edge_keys():
             side = np.empty(3 * len(F), dtype=np.int64)
             order = np.empty(3 * len(F), dtype=np.int64)
             key, count = edge_table(F, n, side, order)
-            ref_key, ref_inverse, ref_count, ref_order = numpy_edge_table(F, n)
+            ref_key, ref_count, ref_inverse, ref_order = small_mesh.edge_table(F, n)
             np.testing.assert_array_equal(key, ref_key)
             np.testing.assert_array_equal(count, ref_count)
             np.testing.assert_array_equal(side, ref_inverse)
             np.testing.assert_array_equal(order, ref_order)
-
-
-def numpy_face_neighbors(faces):
-    """The sort-based form (``geometry.mandrel.face_neighbors`` before the kernel)."""
-    nf = len(faces)
-    a = faces.reshape(-1)
-    b = np.roll(faces, -1, axis=1).reshape(-1)
-    nv = int(faces.max()) + 1
-    key = a * nv + b
-    twin = b * nv + a
-    order = np.argsort(key, kind="stable")
-    sorted_keys = key[order]
-    pos = np.minimum(np.searchsorted(sorted_keys, twin), len(sorted_keys) - 1)
-    found = sorted_keys[pos] == twin
-    dup = np.zeros(len(key), dtype=bool)
-    same = sorted_keys[1:] == sorted_keys[:-1]
-    dup[order[1:][same]] = True
-    dup[order[:-1][same]] = True
-    out = np.where(found, order[pos] // 3, -1)
-    out[dup] = -1
-    return out.reshape(nf, 3)
 
 
 def test_face_neighbors_equal_the_sort_based_form():
@@ -129,13 +102,13 @@ def test_face_neighbors_equal_the_sort_based_form():
         _, F = arrays(m)
         collapsed = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])      # a repeated vertex too
         for faces in (F, collapsed):
-            np.testing.assert_array_equal(face_neighbors(faces), numpy_face_neighbors(faces))
+            np.testing.assert_array_equal(face_neighbors(faces, KERNELS), small_mesh.face_neighbors(faces))
             side = np.empty(3 * len(faces), dtype=np.int64)
             order = np.empty(3 * len(faces), dtype=np.int64)
             _, count = edge_table(faces, int(faces.max()) + 1, side, order)
             out = np.empty(3 * len(faces), dtype=np.int64)
             directed_neighbors(faces, order, count, out)
-            np.testing.assert_array_equal(out.reshape(-1, 3), numpy_face_neighbors(faces))
+            np.testing.assert_array_equal(out.reshape(-1, 3), small_mesh.face_neighbors(faces))
 
 
 def test_first_of_each_face_is_numpy_unique_return_index():
@@ -145,26 +118,6 @@ def test_first_of_each_face_is_numpy_unique_return_index():
         first_of_each_face(F, keep)
         _, first = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
         np.testing.assert_array_equal(np.nonzero(keep)[0], np.sort(first))
-
-
-def numpy_orientation(F, pairs):
-    """The double-cover form of ``geometry.repair._orientation``: (flipped, component, first face
-    whose two nodes are connected or -1)."""
-    m = len(F)
-    h1, h2 = pairs[:, 0], pairs[:, 1]
-    same_direction = F.reshape(-1)[h1] == F.reshape(-1)[h2]
-    f1, f2 = h1 // 3, h2 // 3
-    g1 = np.where(same_direction, f2 + m, f2)
-    g2 = np.where(same_direction, f2, f2 + m)
-    rows = np.concatenate([f1, f1 + m])
-    cols = np.concatenate([g1, g2])
-    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * m, 2 * m))
-    _, label = connected_components(graph, directed=False)
-    given, reversed_ = label[:m], label[m:]
-    bad = np.nonzero(given == reversed_)[0]
-    body_label = np.minimum(given, reversed_)
-    _, component = np.unique(body_label, return_inverse=True)
-    return given != body_label, component.reshape(-1), int(bad[0]) if len(bad) else -1
 
 
 def two_face_pairs(F):
@@ -215,7 +168,7 @@ def test_orient_bodies_is_the_double_cover_components(seed):
     flipped = np.empty(len(F), dtype=bool)
     component = np.empty(len(F), dtype=np.int64)
     bad = orient_bodies(F, pairs, flipped, component)
-    ref_flipped, ref_component, ref_bad = numpy_orientation(F, pairs)
+    ref_flipped, ref_component, ref_bad = small_mesh.orient_bodies(F, pairs)
     assert bad == ref_bad
     assert (bad >= 0) == bool(seed % 2)
     np.testing.assert_array_equal(component, ref_component)
@@ -280,10 +233,9 @@ def test_face_cross_normals_are_the_numpy_form():
         F = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])             # a zero-area face
         cross, normals = np.empty((len(F), 3)), np.empty((len(F), 3))
         face_cross_normals(V, F, cross, normals)
-        ref = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-        area2 = np.linalg.norm(ref, axis=1)
-        np.testing.assert_array_equal(cross, ref)
-        np.testing.assert_array_equal(normals, ref / np.where(area2 > 0, area2, 1.0)[:, None])
+        ref_cross, ref_normals = small_mesh.face_cross_normals(V, F)
+        np.testing.assert_array_equal(cross, ref_cross)
+        np.testing.assert_array_equal(normals, ref_normals)
 
 
 def test_edge_ray_geometry_is_the_numpy_form():
@@ -297,19 +249,14 @@ def test_edge_ray_geometry_is_the_numpy_form():
         a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
         length, eps = np.empty(k), np.empty(k)
         n = edge_ray_geometry(V, e, ok, a, u, length, eps, origin)
-        ra = V[e[:, 0]]
-        d = V[e[:, 1]] - ra
-        L = np.linalg.norm(d, axis=1)
-        keep = L > 0
+        keep, ra, ru, L, reps, rorigin = small_mesh.edge_ray_geometry(V, e)
         assert not keep.all() and n == keep.sum()
-        ra, d, L = ra[keep], d[keep], L[keep]
-        ru = d / L[:, None]
         np.testing.assert_array_equal(ok, keep)
         np.testing.assert_array_equal(a[:n], ra)
         np.testing.assert_array_equal(u[:n], ru)
         np.testing.assert_array_equal(length[:n], L)
-        np.testing.assert_array_equal(eps[:n], 1e-6 * L)
-        np.testing.assert_array_equal(origin[:n], ra + ru * (1e-6 * L)[:, None])
+        np.testing.assert_array_equal(eps[:n], reps)
+        np.testing.assert_array_equal(origin[:n], rorigin)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -324,17 +271,10 @@ def test_merge_clusters_are_the_components_form(seed):
     survivors, new_index = np.empty(900, dtype=np.int64), np.empty(900, dtype=np.int64)
     n = merge_clusters(inverse, pairs, n_exact, survivors, new_index)
     # the NumPy form of geometry.repair._merge_vertices
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_exact, n_exact))
-    _, cluster = connected_components(graph, directed=False)
-    cluster = cluster[inverse]
-    n_clusters = int(cluster.max()) + 1
-    keeper = np.full(n_clusters, len(inverse), dtype=np.int64)
-    np.minimum.at(keeper, cluster, np.arange(len(inverse)))
-    ref_index = np.empty(n_clusters, dtype=np.int64)
-    ref_index[np.argsort(keeper)] = np.arange(n_clusters)
-    assert n == n_clusters
-    np.testing.assert_array_equal(survivors[:n], np.sort(keeper))
-    np.testing.assert_array_equal(new_index, ref_index[cluster])
+    keeper, ref_index = small_mesh.merge_clusters(inverse, pairs, n_exact)
+    assert n == len(keeper)
+    np.testing.assert_array_equal(survivors[:n], keeper)
+    np.testing.assert_array_equal(new_index, ref_index)
 
 
 def test_near_pairs_are_the_kd_tree_pairs():

@@ -1,7 +1,8 @@
 """The first run's compile worker (``preform._jit``): each job runs once, in one of the two
 processes; a failing job does not stop the run; and on a real first run the main process
 compiles none of the stepper's or the field kernels (the worker's small jobs compile the same
-specialisations the run needs)."""
+specialisations the run needs), and neither process the intake kernels (a small mandrel takes
+their NumPy forms)."""
 
 from __future__ import annotations
 
@@ -33,6 +34,30 @@ def test_finish_runs_the_unclaimed_jobs_here_and_waits_for_the_claimed_ones(tmp_
     _jit.Warmup(tmp_path, finished_process(), config=None, runners=runners).finish()
     assert ran == ["c", "b"]              # the last-needed first
     assert not tmp_path.exists()           # the claims folder is removed
+
+
+def test_lead_runs_a_job_here_then_waits_for_the_workers_first(tmp_path):
+    """Before the mandrel is loaded: the command runs the lead jobs while the worker holds its
+    first job, then waits for that one; nothing once it is done."""
+    import threading
+
+    ran = []
+    runners = {name: (lambda config, name=name: ran.append(name)) for name in ("first", "b", "c")}
+    assert _jit._claim(tmp_path, "first")                       # the worker holds it
+    worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        done = threading.Timer(0.5, (tmp_path / "first.done").touch)
+        done.start()
+        warmup = _jit.Warmup(tmp_path, worker, config=None, runners=runners)
+        warmup.lead(jobs=("c",))
+        assert ran == ["c"] and (tmp_path / "first.done").exists()
+        warmup.lead(jobs=("b",))                                 # the first job is done: nothing
+        assert ran == ["c"]
+        warmup.finish()
+        assert ran == ["c", "b"]
+    finally:
+        worker.kill()
+        worker.wait()
 
 
 def test_a_failing_job_is_marked_done_and_does_not_raise(tmp_path):
@@ -152,6 +177,14 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     jobs = sorted(d["job"] for d in events if d["event"] == "job")
     assert jobs == sorted(_jit.JOBS)
     assert not [d for d in lines if d["role"] == "main" and d["kernel"].endswith(".project_to_polyline")]
+    # a small mandrel's intake, arrays, sections and checks take their NumPy forms
+    # (geometry.small_mesh): neither process compiles those kernels, but for the exact weld that
+    # the field mesh's build calls (the field_mesh job)
+    from test_small_mesh_intake import INTAKE_KERNELS
+
+    intake = {f"preform._kernels.{m}.{k}" for m, names in INTAKE_KERNELS.items() for k in names}
+    assert sorted({(d["kernel"], d["job"]) for d in lines if d["kernel"] in intake}) in (
+        [], [("preform._kernels.mesh.weld_exact", "field_mesh")])
     # the field mesh in the cache was built by a job before the simulation, and the map used it
     # (it would have written the entry again after the simulation had it been missing)
     finished = [d["start_s"] for d in events if d["event"] == "finished"]

@@ -1,12 +1,12 @@
 """Section chaining (``geometry.centerline.chain_segments`` on ``_kernels.sections.chain_loops``)
-against its Python reference (``naive_sections``), on shuffled and awkward segment soups."""
+against its Python form (``small_mesh.chain_loops``, a small mesh's first sections), on shuffled and
+awkward segment soups."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import naive_sections as naive
 from preform.geometry.centerline import chain_segments
 
 
@@ -40,7 +40,7 @@ def _soup(rng):
 @pytest.mark.parametrize("seed", range(6))
 def test_chain_segments_matches_the_python_reference(seed):
     seg = _soup(np.random.default_rng(seed))
-    ref = naive.chain_segments(seg)
+    ref = chain_segments(seg, kernels=False)
     got = chain_segments(seg)
     assert len(got) == len(ref) >= 2                                  # the figure eight gives 0-2
     for a, b in zip(got, ref):
@@ -55,7 +55,7 @@ def test_chain_segments_on_a_mesh_section():
     mesh = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
     seg = mesh_plane(mesh, plane_normal=[0.2, 0.1, 1.0], plane_origin=[0, 0, 0.03])
     (loop,) = chain_segments(np.asarray(seg))
-    (ref,) = naive.chain_segments(np.asarray(seg))
+    (ref,) = chain_segments(np.asarray(seg), kernels=False)
     np.testing.assert_array_equal(loop, ref)
     assert len(loop) == len(seg) + 1
     assert chain_segments(np.zeros((0, 2, 3))) == []

@@ -18,7 +18,9 @@ there instead of compiling them.
 The jobs are claimed through files created exclusively in a folder of the two processes: the
 worker claims them from the front; :meth:`Warmup.finish` (called once the mandrel is loaded and
 checked) claims what the worker has not reached, from the back, and runs it here, then waits for
-the jobs the worker holds: whichever process is free takes the next job. A compile job is the
+the jobs the worker holds: whichever process is free takes the next job. Before loading the
+mandrel, :meth:`Warmup.lead` runs a map job here while the worker does its first job (on a
+small mandrel the command would otherwise reach the projection first and compile it too). A compile job is the
 run's own code on a small cylinder (the same calls, so the same argument types and the same
 compiled specialisations), so nothing here knows the kernels' types; a job that fails, or a
 worker that dies, only means that the run does that work itself.
@@ -177,6 +179,9 @@ RUNNERS = {"projection": job_projection, "stepper": job_stepper, "analysis": job
            "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
 #: the jobs, in that order
 JOBS = tuple(RUNNERS)
+#: what the command runs before it loads the mandrel while the worker does its first job
+#: (:meth:`Warmup.lead`): the shortest of the map's compile jobs, which need none of its kernels
+LEAD_JOBS = ("clip",)
 
 
 # ------------------------------------------------------------------------------ compile log
@@ -284,6 +289,23 @@ class Warmup:
         self.process = process
         self.config = config
         self.runners = RUNNERS if runners is None else runners
+
+    def lead(self, jobs=LEAD_JOBS) -> None:
+        """Before the command loads and checks the mandrel: unless the worker has done its first
+        job (the centerline projection, which the checks call), run ``jobs`` here, then wait for
+        that job (while the worker runs, at most :data:`WAIT_LIMIT_S`). A small mandrel loads
+        without compiling (``geometry.small_mesh``), so the command would otherwise reach the
+        projection first and compile it a second time at the same moment; waiting for the
+        worker, which started on it earlier, ends sooner."""
+        first = self.folder / f"{next(iter(self.runners))}.done"
+        for job in jobs:
+            if first.exists() or self.process.poll() is not None:
+                return
+            if job in self.runners and _claim(self.folder, job):
+                _run(self.folder, job, self.config, self.runners)
+        deadline = time.monotonic() + WAIT_LIMIT_S
+        while not first.exists() and self.process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
 
     def finish(self, mandrel=None) -> None:
         """Run here the jobs the worker has not claimed yet (the last ones first; ``mandrel``: the

@@ -174,6 +174,8 @@ def _cmd_run(args, note=None) -> int:
     if warmup is not None and note is not None:
         note.say()
     try:
+        if warmup is not None:
+            warmup.lead()
         mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
     except BaseException:
         if warmup is not None:

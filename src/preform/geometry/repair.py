@@ -23,6 +23,10 @@
 9. refuses self-intersections: an edge that pierces a triangle it does not belong to (one batched
    ray query, embree when installed). Coplanar overlaps are not detected.
 
+The passes are numba kernels for big meshes; below ``IntakeSettings.kernel_faces`` faces they are
+their NumPy forms (``geometry.small_mesh``), with the same results, so that a first run on a small
+mandrel compiles none of them.
+
 Every change is said in ``RepairReport.messages``, which the run log and ``summary.json`` repeat.
 Merging the corners of an STL triangle soup (``3 * n_faces`` vertices, as every STL file is) is the
 format, not a repair, and is not said.
@@ -37,6 +41,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import MandrelError
 from ..tolerances import tol
+from . import small_mesh
+from .small_mesh import INTAKE
 
 #: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
 SMALL_HOLE = 0.05
@@ -88,7 +94,7 @@ class RepairReport:
         return bool(self.messages)
 
 
-def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None):
+def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None, settings=INTAKE):
     """Repair a triangle mesh (or soup) into one closed, outward-wound body; see the module docstring.
 
     vertices : (n, 3) float64, m, the STL's frame (already converted with ``unit_scale``)
@@ -98,6 +104,7 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
         are given in the file's own coordinates so they can be found in the CAD tool
     body : None (exactly one body required), "largest", or an index into the bodies ordered by
         decreasing bounding-box diagonal (0 is the largest)
+    settings : IntakeSettings, which meshes (by input face count) the numba kernels handle
 
     Returns ``(vertices (k, 3) float64 m, faces (l, 3) int64, RepairReport)``; unused vertices are
     dropped. The inputs are not modified. Raises MandrelError, naming ``source``, what is wrong and
@@ -106,25 +113,26 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     say = _Messages(source, unit_scale)
     V, F = _validated(vertices, faces, say)
     counts = {"input_vertices": len(V), "input_faces": len(F)}
-    radius = tol.merge_vertices * _diagonal(V)
+    kernels = settings.kernels(len(F))
+    radius = tol.merge_vertices * _diagonal(V, kernels=kernels)
 
-    V, F, counts["merged_vertices"] = _merge_vertices(V, F, radius)
+    V, F, counts["merged_vertices"] = _merge_vertices(V, F, radius, kernels)
     if counts["merged_vertices"]:
         say.change(f"merged {counts['merged_vertices']:,} duplicate vertices")
-    F, counts["degenerate_faces"] = _drop_degenerate(V, F, radius)
+    F, counts["degenerate_faces"] = _drop_degenerate(V, F, radius, kernels)
     if counts["degenerate_faces"]:
         say.change(f"dropped {counts['degenerate_faces']:,} degenerate faces")
-    F, counts["duplicate_faces"] = _drop_duplicate_faces(F)
+    F, counts["duplicate_faces"] = _drop_duplicate_faces(F, kernels)
     if counts["duplicate_faces"]:
         say.change(f"dropped {counts['duplicate_faces']:,} duplicated faces")
     if len(F) == 0:
         say.refuse(f"no usable triangles (all {counts['input_faces']:,} are degenerate)",
                    "export the mandrel again as a closed solid")
 
-    edges = _EdgeTable(F)
+    edges = _EdgeTable(F, kernels)
     _refuse_non_manifold(V, edges, say)
     _refuse_unwelded(V, edges, radius, say)
-    flipped, component = _orientation(F, edges, V, say)
+    flipped, component = _orientation(F, edges, V, say, kernels)
     if flipped.any():
         F = np.where(flipped[:, None], F[:, ::-1], F)
     keep, counts["bodies"] = _choose_body(V, F, component, body, say)
@@ -134,12 +142,12 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     # every edge of a body lies in that body's faces only (two-face edges join faces of one body,
     # and no edge has more), so with no open edge now no kept body has a hole
     closed = not np.any(edges.count == 1)
-    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say, closed)
+    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say, closed, kernels)
     volume = _signed_volume(V, F)
     if volume < 0:
         F = F[:, ::-1]
         flipped = ~flipped
-    _refuse_flat(V, F, say, abs(volume))
+    _refuse_flat(V, F, say, abs(volume), kernels)
     n_flipped = int(flipped.sum())
     counts["flipped_faces"] = n_flipped
     if n_flipped == len(flipped):
@@ -152,7 +160,7 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None)
     V = np.ascontiguousarray(V, dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.int64)
     mesh = trimesh.Trimesh(V, F, process=False)
-    _refuse_self_intersections(V, F, say, mesh)
+    _refuse_self_intersections(V, F, say, mesh, kernels)
     return V, F, RepairReport(**counts, messages=tuple(say.changes), ray_mesh=mesh)
 
 
@@ -207,15 +215,20 @@ def _validated(vertices, faces, say):
     return V, F
 
 
-def _diagonal(V, F=None):
+def _diagonal(V, F=None, kernels=True):
     """Bounding-box diagonal (m) of finite vertices (n, 3), or of those faces F (m, 3) use; 1 for a
-    single point. One pass (``_kernels.mesh.vertex_bounds``): ``V.max(axis=0) - V.min(axis=0)``
-    exactly, without gathering ``V[np.unique(F)]``."""
-    from .._kernels.mesh import vertex_bounds
-
-    lo, hi = np.empty(3), np.empty(3)
+    single point. One pass (``_kernels.mesh.vertex_bounds``, or its NumPy form unless
+    ``kernels``): ``V.max(axis=0) - V.min(axis=0)`` exactly, without gathering
+    ``V[np.unique(F)]``."""
     F = np.zeros((0, 3), dtype=np.int64) if F is None else np.ascontiguousarray(F, dtype=np.int64)
-    vertex_bounds(np.ascontiguousarray(V, dtype=np.float64), F, lo, hi)
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    if kernels:
+        from .._kernels.mesh import vertex_bounds
+
+        lo, hi = np.empty(3), np.empty(3)
+        vertex_bounds(V, F, lo, hi)
+    else:
+        lo, hi = small_mesh.vertex_bounds(V, F)
     return float(np.linalg.norm(hi - lo)) or 1.0
 
 
@@ -229,28 +242,37 @@ def _compact(V, F):
     return V[used], remap[F]
 
 
-def _merge_vertices(V, F, radius):
+def _merge_vertices(V, F, radius, kernels=True):
     """Merge vertices closer than ``radius`` (m): the lowest index of each cluster survives.
 
     Returns (vertices, faces, merged) where ``merged`` leaves out the corners shared by an STL
     soup's triangles when the input is a soup (exact copies, ``3 * len(F)`` vertices).
     """
-    from .._kernels.edges import merge_clusters
-
-    exact, inverse = _weld_exact(V)
-    pairs = _near_pairs(exact, radius)
+    first, inverse = _weld_exact(V, kernels)
+    exact = V[first]
+    pairs = _near_pairs(exact, radius, kernels)
     n_exact = len(exact)
     # clusters: connected components of the pairs on the exact vertices; survivors: the lowest
     # input vertex of each, ascending; new_index: each input vertex's survivor's rank (one
-    # union-find pass, _kernels.edges.merge_clusters)
-    survivors = np.empty(len(V), dtype=np.int64)
-    new_index = np.empty(len(V), dtype=np.int64)
-    n_clusters = merge_clusters(inverse, np.ascontiguousarray(pairs.reshape(-1, 2), dtype=np.int64), n_exact,
-                                survivors, new_index)
+    # union-find pass, _kernels.edges.merge_clusters). Without pairs the clusters are the exact
+    # vertices: their first appearances survive, in order, and new_index is the weld's inverse
+    if len(pairs) == 0:
+        survivors, new_index = first, inverse
+    elif kernels:
+        from .._kernels.edges import merge_clusters
+
+        survivors = np.empty(len(V), dtype=np.int64)
+        new_index = np.empty(len(V), dtype=np.int64)
+        n = merge_clusters(inverse, np.ascontiguousarray(pairs.reshape(-1, 2), dtype=np.int64), n_exact,
+                           survivors, new_index)
+        survivors = survivors[:n]
+    else:
+        survivors, new_index = small_mesh.merge_clusters(inverse, pairs.reshape(-1, 2), n_exact)
+    n_clusters = len(survivors)
     merged = len(V) - n_clusters
     if len(V) == 3 * len(F):
         merged = n_exact - n_clusters                      # a soup: only near-duplicates are repairs
-    return V[survivors[:n_clusters]], new_index[F], merged
+    return V[survivors], new_index[F], merged
 
 
 #: _near_pairs's grid test applies while coordinates stay below this many grid cubes (the
@@ -258,34 +280,35 @@ def _merge_vertices(V, F, radius):
 GRID_REACH = 1e12
 
 
-def _near_pairs(P, radius):
+def _near_pairs(P, radius, kernels=True):
     """``cKDTree(P).query_pairs(radius, output_type="ndarray")``: the pairs of rows of P (n, 3)
-    within ``radius`` (m). A grid of cubes of edge ``2 radius`` comes first
+    within ``radius`` (m). With ``kernels``, a grid of cubes of edge ``2 radius`` comes first
     (``_kernels.mesh.grid_neighbours_exist``): when no two points share a cube or touch cubes,
     no pair is that close and the tree (0.45 s on 500 k points) is not built; else the tree."""
-    from .._kernels.mesh import grid_neighbours_exist
-
     cube = 2.0 * radius
     P = np.ascontiguousarray(P, dtype=np.float64)
-    if (len(P) and cube > 0 and np.isfinite(cube) and float(np.abs(P).max()) < GRID_REACH * cube
-            and not grid_neighbours_exist(P, cube)):
-        return np.zeros((0, 2), dtype=np.int64)
+    if kernels and len(P) and cube > 0 and np.isfinite(cube) and float(np.abs(P).max()) < GRID_REACH * cube:
+        from .._kernels.mesh import grid_neighbours_exist
+
+        if not grid_neighbours_exist(P, cube):
+            return np.zeros((0, 2), dtype=np.int64)
     return cKDTree(P).query_pairs(radius, output_type="ndarray")
 
 
-def _weld_exact(V):
-    """Distinct rows of V (k, 3), in order of first appearance, and the row of each vertex (n,)
-    (hash table, ``_kernels.mesh.weld_exact``). The order of the distinct rows does not reach
-    ``_merge_vertices``'s result, which keeps the lowest input index of each cluster."""
+def _weld_exact(V, kernels=True):
+    """The distinct rows of V (n, 3) in order of first appearance: (first (k,) the index of each
+    one's first appearance, ascending; inverse (n,) the distinct row of each vertex). A hash
+    table (``_kernels.mesh.weld_exact``), or a lexicographic sort unless ``kernels``."""
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    if not kernels:
+        return small_mesh.weld_exact(V)
     from .._kernels.mesh import weld_exact
 
-    V = np.ascontiguousarray(V, dtype=np.float64)
     inverse = np.empty(len(V), dtype=np.int64)
-    first = weld_exact(V, inverse)
-    return V[first], inverse
+    return weld_exact(V, inverse), inverse
 
 
-def _drop_degenerate(V, F, radius):
+def _drop_degenerate(V, F, radius, kernels=True):
     """Drop zero-area faces (height below ``radius`` m); split the neighbour across a cap's long edge.
 
     In NumPy (kernel ``_kernels.mesh.degenerate_faces``)::
@@ -298,16 +321,20 @@ def _drop_degenerate(V, F, radius):
         longest = length.argmax(axis=1)
         caps = ~collapsed & (area2 <= radius * length.max(axis=1))
 
+    Unless ``kernels``, this NumPy form itself (``small_mesh.degenerate_faces``).
     Returns (faces, dropped).
     """
-    from .._kernels.mesh import degenerate_faces
-
     V = np.ascontiguousarray(V, dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.int64)
-    collapsed = np.empty(len(F), dtype=bool)
-    caps = np.empty(len(F), dtype=bool)
-    longest = np.empty(len(F), dtype=np.int64)
-    degenerate_faces(V, F, float(radius), collapsed, caps, longest)
+    if kernels:
+        from .._kernels.mesh import degenerate_faces
+
+        collapsed = np.empty(len(F), dtype=bool)
+        caps = np.empty(len(F), dtype=bool)
+        longest = np.empty(len(F), dtype=np.int64)
+        degenerate_faces(V, F, float(radius), collapsed, caps, longest)
+    else:
+        collapsed, caps, longest = small_mesh.degenerate_faces(V, F, float(radius))
     if caps.any():
         F = _split_across_caps(F, np.nonzero(caps)[0], longest, collapsed | caps)
     keep = ~(collapsed | caps)
@@ -350,15 +377,19 @@ def _edge_keys(F, n_vertices):
     return np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
 
 
-def _drop_duplicate_faces(F):
+def _drop_duplicate_faces(F, kernels=True):
     """Keep the first of faces with the same vertex set (either winding): (faces, dropped).
 
     The faces ``np.unique(np.sort(F, axis=1), axis=0, return_index=True)`` keeps, by a hash
-    table (``_kernels.edges.first_of_each_face``) instead of a lexicographic sort."""
-    from .._kernels.edges import first_of_each_face
+    table (``_kernels.edges.first_of_each_face``) instead of a lexicographic sort when
+    ``kernels``."""
+    if kernels:
+        from .._kernels.edges import first_of_each_face
 
-    keep = np.empty(len(F), dtype=bool)
-    first_of_each_face(np.ascontiguousarray(F, dtype=np.int64), keep)
+        keep = np.empty(len(F), dtype=bool)
+        first_of_each_face(np.ascontiguousarray(F, dtype=np.int64), keep)
+    else:
+        keep = small_mesh.first_of_each_face(F)
     n_kept = int(keep.sum())
     return (F if n_kept == len(F) else F[keep]), len(F) - n_kept
 
@@ -368,15 +399,18 @@ class _EdgeTable:
     ``count`` faces per edge, ``pairs`` (k, 2) the two half-edge ids (3 * face + side) of every
     two-face edge."""
 
-    def __init__(self, F):
-        from .._kernels.edges import edge_table
-
+    def __init__(self, F, kernels=True):
         F = np.ascontiguousarray(F, dtype=np.int64)
         # np.unique of the edge keys (_edge_keys) with its inverse and counts, and the stable
-        # argsort of the inverse, in O(m) passes instead of sorts
-        inverse = np.empty(3 * len(F), dtype=np.int64)
-        order = np.empty(3 * len(F), dtype=np.int64)
-        self.key, self.count = edge_table(F, int(F.max()) + 1, inverse, order)
+        # argsort of the inverse: in O(m) passes instead of sorts with ``kernels``
+        if kernels:
+            from .._kernels.edges import edge_table
+
+            inverse = np.empty(3 * len(F), dtype=np.int64)
+            order = np.empty(3 * len(F), dtype=np.int64)
+            self.key, self.count = edge_table(F, int(F.max()) + 1, inverse, order)
+        else:
+            self.key, self.count, inverse, order = small_mesh.edge_table(F, int(F.max()) + 1)
         self.side_edge = inverse.reshape(-1, 3)
         starts = np.concatenate([[0], np.cumsum(self.count)[:-1]])
         two = np.nonzero(self.count == 2)[0]
@@ -407,7 +441,7 @@ def _refuse_unwelded(V, edges, radius, say):
                    "export the STL as one watertight mesh (binary STL, fine tessellation)")
 
 
-def _orientation(F, edges, V, say):
+def _orientation(F, edges, V, say, kernels=True):
     """Flips for a consistent winding, and a component label per face (both (m,)).
 
     Orientation double cover: node f is face f as given, node f + m is face f reversed. Across a
@@ -418,14 +452,19 @@ def _orientation(F, edges, V, say):
 
     The components are found by a union-find over the faces that keeps each face's parity
     against its root (``_kernels.edges.orient_bodies``): the same flips and body numbers (in
-    order of the bodies' lowest faces) as connected components of the 2 m-node cover, 10x faster.
+    order of the bodies' lowest faces) as connected components of the 2 m-node cover, 10x faster;
+    unless ``kernels``, those components (``small_mesh.orient_bodies``).
     """
-    from .._kernels.edges import orient_bodies
-
     F = np.ascontiguousarray(F, dtype=np.int64)
-    flipped = np.empty(len(F), dtype=bool)
-    component = np.empty(len(F), dtype=np.int64)
-    f = orient_bodies(F, np.ascontiguousarray(edges.pairs, dtype=np.int64), flipped, component)
+    pairs = np.ascontiguousarray(edges.pairs, dtype=np.int64).reshape(-1, 2)
+    if kernels:
+        from .._kernels.edges import orient_bodies
+
+        flipped = np.empty(len(F), dtype=bool)
+        component = np.empty(len(F), dtype=np.int64)
+        f = orient_bodies(F, pairs, flipped, component)
+    else:
+        flipped, component, f = small_mesh.orient_bodies(F, pairs)
     if f >= 0:
         say.refuse(f"the surface cannot be oriented (one-sided like a Moebius strip), e.g. "
                    f"{say.where(V[F[f]].mean(axis=0))}", "export the mandrel as one closed solid")
@@ -463,11 +502,11 @@ def _choose_body(V, F, component, body, say):
     return component == chosen, n
 
 
-def _boundary_loops(F):
+def _boundary_loops(F, kernels=True):
     """Boundary loops of a consistently wound mesh: lists of vertex ids in the faces' direction
     (each boundary edge runs loop[i] -> loop[i + 1] in its face). A vertex where two holes touch is
     split into simple loops; an unclosed chain comes back as None."""
-    edges = _EdgeTable(F)
+    edges = _EdgeTable(F, kernels)
     sides = np.nonzero(edges.count[edges.side_edge] == 1)
     tails = F[sides]
     heads = F[sides[0], (sides[1] + 1) % 3]
@@ -510,18 +549,19 @@ def _simple_loops(walk):
     return [loop for loop in out if len(loop) >= 3]
 
 
-def _fill_small_holes(V, F, say, closed=False):
+def _fill_small_holes(V, F, say, closed=False, kernels=True):
     """Fill the small boundary loops (module docstring, step 7); refuse if any is large.
 
     closed : True when F is known to have no open edge (the loops are not searched for).
+    kernels : whether the edge table and bounds are the numba kernels (else their NumPy forms).
     Returns (faces, holes filled, largest span m).
     """
     say.mark_holes()
-    loops = [] if closed else _boundary_loops(F)
+    loops = [] if closed else _boundary_loops(F, kernels)
     if not loops:
         return F, 0, 0.0
-    spans = np.array([np.inf if loop is None else _diagonal(V[loop]) for loop in loops])
-    limit = SMALL_HOLE * _diagonal(V, F)
+    spans = np.array([np.inf if loop is None else _diagonal(V[loop], kernels=kernels) for loop in loops])
+    limit = SMALL_HOLE * _diagonal(V, F, kernels)
     patches = [None if loop is None else _triangulate_loop(V, loop[::-1]) for loop in loops]  # fills run against the loop
     surface = _area(V, F).sum()
     patch_area = np.array([np.inf if patch is None else _area(V, patch).sum() for patch in patches])
@@ -625,9 +665,9 @@ def _signed_volume(V, F):
     return float(np.einsum("ij,ij->", p[:, 0], np.cross(p[:, 1], p[:, 2]))) / 6.0
 
 
-def _refuse_flat(V, F, say, volume):
+def _refuse_flat(V, F, say, volume, kernels=True):
     """volume: the outward-wound mesh's enclosed volume (m^3, ``_signed_volume``)."""
-    diag = _diagonal(V, F)
+    diag = _diagonal(V, F, kernels)
     if volume <= MIN_VOLUME * diag**3:
         say.refuse(f"the closed surface encloses no volume ({volume:.3g} m^3 for a {_mm(diag)} wide mesh: "
                    "flat or folded onto itself)", "export the mandrel as a solid body")
@@ -638,11 +678,13 @@ def _refuse_flat(V, F, say, volume):
 RAY_ADVANCE = 1e-6
 
 
-def self_intersections(vertices, faces, mesh=None):
+def self_intersections(vertices, faces, mesh=None, kernels=True):
     """Edges that pierce a triangle they do not belong to: (k, 2) int64 vertex-index pairs.
 
     vertices : (n, 3) float64, m; faces : (m, 3) int64; mesh : a trimesh.Trimesh of exactly
-    these arrays to cast on (its embree scene is built on first use and kept by it), or None.
+    these arrays to cast on (its embree scene is built on first use and kept by it), or None;
+    kernels : whether the ray bookkeeping runs in the numba kernels named below or in their
+    NumPy forms (``small_mesh``, the same rays and hits; for small meshes).
     Every pair of crossing, non-coplanar triangles has such an edge. Each edge, shortened by a
     hair at both ends, is cast along itself (embree when installed, which works in float32 on
     the mesh shifted to its bounding box's corner and scaled to a 100-unit box) and every
@@ -653,25 +695,31 @@ def self_intersections(vertices, faces, mesh=None):
     """
     import trimesh
 
-    from .._kernels.mesh import edge_ray_batch, edge_ray_geometry, edge_ray_hits, face_cross_normals
-
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if mesh is None:
         mesh = trimesh.Trimesh(vertices, faces, process=False)
-    from .._kernels.edges import edge_table
-
     n = np.int64(len(vertices))
-    # the distinct edges in increasing key, _unique(_edge_keys(faces, n)), without a sort
-    key, _ = edge_table(faces, int(n), np.empty(3 * len(faces), dtype=np.int64),
-                        np.empty(3 * len(faces), dtype=np.int64))
-    e = np.stack([key // n, key % n], axis=1)
-    k = len(e)
-    ok = np.empty(k, dtype=bool)
-    a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
-    length, eps = np.empty(k), np.empty(k)
-    k = edge_ray_geometry(vertices, e, ok, a, u, length, eps, origin)   # origin = a + eps u
-    e, a, u, length, eps, origin = e[ok], a[:k], u[:k], length[:k], eps[:k], origin[:k]
+    if kernels:
+        from .._kernels.edges import edge_table
+        from .._kernels.mesh import edge_ray_geometry
+
+        # the distinct edges in increasing key, _unique(_edge_keys(faces, n)), without a sort
+        key, _ = edge_table(faces, int(n), np.empty(3 * len(faces), dtype=np.int64),
+                            np.empty(3 * len(faces), dtype=np.int64))
+        e = np.stack([key // n, key % n], axis=1)
+        k = len(e)
+        ok = np.empty(k, dtype=bool)
+        a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+        length, eps = np.empty(k), np.empty(k)
+        k = edge_ray_geometry(vertices, e, ok, a, u, length, eps, origin)   # origin = a + eps u
+        e, a, u, length, eps, origin = e[ok], a[:k], u[:k], length[:k], eps[:k], origin[:k]
+    else:
+        key = _unique(_edge_keys(faces, n))
+        e = np.stack([key // n, key % n], axis=1)
+        ok, a, u, length, eps, origin = small_mesh.edge_ray_geometry(vertices, e)
+        e = e[ok]
+        k = len(e)
     intersector = mesh.ray
     scene = getattr(intersector, "_scene", None)
     if scene is None or not hasattr(scene, "scene"):        # no embree: trimesh's own rays
@@ -681,17 +729,27 @@ def self_intersections(vertices, faces, mesh=None):
         own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
         return e[_unique(ray[inside & ~own])]
     base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(vertices, axis=0))))
-    normals = np.empty((len(faces), 3))
-    face_cross_normals(vertices, faces, np.empty((len(faces), 3)), normals)
+    if kernels:
+        from .._kernels.mesh import face_cross_normals
+
+        normals = np.empty((len(faces), 3))
+        face_cross_normals(vertices, faces, np.empty((len(faces), 3)), normals)
+    else:
+        normals = small_mesh.face_cross_normals(vertices, faces)[1]
+    scene_origin = np.asarray(scene.origin, dtype=np.float64)
     offset = np.full(k, base)
     last = np.full(k, -1, dtype=np.int64)
     bad = np.zeros(k, dtype=bool)
     live = np.arange(k, dtype=np.int64)
+    if not kernels:
+        return e[_numpy_edge_rays(scene, live, vertices, faces, normals, e, origin, a, u, length, eps,
+                                  base, offset, last, bad, scene_origin)]
+    from .._kernels.mesh import edge_ray_batch, edge_ray_hits
+
     rays = np.empty(k, dtype=np.int64)
     origin32 = np.empty((k, 3), dtype=np.float32)
     dirs32 = np.empty((k, 3), dtype=np.float32)
     far32 = np.empty(k, dtype=np.float32)
-    scene_origin = np.asarray(scene.origin, dtype=np.float64)
     for _ in range(100):
         m = edge_ray_batch(live, origin, a, u, length, eps, scene_origin, float(scene.scale),
                            rays, origin32, dirs32, far32)
@@ -707,8 +765,25 @@ def self_intersections(vertices, faces, mesh=None):
     return e[np.nonzero(bad)[0]]
 
 
-def _refuse_self_intersections(V, F, say, mesh=None):
-    bad = self_intersections(V, F, mesh)
+def _numpy_edge_rays(scene, live, V, F, FN, e, origin, a, u, length, eps, base, offset, last, bad,
+                     scene_origin):
+    """``self_intersections``'s embree passes with the NumPy forms of the kernels
+    (``small_mesh.edge_ray_batch`` and ``edge_ray_hits``): the indices of the piercing edges."""
+    for _ in range(100):
+        live, origin32, dirs32, far32 = small_mesh.edge_ray_batch(live, origin, a, u, length, eps,
+                                                                  scene_origin, float(scene.scale))
+        if len(live) == 0:
+            break
+        prim = np.asarray(scene.scene.run(origin32, dirs32, dists=far32), dtype=np.int64)
+        live = small_mesh.edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base,
+                                        offset, last, bad)
+        if len(live) == 0:
+            break
+    return np.nonzero(bad)[0]
+
+
+def _refuse_self_intersections(V, F, say, mesh=None, kernels=True):
+    bad = self_intersections(V, F, mesh, kernels)
     if len(bad):
         say.refuse(f"the surface intersects itself ({len(bad):,} edges pierce other triangles, e.g. "
                    f"{say.where(V[bad[0, 0]])}), so inside and outside are ambiguous",
