@@ -283,3 +283,15 @@ def test_the_data_files_do_not_wait_for_the_early_worker(small_result, fields, t
     write_results(small_result, fields, out, pictures=worker)
     assert (out / "seen").read_text() == "True"
     assert json.loads((out / "summary.json").read_text())["pictures"] == {"failed": []}
+
+
+def test_without_fork_the_early_worker_draws_in_write_results(small_result, fields, tmp_path, monkeypatch):
+    import preform.io.pictures as pictures
+
+    monkeypatch.setattr(pictures, "can_fork", lambda: False)
+    out = tmp_path / "out"
+    worker = start_pictures(small_result, out)
+    assert worker.pid is None
+    names = _names(write_results(small_result, fields, out, pictures=worker), out)
+    assert {"plots/braided_mandrel.png", "plots/surface_thickness.png", "surface.vtu"} <= set(names)
+    assert json.loads((out / "summary.json").read_text())["pictures"] == {"failed": []}
