@@ -295,3 +295,35 @@ def test_without_fork_the_early_worker_draws_in_write_results(small_result, fiel
     names = _names(write_results(small_result, fields, out, pictures=worker), out)
     assert {"plots/braided_mandrel.png", "plots/surface_thickness.png", "surface.vtu"} <= set(names)
     assert json.loads((out / "summary.json").read_text())["pictures"] == {"failed": []}
+
+
+@needs_fork
+def test_arrays_that_cannot_be_sent_cost_only_their_pictures(tmp_path, monkeypatch):
+    def broken(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    def later(arrays):
+        raise AssertionError("drawn without its arrays")
+
+    worker = PictureWorker([PictureJob(("first.png",), lambda: _touch(tmp_path / "first.png"))],
+                           later=[LaterJob(("later.png",), later)])
+    monkeypatch.setattr(np, "savez", broken)
+    worker.send({"x": np.arange(3)})
+    written, failed = worker.finish()
+    assert written == [tmp_path / "first.png"]
+    assert failed == ["later.png not drawn (could not hand their arrays to the picture worker: "
+                      "OSError: [Errno 28] No space left on device)"]
+
+
+@needs_fork
+def test_the_worker_never_unpickles_what_it_receives(tmp_path):
+    """An object array would need unpickling: the worker refuses it and reports the pictures."""
+    def later(arrays):
+        raise AssertionError("drawn from unpickled arrays")
+
+    worker = PictureWorker([], later=[LaterJob(("later.png",), later)])
+    worker.send({"x": np.array([{"a": 1}], dtype=object)})
+    written, failed = worker.finish()
+    assert written == [] and len(failed) == 1
+    assert failed[0].startswith("later.png not drawn (RuntimeError: their arrays could not be received")
+    assert "pickle" in failed[0]

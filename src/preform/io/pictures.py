@@ -99,6 +99,7 @@ class PictureWorker:
         self.fd = None
         self.arrays = None        # what send() was given (drawn here when there is no child)
         self.sent = False
+        self.unsent = ""          # why send() could not hand the arrays over ("" if it could)
         self._memory = self._ready = None
         if not (self.jobs or self.later) or not can_fork():
             return
@@ -137,8 +138,11 @@ class PictureWorker:
                 with os.fdopen(os.dup(self._memory), "wb") as file:
                     np.savez(file, **arrays)
                 os.write(self._ready, b"1")
-        except OSError:   # the child is gone: finish() reports it
-            pass
+        except Exception as error:  # noqa: BLE001 - costs those pictures, reported by finish()
+            names = ", ".join(n for job in self.later for n in job.names)
+            self.unsent = f"{names} not drawn (could not hand their arrays to the picture worker: " \
+                          f"{type(error).__name__}: {error})"
+            self.arrays = None
         finally:
             self._close_inbox()
 
@@ -156,6 +160,10 @@ class PictureWorker:
         """Wait for the pictures (at most ``timeout_s``); (paths written, failure sentences)."""
         if not self.sent:
             self.send(None)
+        written, failed = self._wait()
+        return written, failed + ([self.unsent] if self.unsent else [])
+
+    def _wait(self) -> tuple[list[Path], list[str]]:
         if self.pid is None:
             return run_jobs([*self.jobs, *(bound(self.later, self.arrays) if self.arrays is not None else [])])
         data, deadline, timed_out = b"", time.monotonic() + self.timeout_s, False
