@@ -13,8 +13,9 @@ Two ways:
   end the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
-  map (field mesh from the cache), write the data files, pictures (3-D renders in the worker
-  process beside the matplotlib plots, as ``preform run`` does).
+  map (field mesh from the cache), write the data files, pictures (as ``preform run`` does: the
+  3-D renders in a worker process started after the simulation, beside the map, the data files
+  and the matplotlib plots).
 
 Run: ``python benchmarks/bench_pipeline.py [--command] [--fresh] [--repeat 5]
 [--toml examples/case_a.toml] [--stl other.stl --unit mm]`` (``--stl`` swaps the mandrel, API
@@ -52,7 +53,7 @@ def config(toml, stl=None, unit="m"):
 def run_once(cfg, out_dir):
     import preform as pf
     from preform import pipeline
-    from preform.io import write_results
+    from preform.io import start_pictures, write_results
     from preform.io.cache import cached_field_mesh, cached_mandrel
 
     t = {}
@@ -83,9 +84,10 @@ def run_once(cfg, out_dir):
     result = pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=cl)
     t["simulate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    pictures = start_pictures(result, out_dir)   # as preform run: the 3-D renders beside the map
     fields = pf.map_to_surface(result, mesh=cached_field_mesh(result))
     t["map"] = time.perf_counter() - t0
-    write_results(result, fields, out_dir, stages={}, background=True)
+    write_results(result, fields, out_dir, stages={}, pictures=pictures)
     stages = json.loads((Path(out_dir) / "summary.json").read_text())["stages_s"]
     t["write"], t["pictures"] = stages["write"], stages["pictures"]
     return t, result, fields

@@ -198,8 +198,13 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
     started : ``time.perf_counter()`` when the command began (before loading the geometry), so
         the summary's wall time is the command's; None: from this call.
-    background_pictures : render the 3-D pictures in a worker process while the data files are
-        written (``io.write_results(background=True)``; ``preform run`` does)
+    background_pictures : render the 3-D pictures in a worker process forked right after the
+        simulation (``io.start_pictures``; ``preform run`` does): it imports pyvista and renders
+        the braided mandrel while this process maps the fields and writes the data files, then
+        renders the surface pictures from the fields ``write_results`` hands it. The stages
+        (``simulate``, ``map``, ``write``, ``pictures``) are this process's, one after the other;
+        ``pictures`` is what the pictures add after the data files (the matplotlib pictures, then
+        the wait for the worker). Embree is not used in the worker (it only renders).
     startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
         listed as the stage ``start`` when given
     Raises PreformError for bad input or an unusable folder (before simulating) and
@@ -207,7 +212,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     """
     from .checkpoint import Checkpoint
     from .fields import map_to_surface
-    from .io import write_results
+    from .io import start_pictures, write_results
     from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
@@ -240,12 +245,20 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         if warmup is not None:   # its failure only means the map compiles the kernels itself
             warmup.finish()
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
-        # the field mesh depends only on the mandrel and the settings: kept in the cache
-        fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
-        fields = with_rtm_fields(result, fields)
+        # the 3-D pictures start now, on the second core, beside the map and the data files
+        pictures = start_pictures(result, out_dir) if background_pictures else None
+        try:
+            # the field mesh depends only on the mandrel and the settings: kept in the cache
+            fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
+            fields = with_rtm_fields(result, fields)
+        except BaseException:
+            if pictures is not None:
+                pictures.stop()
+            raise
         stages["map"] = time.perf_counter() - t
         try:
-            written = write_results(result, fields, out_dir, stages=stages, background=background_pictures)
+            written = write_results(result, fields, out_dir, stages=stages, background=background_pictures,
+                                    pictures=pictures)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "

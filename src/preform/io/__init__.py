@@ -35,8 +35,11 @@ def plot_yarns_3d(result, path):
 
 
 def _picture_jobs(result, fields, out_dir):
-    """(matplotlib jobs, 3-D render jobs) of the pictures of a run (``io.pictures.PictureJob``)."""
-    from .pictures import PictureJob
+    """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
+    ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
+    include those of ``fields`` (None: the result's alone); the later jobs take the fields as
+    the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped."""
+    from .pictures import LaterJob, PictureJob
     from .surface import PICTURES
 
     plots = out_dir / PLOTS
@@ -55,16 +58,74 @@ def _picture_jobs(result, fields, out_dir):
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
                                 lambda: plot_history(result, plots)))
+
+    def surface_pictures(shown):
+        from .plots import run_label
+        from .surface import write_surface_pictures
+
+        return write_surface_pictures(shown, plots, run_label(result))
+
+    names = tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES)
     if fields is not None:
-        def surface_pictures():
-            from .plots import run_label
-            from .surface import write_surface_pictures
-
-            return write_surface_pictures(fields, plots, run_label(result))
-
-        rendered.append(PictureJob(tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES), surface_pictures))
+        rendered.append(PictureJob(names, lambda: surface_pictures(fields)))
     rendered.append(PictureJob((f"{PLOTS}/{YARNS_PNG}",), lambda: [plot_yarns_3d(result, plots / YARNS_PNG)]))
-    return drawn, rendered
+    later = [LaterJob(names, lambda arrays: surface_pictures(fields_from_arrays(arrays)))]
+    return drawn, rendered, later
+
+
+#: the SurfaceFields attributes that are plain numbers, sent as 0-d arrays
+_FIELD_NUMBERS = ("unmapped_length_m", "edge_length_m", "pool_radius_m")
+
+
+def fields_arrays(fields) -> dict:
+    """``fields`` (preform.fields.SurfaceFields) as a dict name -> numpy array, to hand to a
+    picture worker without pickling (:func:`fields_from_arrays` makes it back)."""
+    import numpy as np
+
+    arrays = {"vertices": fields.vertices, "faces": fields.faces, "source_faces": fields.source_faces}
+    if fields.jammed is not None:
+        arrays["jammed"] = fields.jammed
+    arrays.update({name: np.asarray(float(getattr(fields, name))) for name in _FIELD_NUMBERS})
+    arrays.update({f"cell_data/{name}": values for name, values in fields.cell_data.items()})
+    return {name: np.asarray(values) for name, values in arrays.items()}
+
+
+def fields_from_arrays(arrays):
+    """The SurfaceFields of :func:`fields_arrays`' dict."""
+    from ..fields import SurfaceFields
+
+    cell_data = {name[len("cell_data/"):]: values for name, values in arrays.items()
+                 if name.startswith("cell_data/")}
+    return SurfaceFields(vertices=arrays["vertices"], faces=arrays["faces"],
+                         source_faces=arrays["source_faces"], cell_data=cell_data,
+                         jammed=arrays.get("jammed"),
+                         **{name: float(arrays[name]) for name in _FIELD_NUMBERS})
+
+
+def _prepare_folder(out_dir) -> Path:
+    """``out_dir`` and its ``plots/`` made safe to write into, without an earlier summary (which
+    would mark a set of files being replaced as complete)."""
+    out_dir = safe_folder(out_dir)
+    safe_folder(out_dir, PLOTS)   # a symlink planted as plots/ is replaced, never followed
+    (out_dir / SUMMARY).unlink(missing_ok=True)
+    return out_dir
+
+
+def start_pictures(result, out_dir):
+    """Start the 3-D pictures of ``result`` in a worker process before its fields are mapped
+    (``preform run`` calls it right after the simulation): the worker imports pyvista and renders
+    the braided mandrel while this process maps the fields and writes the data files, then draws
+    the surface pictures from the fields :func:`write_results` hands it (``pictures=``).
+    Returns the ``io.pictures.PictureWorker`` (without fork it draws them in ``write_results``),
+    or None when the folder cannot be prepared (``write_results`` then says why)."""
+    from .pictures import PictureWorker
+
+    try:
+        out_dir = _prepare_folder(out_dir)
+    except OSError:
+        return None
+    _, rendered, later = _picture_jobs(result, None, out_dir)
+    return PictureWorker(rendered, later=later)
 
 
 def _relative(path, out_dir) -> str:
@@ -73,20 +134,25 @@ def _relative(path, out_dir) -> str:
 
 
 def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=(),
-                  background=False) -> list[Path]:
+                  background=False, pictures=None) -> list[Path]:
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
     fields : preform.fields.SurfaceFields or None (no surface files then)
     out_dir : str or Path, created if missing
     stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
-        ``wall_time_s`` is then the whole command's, these stages, the writing (``write``) and
-        the wait for the pictures after it (``pictures``) included
+        ``wall_time_s`` is then the whole command's, these stages, the writing of the data files
+        (``write``) and what the pictures take after it (``pictures``: the matplotlib pictures
+        drawn here, then the wait for the worker's renders) included. The stages follow each
+        other in this process; a picture worker renders beside the stages since it started.
     layers : summary.json's ``layers`` entries of a run with [[layer]] tables, or None
     layer_results : the Results of layers 2, 3, ...: their ``history.csv`` and ``yarns.vtp`` go
         to ``layer2/``, ``layer3/``, ... (``result`` is the first layer's)
     background : render the 3-D pictures in a worker process while the data files are written
         (``io.pictures.PictureWorker``), else one after the other here
+    pictures : the worker :func:`start_pictures` started for ``result`` (then ``background`` is
+        not looked at): it gets ``fields`` before the data files are written, and is waited for
+        after them; stopped if writing fails
     returns : the paths written, summary.json last
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
@@ -98,13 +164,15 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     from .pictures import PictureWorker, run_jobs
 
     t_write = time.perf_counter()
-    out_dir = safe_folder(out_dir)
-    safe_folder(out_dir, PLOTS)   # a symlink planted as plots/ is replaced, never followed
-    summary = out_dir / SUMMARY
-    summary.unlink(missing_ok=True)  # a summary from an earlier run would mark this one complete
-    drawn, rendered = _picture_jobs(result, fields, out_dir)
-    worker = PictureWorker(rendered if background else [])
     try:
+        out_dir = _prepare_folder(out_dir)
+        summary = out_dir / SUMMARY
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir)
+        if pictures is not None:       # the early worker renders the fields too
+            rendered = []
+            pictures.send(fields_arrays(fields) if fields is not None else None)
+        else:
+            pictures = PictureWorker(rendered if background else [])
         written = [write_history(result, out_dir / HISTORY),
                    write_yarns_vtp(result.yarns, out_dir / YARNS),
                    *write_convergence(result.snapshots, out_dir)]
@@ -124,15 +192,20 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
         rtm = _write_rtm(result, fields, out_dir, written)
     except BaseException:
-        worker.stop()
+        if pictures is not None:
+            pictures.stop()
         raise
     t_pictures = time.perf_counter()
-    pictures, failed = run_jobs(drawn if background else drawn + rendered)
-    more, more_failed = worker.finish()
-    pictures, failed = pictures + more, failed + more_failed
+    try:
+        drawn_here, failed = run_jobs(drawn if pictures.pid is not None else drawn + rendered)
+    except BaseException:
+        pictures.stop()
+        raise
+    more, more_failed = pictures.finish()
+    drawn_here, failed = drawn_here + more, failed + more_failed
     for text in failed:
         warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=2)
-    written += [p for p in pictures if Path(p).is_file()]
+    written += [p for p in drawn_here if Path(p).is_file()]
     files = [_relative(p, out_dir) for p in [*written, summary]]
     from ..quality import surface_reasons
 
@@ -169,6 +242,7 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
 
 __all__ = [
     "write_results",
+    "start_pictures",
     "write_summary",
     "write_history",
     "write_yarns_vtp",

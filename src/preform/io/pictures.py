@@ -13,6 +13,14 @@ waiting for the pictures after the data. Where ``fork`` is missing (Windows) or 
 run in this process. A child that dies (a signal), or runs past ``timeout_s``, is reported with
 the pictures it did not write; a child never returns into the caller's code (it leaves with
 ``os._exit``).
+
+A worker can be started before the data it draws last exists (``preform run`` forks it right
+after the simulation, so that it imports pyvista and renders the braided mandrel while the
+parent maps the fields): its ``later`` jobs take a dict of plain arrays that the parent hands
+over with :meth:`PictureWorker.send` (``np.savez`` into a memory file the child inherited, read
+back with ``np.load(allow_pickle=False)``; a one-byte pipe says it is there). The parent never
+blocks on the child to send, and the child, which is still drawing its first jobs, reads the
+arrays only when it gets to them.
 """
 
 from __future__ import annotations
@@ -28,6 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 #: seconds the parent waits for the picture worker after its own work, before stopping it
 TIMEOUT_S = 600.0
 
@@ -39,6 +49,20 @@ class PictureJob:
 
     names: tuple
     draw: Callable[[], list]
+
+
+@dataclass(frozen=True)
+class LaterJob:
+    """A picture of data the worker receives after it started (:meth:`PictureWorker.send`):
+    ``draw(arrays)`` writes the files ``names`` from a dict name -> numpy array."""
+
+    names: tuple
+    draw: Callable[[dict], list]
+
+
+def bound(jobs, arrays) -> list[PictureJob]:
+    """``LaterJob`` s given their arrays: plain :class:`PictureJob` s."""
+    return [PictureJob(job.names, (lambda job=job: job.draw(arrays))) for job in jobs]
 
 
 def run_jobs(jobs) -> tuple[list[Path], list[str]]:
@@ -61,32 +85,87 @@ def can_fork() -> bool:
 class PictureWorker:
     """``PictureWorker(jobs)`` starts drawing ``jobs`` in a forked child; :meth:`finish` waits for
     it and returns (paths written, failure sentences), re-emitting the child's warnings here.
-    Without fork the jobs are drawn by :meth:`finish` itself (in this process)."""
+    Without fork the jobs are drawn by :meth:`finish` itself (in this process).
 
-    def __init__(self, jobs, timeout_s: float = TIMEOUT_S):
+    later : :class:`LaterJob` s the child draws after ``jobs``, once :meth:`send` gave it their
+        arrays (skipped when the parent sends None or never sends)
+    """
+
+    def __init__(self, jobs, timeout_s: float = TIMEOUT_S, later=()):
         self.jobs = list(jobs)
+        self.later = list(later)
         self.timeout_s = float(timeout_s)
         self.pid = None
         self.fd = None
-        if not self.jobs or not can_fork():
+        self.arrays = None        # what send() was given (drawn here when there is no child)
+        self.sent = False
+        self.unsent = ""          # why send() could not hand the arrays over ("" if it could)
+        self._memory = self._ready = None
+        if not (self.jobs or self.later) or not can_fork():
             return
         read, write = os.pipe()
+        inbox = None
         try:
+            if self.later:
+                inbox = (os.memfd_create("preform-pictures", os.MFD_CLOEXEC), *os.pipe())
             pid = os.fork()
         except OSError:
-            os.close(read)
-            os.close(write)
+            for fd in (read, write, *(inbox or ())):
+                os.close(fd)
             return
         if pid == 0:   # the child: draw, report, leave without returning into the caller
             os.close(read)
-            _child(self.jobs, write)
+            if inbox is not None:
+                os.close(inbox[2])
+            _child(self.jobs, write, self.later, inbox and (inbox[0], inbox[1]))
         os.close(write)
+        if inbox is not None:
+            os.close(inbox[1])
+            self._memory, self._ready = inbox[0], inbox[2]
         self.pid, self.fd = pid, read
+
+    def send(self, arrays) -> None:
+        """Hand the ``later`` jobs their arrays (dict name -> numpy array), or None to skip them.
+        Returns at once: the arrays go to a memory file the child reads when it gets to them."""
+        if self.sent:
+            raise RuntimeError("PictureWorker.send: the arrays were sent already")
+        self.sent = True
+        self.arrays = arrays
+        if self._ready is None:
+            return
+        try:
+            if arrays is not None:
+                with os.fdopen(os.dup(self._memory), "wb") as file:
+                    np.savez(file, **arrays)
+                os.write(self._ready, b"1")
+        except Exception as error:  # noqa: BLE001 - costs those pictures, reported by finish()
+            names = ", ".join(n for job in self.later for n in job.names)
+            self.unsent = f"{names} not drawn (could not hand their arrays to the picture worker: " \
+                          f"{type(error).__name__}: {error})"
+            self.arrays = None
+        finally:
+            self._close_inbox()
+
+    def _close_inbox(self) -> None:
+        for fd in (self._memory, self._ready):
+            if fd is not None:
+                os.close(fd)
+        self._memory = self._ready = None
+
+    def _names(self) -> str:
+        later = self.later if self.arrays is not None else []
+        return ", ".join(n for job in [*self.jobs, *later] for n in job.names)
 
     def finish(self) -> tuple[list[Path], list[str]]:
         """Wait for the pictures (at most ``timeout_s``); (paths written, failure sentences)."""
+        if not self.sent:
+            self.send(None)
+        written, failed = self._wait()
+        return written, failed + ([self.unsent] if self.unsent else [])
+
+    def _wait(self) -> tuple[list[Path], list[str]]:
         if self.pid is None:
-            return run_jobs(self.jobs)
+            return run_jobs([*self.jobs, *(bound(self.later, self.arrays) if self.arrays is not None else [])])
         data, deadline, timed_out = b"", time.monotonic() + self.timeout_s, False
         try:
             while True:
@@ -110,7 +189,7 @@ class PictureWorker:
             failed = [str(f) for f in report["failed"]]
             said = [str(w) for w in report["warnings"]]
         except (ValueError, KeyError, TypeError):
-            names = ", ".join(n for job in self.jobs for n in job.names)
+            names = self._names()
             why = (f"took longer than {self.timeout_s:g} s" if timed_out else
                    f"stopped by signal {os.WTERMSIG(status)}" if os.WIFSIGNALED(status) else
                    f"exited with code {os.WEXITSTATUS(status)}")
@@ -121,6 +200,8 @@ class PictureWorker:
 
     def stop(self) -> None:
         """Stop the worker (the caller failed): kill it and reap it; no report."""
+        self._close_inbox()
+        self.sent = True
         if self.pid is not None:
             try:
                 os.kill(self.pid, signal.SIGKILL)
@@ -131,8 +212,12 @@ class PictureWorker:
             self.pid = None
 
 
-def _child(jobs, fd) -> None:
-    """The forked child's whole life: draw, send the JSON report, ``os._exit``."""
+def _child(jobs, fd, later=(), inbox=None) -> None:
+    """The forked child's whole life: draw, send the JSON report, ``os._exit``.
+
+    inbox : (memory file, read end of the pipe) that :meth:`PictureWorker.send` fills: one byte
+        when the arrays of the ``later`` jobs are in the memory file, end of file when not
+    """
     code = 1
     try:
         # Ctrl-C goes to the whole process group: the parent reports the missing pictures
@@ -142,6 +227,9 @@ def _child(jobs, fd) -> None:
                 signal.signal(getattr(signal, name), signal.SIG_DFL)
         with warnings.catch_warnings(record=True) as caught:   # the filters as they were
             written, failed = run_jobs(jobs)
+            if inbox is not None and later:
+                w, f = run_jobs(_received(later, *inbox))
+                written, failed = written + w, failed + f
         # what the user is told: the renderers' own warnings, not libraries' deprecations
         said = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
         report = {"written": [str(p) for p in written], "failed": failed, "warnings": said}
@@ -151,3 +239,19 @@ def _child(jobs, fd) -> None:
         code = 0
     finally:
         os._exit(code)
+
+
+def _received(later, memory, ready) -> list[PictureJob]:
+    """The ``later`` jobs bound to the arrays the parent sent ([] when it sent none); a failure
+    to read them fails those jobs (a sentence each), not the worker."""
+    try:
+        if os.read(ready, 1) != b"1":   # end of file: the parent had nothing to send
+            return []
+        os.lseek(memory, 0, os.SEEK_SET)
+        with os.fdopen(memory, "rb", closefd=False) as file, np.load(file, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except Exception as error:  # noqa: BLE001 - reported as the pictures it costs
+        def failed(error=error):
+            raise RuntimeError(f"their arrays could not be received ({type(error).__name__}: {error})")
+        return [PictureJob(job.names, failed) for job in later]
+    return bound(later, arrays)
