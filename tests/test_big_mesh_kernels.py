@@ -176,15 +176,18 @@ def test_orient_bodies_is_the_double_cover_components(seed):
         np.testing.assert_array_equal(flipped, ref_flipped)
 
 
-def test_field_mesh_weld_returns_welded_arrays_as_they_are():
+@pytest.mark.parametrize("kernel_faces", [0, 10**12])   # the kernel, and the NumPy form
+def test_field_mesh_weld_returns_welded_arrays_as_they_are(kernel_faces):
     from preform.fields import _merge_exact_duplicates
+    from preform.geometry.small_mesh import IntakeSettings
 
+    settings = IntakeSettings(kernel_faces=kernel_faces)
     V, F = arrays(trimesh.creation.icosphere(subdivisions=2))
-    U, G = _merge_exact_duplicates(V, F)
+    U, G = _merge_exact_duplicates(V, F, settings)
     assert U is V and G is F
     soup_V = V[F.reshape(-1)]
     soup_F = np.arange(3 * len(F)).reshape(-1, 3)
-    U, G = _merge_exact_duplicates(soup_V, soup_F)
+    U, G = _merge_exact_duplicates(soup_V, soup_F, settings)
     ref, inverse = np.unique(soup_V, axis=0, return_inverse=True)
     np.testing.assert_array_equal(U, ref)
     np.testing.assert_array_equal(G, inverse.reshape(-1)[soup_F])

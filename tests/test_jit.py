@@ -177,14 +177,12 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     jobs = sorted(d["job"] for d in events if d["event"] == "job")
     assert jobs == sorted(_jit.JOBS)
     assert not [d for d in lines if d["role"] == "main" and d["kernel"].endswith(".project_to_polyline")]
-    # a small mandrel's intake, arrays, sections and checks take their NumPy forms
-    # (geometry.small_mesh): neither process compiles those kernels, but for the exact weld that
-    # the field mesh's build calls (the field_mesh job)
+    # a small mandrel's intake, arrays, sections and checks, and the field mesh's weld test,
+    # take their NumPy forms (geometry.small_mesh): neither process compiles those kernels
     from test_small_mesh_intake import INTAKE_KERNELS
 
     intake = {f"preform._kernels.{m}.{k}" for m, names in INTAKE_KERNELS.items() for k in names}
-    assert sorted({(d["kernel"], d["job"]) for d in lines if d["kernel"] in intake}) in (
-        [], [("preform._kernels.mesh.weld_exact", "field_mesh")])
+    assert sorted({(d["kernel"], d["job"]) for d in lines if d["kernel"] in intake}) == []
     # the field mesh in the cache was built by a job before the simulation, and the map used it
     # (it would have written the entry again after the simulation had it been missing)
     finished = [d["start_s"] for d in events if d["event"] == "finished"]
