@@ -2,14 +2,17 @@
 process loads the mandrel: compiling numba kernels, and building the field mesh.
 
 On a first run in an environment (numba's on-disk cache lacks the kinematic kernels), ``preform
-run`` compiles kernels for most of its first 20-30 s: the intake and check kernels
-(``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks the mandrel, then the
+run`` compiles kernels for most of its first 10-30 s: the intake and check kernels
+(``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks a mandrel of
+``IntakeSettings.kernel_faces`` faces or more (smaller ones take their NumPy forms,
+``geometry.small_mesh``, and compile nothing), then the
 stepper's (``_kernels.kinematic`` and the centerline projection) and the field kernels
 (``_kernels.fields``); its map then builds the field mesh, which later runs read from the preform
 cache. The first group is needed at once, the rest only after it, so :func:`start` launches a
 worker process that runs small representative jobs meanwhile (:data:`JOBS`, in the order the run
 needs what they make): ``projection`` (the centerline projection, which the checks need too:
-compiled first, the command loads it), ``stepper``, ``analysis`` (the laid yarn's angles), then
+compiled first, the command loads it), ``stepper``, ``laid`` and ``angles`` (the laid yarn's and the
+history's braid angles: two jobs, so the process free first takes one), then
 what the map needs: ``clip`` and ``pool`` (the field kernels) and ``field_mesh`` (the run's own
 field mesh, into the preform cache). The kernels are
 ``cache=True``: the worker writes them to the cache and this process loads them when it gets
@@ -107,13 +110,11 @@ def job_stepper(config, mandrel=None):
     make_stepper(small, cylinder, centerline).run(progress=False, max_steps=3)
 
 
-def job_analysis(config, mandrel=None):
-    """The laid yarn's braid angles (``analysis.braid_angles_at`` for the history,
-    ``analysis.laid_braid_angles`` for the yarn paths), as a result computes them, on two
-    points of :func:`small_case`'s surface."""
-    from .analysis import braid_angles_at, laid_braid_angles, mandrel_friction
+def _analysis_case(config):
+    """(small config, surface arrays, centerline, two points on faces 0 and 1, those faces, their
+    centerline coordinates, a direction each) on :func:`small_case`'s cylinder, the arguments
+    the analysis jobs pass as a result does."""
     from .kinematic import SurfaceArrays
-    from .tolerances import tol
 
     small, cylinder, centerline = small_case(config)
     arrays = SurfaceArrays.from_mandrel(cylinder)
@@ -121,7 +122,25 @@ def job_analysis(config, mandrel=None):
     points = np.ascontiguousarray(np.asarray(cylinder.vertices)[np.asarray(cylinder.faces)[faces]].mean(axis=1))
     s, _ = centerline.project(points)
     directions = np.ascontiguousarray(points[::-1] - points)
+    return small, arrays, centerline, points, faces, s, directions
+
+
+def job_angles(config, mandrel=None):
+    """The braid angles of the history (``analysis.braid_angles_at``), as a result computes
+    them, on two points of :func:`small_case`'s surface."""
+    from .analysis import braid_angles_at
+
+    _, arrays, centerline, points, faces, s, directions = _analysis_case(config)
     braid_angles_at(arrays, centerline, points, faces, s, directions)
+
+
+def job_laid(config, mandrel=None):
+    """The laid yarn's braid angles of the yarn paths (``analysis.laid_braid_angles``), as a
+    result computes them, on the same two points."""
+    from .analysis import laid_braid_angles, mandrel_friction
+    from .tolerances import tol
+
+    small, arrays, centerline, points, faces, s, _ = _analysis_case(config)
     laid_braid_angles(arrays, None, centerline, points, faces, np.array([0, 2], dtype=np.int64),
                       mandrel_friction(small), tol.slip_curvature, s=s)
 
@@ -172,10 +191,11 @@ def job_field_mesh(config, mandrel=None):
 
 
 #: each job's function of the run's config (and the run's mandrel, when the command runs it), in
-#: the order the run needs what they make; the last three are the map's, each 1-2 s of CPU, where
-#: the worker (from the front) and the command (from the back) meet: small jobs there keep the
-#: two processes' finishing times within about one job of each other
-RUNNERS = {"projection": job_projection, "stepper": job_stepper, "analysis": job_analysis,
+#: the order the run needs what they make; the last three are the map's, each 1-2 s of CPU, the
+#: two angle jobs 0.5 s each: the worker (from the front) and the command (from the back) meet
+#: among them, and small jobs there keep the two processes' finishing times within about one job
+#: of each other
+RUNNERS = {"projection": job_projection, "stepper": job_stepper, "laid": job_laid, "angles": job_angles,
            "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
 #: the jobs, in that order
 JOBS = tuple(RUNNERS)
