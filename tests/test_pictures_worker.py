@@ -327,3 +327,23 @@ def test_the_worker_never_unpickles_what_it_receives(tmp_path):
     assert written == [] and len(failed) == 1
     assert failed[0].startswith("later.png not drawn (RuntimeError: their arrays could not be received")
     assert "pickle" in failed[0]
+
+
+def test_without_fork_background_draws_each_picture_once(small_result, tmp_path, monkeypatch):
+    """``background=True`` where the worker cannot fork: its jobs are drawn once, by
+    ``PictureWorker.finish`` in this process, not a second time beside the matplotlib ones."""
+    import preform.io.pictures as pictures
+    import preform.io.plots as plots
+
+    calls = []
+
+    def counted(result, path):
+        calls.append(path)
+        return _touch(path)[0]
+
+    monkeypatch.setattr(pictures, "can_fork", lambda: False)
+    monkeypatch.setattr(plots, "plot_yarns_3d", counted)
+    out = tmp_path / "out"
+    names = _names(write_results(small_result, None, out, background=True), out)
+    assert calls == [out / "plots" / "braided_mandrel.png"]
+    assert names.count("plots/braided_mandrel.png") == 1

@@ -173,6 +173,8 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
             pictures.send(fields_arrays(fields) if fields is not None else None)
         else:
             pictures = PictureWorker(rendered if background else [])
+            if background:             # the worker's (drawn by its finish() where it cannot fork)
+                rendered = []
         written = [write_history(result, out_dir / HISTORY),
                    write_yarns_vtp(result.yarns, out_dir / YARNS),
                    *write_convergence(result.snapshots, out_dir)]
@@ -197,7 +199,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         raise
     t_pictures = time.perf_counter()
     try:
-        drawn_here, failed = run_jobs(drawn if pictures.pid is not None else drawn + rendered)
+        drawn_here, failed = run_jobs(drawn + rendered)
     except BaseException:
         pictures.stop()
         raise
