@@ -43,6 +43,7 @@ from ..errors import MandrelError
 from ..tolerances import tol
 from . import small_mesh
 from .small_mesh import INTAKE
+from .small_mesh import edge_keys as _edge_keys
 
 #: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
 SMALL_HOLE = 0.05
@@ -369,12 +370,6 @@ def _split_across_caps(F, caps, longest, dropped):
         F[g] = (r, p, c)
         extra.append((r, c, q))
     return np.vstack([F, np.array(extra, dtype=np.int64).reshape(-1, 3)])
-
-
-def _edge_keys(F, n_vertices):
-    """Undirected edge key per face side: (m, 3) int64, side k runs F[:, k] -> F[:, k + 1]."""
-    a, b = F, np.roll(F, -1, axis=1)
-    return np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
 
 
 def _drop_duplicate_faces(F, kernels=True):

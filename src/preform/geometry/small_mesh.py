@@ -103,12 +103,17 @@ def first_of_each_face(F):
     return keep
 
 
+def edge_keys(F, n_vertices):
+    """Undirected edge key per face side: (m, 3) int64, side k runs F[:, k] -> F[:, k + 1]."""
+    a, b = F, np.roll(F, -1, axis=1)
+    return np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
+
+
 def edge_table(F, n_vertices):
     """Undirected edges of F (m, 3) (``_kernels.edges.edge_table``): (key (ne,) the edge keys
     ``min * n_vertices + max`` ascending, count (ne,) half-edges per edge, side_edge (3 m,) each
     half-edge's edge, order (3 m,) the half-edges grouped by edge, ascending within one)."""
-    a, b = F, np.roll(F, -1, axis=1)
-    key = (np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)).reshape(-1)
+    key = edge_keys(F, n_vertices).reshape(-1)
     uniq, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     return uniq, count, inverse, np.argsort(inverse, kind="stable")
