@@ -736,45 +736,38 @@ def self_intersections(vertices, faces, mesh=None, kernels=True):
     last = np.full(k, -1, dtype=np.int64)
     bad = np.zeros(k, dtype=bool)
     live = np.arange(k, dtype=np.int64)
-    if not kernels:
-        return e[_numpy_edge_rays(scene, live, vertices, faces, normals, e, origin, a, u, length, eps,
-                                  base, offset, last, bad, scene_origin)]
+    batch, hits = _edge_ray_passes(k) if kernels else (small_mesh.edge_ray_batch, small_mesh.edge_ray_hits)
+    for _ in range(100):
+        live, origin32, dirs32, far32 = batch(live, origin, a, u, length, eps, scene_origin, float(scene.scale))
+        if len(live) == 0:
+            break
+        prim = np.asarray(scene.scene.run(origin32, dirs32, dists=far32), dtype=np.int64)
+        live = hits(live, prim, vertices, faces, normals, e, origin, a, u, length, eps, base, offset, last, bad)
+        if len(live) == 0:
+            break
+    return e[np.nonzero(bad)[0]]
+
+
+def _edge_ray_passes(k):
+    """``_kernels.mesh.edge_ray_batch`` and ``edge_ray_hits`` for at most ``k`` rays, called as
+    their NumPy forms are (``small_mesh``): the rays still going, and the batch's float32
+    origins, directions and far distances, as arrays returned (views of buffers kept here)."""
     from .._kernels.mesh import edge_ray_batch, edge_ray_hits
 
     rays = np.empty(k, dtype=np.int64)
     origin32 = np.empty((k, 3), dtype=np.float32)
     dirs32 = np.empty((k, 3), dtype=np.float32)
     far32 = np.empty(k, dtype=np.float32)
-    for _ in range(100):
-        m = edge_ray_batch(live, origin, a, u, length, eps, scene_origin, float(scene.scale),
-                           rays, origin32, dirs32, far32)
-        if m == 0:
-            break
-        live = rays[:m].copy()
-        prim = np.asarray(scene.scene.run(origin32[:m], dirs32[:m], dists=far32[:m]), dtype=np.int64)
-        m = edge_ray_hits(live, prim, vertices, faces, normals, e, origin, a, u, length, eps,
-                          base, offset, last, bad, rays)
-        live = rays[:m].copy()
-        if m == 0:
-            break
-    return e[np.nonzero(bad)[0]]
 
+    def batch(live, origin, a, u, length, eps, scene_origin, scale):
+        m = edge_ray_batch(live, origin, a, u, length, eps, scene_origin, scale, rays, origin32, dirs32, far32)
+        return rays[:m].copy(), origin32[:m], dirs32[:m], far32[:m]
 
-def _numpy_edge_rays(scene, live, V, F, FN, e, origin, a, u, length, eps, base, offset, last, bad,
-                     scene_origin):
-    """``self_intersections``'s embree passes with the NumPy forms of the kernels
-    (``small_mesh.edge_ray_batch`` and ``edge_ray_hits``): the indices of the piercing edges."""
-    for _ in range(100):
-        live, origin32, dirs32, far32 = small_mesh.edge_ray_batch(live, origin, a, u, length, eps,
-                                                                  scene_origin, float(scene.scale))
-        if len(live) == 0:
-            break
-        prim = np.asarray(scene.scene.run(origin32, dirs32, dists=far32), dtype=np.int64)
-        live = small_mesh.edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base,
-                                        offset, last, bad)
-        if len(live) == 0:
-            break
-    return np.nonzero(bad)[0]
+    def hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offset, last, bad):
+        m = edge_ray_hits(live, prim, V, F, FN, e, origin, a, u, length, eps, base, offset, last, bad, rays)
+        return rays[:m].copy()
+
+    return batch, hits
 
 
 def _refuse_self_intersections(V, F, say, mesh=None, kernels=True):
