@@ -206,8 +206,9 @@ def write_design_config(config, design: Design, out) -> Path:
 
     Paths become absolute, so the file runs from wherever it is written."""
     from .config import dump_config
+    import tomli_w
+
     from .io.atomic import atomic_write_text
-    from .sweeps import toml_text
 
     data = dump_config(config)
     data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
@@ -219,7 +220,7 @@ def write_design_config(config, design: Design, out) -> Path:
               f"({design.passes} forward runs, {config.model.kind} model); achieved within "
               f"{design.max_error_deg():.2f} deg beyond {DESIGN.judged_after:g} convergence lengths "
               f"({DESIGN.judged_after * design.h_inf:.2f} m)\n")
-    return atomic_write_text(out, header + toml_text(data))
+    return atomic_write_text(out, header + tomli_w.dumps(data))
 
 
 def plot_design(design: Design, path, title: str) -> Path:

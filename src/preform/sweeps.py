@@ -38,6 +38,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import tomli_w
+
 from .errors import ConfigError, PreformError
 
 SWEEP_CSV = "sweep.csv"
@@ -221,28 +223,6 @@ def point_config_data(spec: SweepSpec, point: Point) -> dict:
     return data
 
 
-def toml_text(data: dict) -> str:
-    """TOML of config data: top-level tables of scalars, lists and inline sub-tables."""
-    def value(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, (int, float)):
-            return repr(v)
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, dict):
-            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
-        raise TypeError(f"cannot write {v!r} as TOML")
-
-    lines = [f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    for section, table in data.items():
-        if isinstance(table, dict):
-            lines += ["", f"[{section}]", *(f"{k} = {value(v)}" for k, v in table.items())]
-    return "\n".join(lines).lstrip() + "\n"
-
-
 def inputs_hash(config) -> str:
     """The checkpoint's inputs hash: the config (less [output]) and the contents of its STL and
     centerline (``preform.checkpoint.input_record``)."""
@@ -339,7 +319,7 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
     rows, todo = {}, []
     for point in spec.points:   # each point runnable on its own: preform run <point>/config.toml
         atomic_write_text(safe_folder(spec.out_dir, point.name) / "config.toml",
-                          toml_text(spec.data[point.index]))
+                          tomli_w.dumps(spec.data[point.index]))
     for point in spec.points:
         row = finished(spec, point) if resume else None
         if row is not None:
