@@ -336,6 +336,32 @@ def cmd_design(args) -> int:
     return EXIT_DONE
 
 
+# ---------------------------------------------------------------- preform compare
+
+def cmd_compare(args) -> int:
+    from .compare import compare, off_lines, summary_lines
+
+    comparisons, written = compare(args.results, args.measured, args.out, plot=not args.no_plot)
+    for line in summary_lines(comparisons):
+        print(line)
+    for line in off_lines(comparisons):
+        print(f"warning: {line}", file=sys.stderr)
+    print(f"compare: {', '.join(str(p) for p in written)}")
+    return EXIT_DONE
+
+
+def add_compare_parser(sub) -> None:
+    cmp = sub.add_parser("compare", help="compare a run's results with measurements of the braid")
+    cmp.add_argument("results", metavar="RESULTS", help="results folder of preform run")
+    cmp.add_argument("measured", metavar="MEASURED", nargs="+",
+                     help="CSV files of braid angles (arc_length_m,azimuth_deg,braid_angle_deg[,group]), "
+                          "convergence lengths (braided_length_m,convergence_length_m) or yarn "
+                          "coordinates (x_m,y_m,z_m[,time_s]); see docs/calibration.md")
+    cmp.add_argument("--out", metavar="DIR", help="where compare.csv/.json/.png go (default: RESULTS)")
+    cmp.add_argument("--no-plot", action="store_true", help="no compare.png")
+    cmp.set_defaults(func=cmd_compare)
+
+
 # ---------------------------------------------------------------- parser and main
 
 def build_parser() -> argparse.ArgumentParser:
@@ -397,6 +423,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="also write the centerline (x,y,z,s,perimeter in the STL's unit, readable "
                            "as [mandrel] centerline) to this file; nothing is written without it")
     info.set_defaults(func=cmd_mandrel_info)
+    add_compare_parser(sub)
     return parser
 
 
@@ -411,7 +438,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 #: the commands after which the process leaves at once (see :func:`main`): every file they
 #: write is complete (written atomically) before they return; ``sweep`` shuts its cluster down
 #: at exit and so leaves the usual way
-QUICK_EXIT = ("run", "check", "mandrel", "design")
+QUICK_EXIT = ("run", "check", "mandrel", "design", "compare")
 
 
 def main(argv=None) -> int:
