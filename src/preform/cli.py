@@ -362,6 +362,46 @@ def add_compare_parser(sub) -> None:
     cmp.set_defaults(func=cmd_compare)
 
 
+# ---------------------------------------------------------------- preform calibrate
+
+def cmd_calibrate(args) -> int:
+    from .calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
+                            report_lines)
+
+    params = [parse_param(p) for p in args.param]   # bad input fails here, before a cluster starts
+    noise = parse_noise(args.noise)
+    report = calibrate(args.config, args.measured, params, out_dir=args.out, noise=noise,
+                       scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                       progress=not args.no_progress)
+    for line in report_lines(report):
+        print(line)
+    out = Path(report["out"])
+    print(f"calibrate: table {out / CALIBRATE_CSV}; runnable config {out / CALIBRATED_TOML}; "
+          f"misfit plots {out / 'plots'}; the best run against the measurements {out / 'best'}")
+    return EXIT_DONE
+
+
+def add_calibrate_parser(sub) -> None:
+    cal = sub.add_parser("calibrate", help="fit model parameters (friction, initial position, ...) "
+                                           "to measurements of the braid")
+    cal.add_argument("config", metavar="CONFIG", help="case file (TOML), normally of the interaction model")
+    cal.add_argument("measured", metavar="MEASURED", nargs="+",
+                     help="measurement CSV files, as preform compare reads them")
+    cal.add_argument("--param", action="append", required=True, metavar="KEY=LO:HI[:N]",
+                     help="a parameter and its range, e.g. yarn.friction=0:0.5 (N: coarse grid points, "
+                          "default 5); repeat for more")
+    cal.add_argument("--noise", action="append", metavar="KIND=SIGMA",
+                     help="standard deviation of one measurement: angle=DEG, convergence=M, yarn=M "
+                          "(default: estimated from the best run's residuals)")
+    cal.add_argument("--out", metavar="DIR", help="output folder (default: results/<config>_calibration)")
+    where = cal.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N", help="worker processes of the LocalCluster")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:port")
+    cal.add_argument("--resume", action="store_true", help="skip the runs already finished")
+    cal.add_argument("--no-progress", action="store_true", help="no progress lines")
+    cal.set_defaults(func=cmd_calibrate)
+
+
 # ---------------------------------------------------------------- parser and main
 
 def build_parser() -> argparse.ArgumentParser:
@@ -424,6 +464,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "as [mandrel] centerline) to this file; nothing is written without it")
     info.set_defaults(func=cmd_mandrel_info)
     add_compare_parser(sub)
+    add_calibrate_parser(sub)
     return parser
 
 

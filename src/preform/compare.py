@@ -18,7 +18,8 @@ Three kinds of measurement are read from CSV files, each recognised by its heade
     simulated value is ``history.csv``'s ``convergence_length_mean_m`` (the mean over the yarns
     of the fell point's axial distance to the supply plane) interpolated linearly in
     ``braided_length_m``; of rows with the same braided length (the start, before the mandrel
-    moves the braid on) the last is used.
+    moves the braid on) the last is used; within one time step's braided length beyond the
+    run's first or last row, that row's value.
 ``yarn``
     yarn coordinates in the convergence zone: ``x_m, y_m, z_m`` in the machine frame and an
     optional ``time_s``. The deviation is the distance from the point to the nearest segment
@@ -482,9 +483,12 @@ def compare_convergence(meas: Measurements, run: RunData) -> Comparison:
     L, H = history_curve(run)
     x = meas.values["braided_length_m"]
     sim = np.interp(x, L, H) if len(L) else np.full(len(x), np.nan)
+    # a run ends on the step that passes braid_length, one run a little before another: within
+    # one step of its ends the end value stands
+    step = float(np.mean(np.diff(L))) if len(L) > 1 else 0.0
     status = []
     for i, v in enumerate(x):
-        if not len(L) or v < L[0] or v > L[-1]:
+        if not len(L) or v < L[0] - step or v > L[-1] + step:
             span = f"{L[0]:.4g}-{L[-1]:.4g} m" if len(L) else "none"
             status.append(f"off the run (braided length outside the run's {span})")
             sim[i] = np.nan
