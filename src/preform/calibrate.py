@@ -337,6 +337,21 @@ def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=N
     safe_folder(out)
     evaluations: list[Evaluation] = []
     seen = {}
+    session = {}   # one Dask client for every stage, made when the first runs are due
+
+    try:
+        return _search(config_path, base, run_data, measurements, params, kinds, noise, out,
+                       evaluations, seen, session, scheduler, workers, resume, progress, settings)
+    finally:
+        if session:
+            session["client"].close()
+            if session["local"] is not None:
+                session["local"].close()
+
+
+def _search(config_path, base, run_data, measurements, params, kinds, noise, out, evaluations,
+            seen, session, scheduler, workers, resume, progress, settings):
+    """The stages of :func:`calibrate` and its files; returns the report."""
 
     def run_stage(name, combos):
         todo = [c for c in combos if _key(c) not in seen]
@@ -344,8 +359,19 @@ def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=N
             spec = _stage_spec(config_path, run_data, todo, out / name)
             from .sweeps import run_spec
 
+            if resume:   # the points finished before: no cluster needed for them
+                from .sweeps import finished
+
+                done = [finished(spec, p) for p in spec.points]
+            else:
+                done = [None]
+            if any(d is None for d in done) and not session:
+                from .sweeps import open_client
+
+                session["client"], session["local"] = open_client(scheduler, workers)
             rows = run_spec(spec, scheduler=scheduler, workers=workers, resume=resume,
-                            progress=progress, label=f"calibrate {name}")
+                            progress=progress, label=f"calibrate {name}",
+                            client=session.get("client"))
             for point, row in zip(spec.points, rows):
                 e = Evaluation(stage=name, index=point.index, values=point.values,
                                status=row.get("status", "failed"), results=str(row.get("results")),
@@ -509,45 +535,62 @@ def _write_outputs(out, config_path, base, params, evaluations, chis, n_points, 
 
 
 def plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_min) -> list[Path]:
-    """``plots/misfit_<key>.png``: the misfit of every run against the parameter (coarse grid
-    and refinement rounds), its profile, the level the noise explains and the estimate."""
+    """``plots/misfit_<key>.png``: the misfit of every run against the parameter (coarse grid,
+    refinement slopes and steps), the level the noise explains and the estimate with its
+    interval; left the whole range, right round the best (+-5 standard deviations, or the
+    refinement's runs where it is not determined)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     from .io.atomic import atomic_path, safe_folder
 
     plots = safe_folder(out, "plots")
-    stages = list(dict.fromkeys(e.stage for e in evaluations))
-    cmap = __import__("matplotlib").colormaps["viridis"]
     written = []
     m = np.array(chis) / n_points
+    groups = (("coarse grid", lambda s: s == "coarse", "o", "none", "tab:blue"),
+              ("refinement: slopes", lambda s: s.endswith("slopes"), "s", None, "tab:green"),
+              ("refinement: steps", lambda s: s.endswith("steps"), "D", None, "tab:orange"))
+    level = (c_min + delta) / n_points
+    i_best = int(np.argmin(chis))
     for p in params:
-        fig = Figure(figsize=(7.0, 4.2), layout="constrained")
-        ax = fig.subplots()
-        for k, stage in enumerate(stages):
-            sel = [i for i, e in enumerate(evaluations) if e.stage == stage and math.isfinite(chis[i])]
-            ax.plot([evaluations[i].values[p.key] for i in sel], [m[i] for i in sel], "o",
-                    ms=4 if stage == "coarse" else 3.5, mfc="none" if stage == "coarse" else None,
-                    color=cmap(k / max(len(stages) - 1, 1)), label=f"{stage} ({len(sel)} runs)")
-        v, c = profile(evaluations, p.key, chis)
-        ok = np.isfinite(c)
-        ax.plot(v[ok], c[ok] / n_points, "-", color="0.3", lw=1.0, label="least misfit at each value")
-        ax.axhline((c_min + delta) / n_points, color="tab:red", lw=1.0, ls="--",
-                   label="what the noise explains (min + Δχ²/N)")
         e = estimates[p.key]
+        fig = Figure(figsize=(10.0, 4.0), layout="constrained")
+        axes = fig.subplots(1, 2)
         if e.determined:
-            ax.axvspan(e.low, e.high, color="tab:red", alpha=0.15)
-            ax.axvline(e.value, color="tab:red", lw=1.2)
-            title = f"{p.key} = {e.value:.4g} ± {e.sigma:.2g}"
+            zoom = (e.value - 5 * e.sigma, e.value + 5 * e.sigma)
         else:
-            title = f"{p.key}: not determined by the measurements"
-        ax.set_yscale("log")
-        ax.set_xlim(p.lo - 0.02 * (p.hi - p.lo), p.hi + 0.02 * (p.hi - p.lo))
-        ax.set_xlabel(p.key)
-        ax.set_ylabel("misfit χ²/N (-)")
-        ax.set_title(title, fontsize=11)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+            vals = [x.values[p.key] for x in evaluations if x.stage != "coarse"] or [p.lo, p.hi]
+            zoom = (min(vals), max(vals)) if max(vals) > min(vals) else (p.lo, p.hi)
+        for ax, (x0, x1) in zip(axes, ((p.lo, p.hi), zoom)):
+            pad = 0.03 * (x1 - x0)
+            for label, test, marker, face, colour in groups:
+                sel = [i for i, x in enumerate(evaluations) if test(x.stage) and math.isfinite(chis[i])
+                       and x0 - pad <= x.values[p.key] <= x1 + pad]
+                if sel:
+                    ax.plot([evaluations[i].values[p.key] for i in sel], m[sel], marker, ms=4.5,
+                            mfc=face, color=colour, ls="none", label=f"{label} ({len(sel)})")
+            ax.plot([evaluations[i_best].values[p.key]], [m[i_best]], "*", ms=11, color="tab:red",
+                    label="best run")
+            ax.axhline(level, color="tab:red", lw=1.0, ls="--", label="what the noise explains")
+            if e.determined:
+                xs = np.linspace(max(x0, e.value - 5 * e.sigma), min(x1, e.value + 5 * e.sigma), 200)
+                ax.plot(xs, (c_min + delta * ((xs - e.value) / e.sigma) ** 2) / n_points, "-",
+                        color="0.35", lw=1.0, label="least-squares profile")
+                ax.axvspan(e.low, e.high, color="tab:red", alpha=0.15, label="within the noise")
+            if ax is axes[0]:
+                ax.set_yscale("log")
+            else:   # linear, up to the profile at 5 standard deviations: the interval readable
+                ax.set_ylim((c_min - 2 * delta) / n_points, (c_min + 27 * delta) / n_points)
+            ax.set_xlim(x0 - pad, x1 + pad)
+            ax.set_xlabel(p.key)
+            ax.grid(True, which="major", alpha=0.3)
+        axes[0].set_ylabel("misfit χ²/N (-)")
+        axes[0].set_title("whole range", fontsize=10)
+        axes[1].set_title("round the best" + (" (±5 standard deviations)" if e.determined else ""),
+                          fontsize=10)
+        axes[1].legend(fontsize=8, loc="upper center")
+        fig.suptitle(f"{p.key} = {e.value:.4g} ± {e.sigma:.2g}" if e.determined
+                     else f"{p.key}: not determined by the measurements", fontsize=12)
         FigureCanvasAgg(fig)
         path = plots / f"misfit_{p.key.replace('.', '_')}.png"
         with atomic_path(path) as tmp:

@@ -312,6 +312,11 @@ def finished(spec: SweepSpec, point: Point) -> dict | None:
 
 # ------------------------------------------------------------------------------ the cluster
 
+def open_client(scheduler=None, workers=None, settings: ClusterSettings = CLUSTER):
+    """(client, local cluster or None) as a sweep makes them; the caller closes both."""
+    return _client(scheduler, workers, settings)
+
+
 def _client(scheduler, workers, settings: ClusterSettings):
     from distributed import Client, LocalCluster
 
@@ -347,9 +352,11 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
 
 
 def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, progress=True,
-             cluster: ClusterSettings = CLUSTER, label: str = "sweep") -> list[dict]:
+             cluster: ClusterSettings = CLUSTER, label: str = "sweep", client=None) -> list[dict]:
     """Run the points of ``spec`` on Dask (with ``resume``, only those not finished with the same
-    inputs); return their rows in the points' order. ``label`` starts the progress lines."""
+    inputs); return their rows in the points' order. ``label`` starts the progress lines;
+    ``client``: a ``distributed.Client`` to use (and leave open), else one is made for the run
+    (:func:`open_client`) and closed after it."""
     from .io.atomic import safe_folder
 
     from .io.atomic import atomic_write_text
@@ -370,7 +377,8 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
     if todo:
         from distributed import as_completed
 
-        client, local = _client(scheduler, workers, cluster)
+        own = client is None
+        client, local = _client(scheduler, workers, cluster) if own else (client, None)
         try:
             futures = {client.submit(run_point, spec.configs[p.index], str(spec.out_dir / p.name),
                                      p.index, p.values, inputs_hash(spec.configs[p.index]),
@@ -389,9 +397,10 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
                 failed += row.get("status") != "done"
                 _report(progress, len(rows) - failed, total - len(rows), failed, total, label)
         finally:
-            client.close()
-            if local is not None:
-                local.close()
+            if own:
+                client.close()
+                if local is not None:
+                    local.close()
     return [rows[p.index] for p in spec.points]
 
 
