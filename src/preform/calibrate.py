@@ -557,7 +557,7 @@ def plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_mi
         fig = Figure(figsize=(10.0, 4.0), layout="constrained")
         axes = fig.subplots(1, 2)
         if e.determined:
-            zoom = (e.value - 5 * e.sigma, e.value + 5 * e.sigma)
+            zoom = (max(p.lo, e.value - 5 * e.sigma), min(p.hi, e.value + 5 * e.sigma))
         else:
             vals = [x.values[p.key] for x in evaluations if x.stage != "coarse"] or [p.lo, p.hi]
             zoom = (min(vals), max(vals)) if max(vals) > min(vals) else (p.lo, p.hi)

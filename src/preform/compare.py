@@ -676,8 +676,8 @@ def _sides(phi: np.ndarray):
 
 
 def plot_compare(comparisons, path, title: str = "", run: RunData | None = None) -> Path:
-    """compare.png: a panel per kind given: braid angles measured (markers) and simulated
-    (lines) against the arc length, one colour per side; H measured against the run's curve
+    """compare.png: a panel per kind given: braid angles measured (circles) and simulated (dots,
+    joined by a line) against the arc length, one colour per side, the points off the run grey; H measured against the run's curve
     against the braided length; the yarn deviations against the axial position."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -701,12 +701,14 @@ def plot_compare(comparisons, path, title: str = "", run: RunData | None = None)
             sim = np.concatenate([c.simulated for c in these])
             labels = [side + ("" if gi < 0 else f", {('warp', 'weft')[gi]}") for side, gi in zip(_sides(phi), g)]
             for k, label in enumerate(dict.fromkeys(labels)):
-                sel = np.array([lab == label for lab in labels])
-                order = np.argsort(s[sel])
+                sel = np.array([lab == label for lab in labels]) & np.isfinite(sim)
                 col = colours(k % 10)
-                ax.plot(s[sel][order], a[sel][order], "o", ms=4, color=col, mfc="none",
-                        label=f"{label}: measured")
-                ax.plot(s[sel][order], sim[sel][order], "-", lw=1.2, color=col, label="simulated")
+                ax.plot(s[sel], a[sel], "o", ms=5, color=col, mfc="none", label=f"{label}: measured")
+                ax.plot(s[sel], sim[sel], ".", ms=5, color=col, label="simulated")
+                ax.vlines(s[sel], a[sel], sim[sel], color=col, lw=0.6)
+            off = ~np.isfinite(sim)
+            if off.any():
+                ax.plot(s[off], a[off], "x", ms=5, color="0.45", label="measured, off the run")
             ax.set_xlabel("centerline arc length from the tip s (m)")
             ax.set_ylabel("braid angle (deg)")
             ax.set_title(f"Braid angle on the part ({rms})", fontsize=10)
@@ -750,7 +752,7 @@ def run_title(run: RunData) -> str:
     name = Path(source).stem if source else run.folder.name
     model = (inputs.get("model") or {}).get("kind", "")
     mu = (inputs.get("yarn") or {}).get("friction")
-    return f"{name} · {model} model" + (f" · friction {mu:g}" if isinstance(mu, (int, float)) else "")
+    return f"{name} · {model} model" + (f" · friction {mu:.3g}" if isinstance(mu, (int, float)) else "")
 
 
 def compare(results, measurements, out_dir=None, *, plot=True,
