@@ -564,11 +564,11 @@ def plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_mi
         for ax, (x0, x1) in zip(axes, ((p.lo, p.hi), zoom)):
             pad = 0.03 * (x1 - x0)
             for label, test, marker, face, colour in groups:
-                sel = [i for i, x in enumerate(evaluations) if test(x.stage) and math.isfinite(chis[i])
-                       and x0 - pad <= x.values[p.key] <= x1 + pad]
+                runs = [i for i, x in enumerate(evaluations) if test(x.stage) and math.isfinite(chis[i])]
+                sel = [i for i in runs if x0 - pad <= evaluations[i].values[p.key] <= x1 + pad]
                 if sel:
                     ax.plot([evaluations[i].values[p.key] for i in sel], m[sel], marker, ms=4.5,
-                            mfc=face, color=colour, ls="none", label=f"{label} ({len(sel)})")
+                            mfc=face, color=colour, ls="none", label=f"{label} ({len(runs)} runs)")
             ax.plot([evaluations[i_best].values[p.key]], [m[i_best]], "*", ms=11, color="tab:red",
                     label="best run")
             ax.axhline(level, color="tab:red", lw=1.0, ls="--", label="what the noise explains")
