@@ -147,3 +147,17 @@ def test_a_key_that_is_no_config_value_is_refused_before_any_run(case, tmp_path,
                  "--out", str(tmp_path)])
     assert code == 2 and "yarn.friction.x" in capsys.readouterr().err
     assert not (tmp_path / "coarse").exists()
+
+
+def test_with_noise_given_too_small_the_intervals_widen_by_birges_ratio():
+    """calibrate's Delta chi2: 1 where the noise explains the best fit, chi2_min / (N - p)
+    where it does not."""
+    from preform.calibrate import SETTINGS, Evaluation, _delta, chi2
+
+    e = Evaluation("coarse", 0, {}, "done", "", n={"angle": 10}, ss={"angle": 10 * 0.5 ** 2},
+                   off={"angle": 2}, residuals={"angle": np.zeros(12)})
+    # 10 residuals of 0.5 deg at a noise of 0.5 deg, 2 points off at 3 sigmas: 10 + 2 * 9
+    assert chi2(e, {"angle": 0.5}) == pytest.approx(28.0)
+    assert _delta([28.0], 12, 1, SETTINGS) == pytest.approx(28.0 / 11)
+    assert _delta([5.0], 12, 1, SETTINGS) == 1.0
+

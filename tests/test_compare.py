@@ -24,6 +24,33 @@ def run(request, tmp_path_factory):
     return d / "res"
 
 
+def test_a_run_without_pictures_writes_its_data_files_alone(run):
+    """``[output] pictures = false``: no PNG, the data files all there, none listed missing."""
+    assert not list(run.rglob("*.png"))
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["inputs"]["output"]["pictures"] is False
+    for name in ("surface.vtu", "history.csv", "convergence.pvd", "yarns.vtp"):
+        assert name in summary["files"] and (run / name).is_file()
+    assert summary["pictures"]["failed"] == []
+
+
+def test_every_braided_face_is_found_at_its_own_centroid(run):
+    """locate_faces: the centroid of each face's unrolled triangle lies in that face, also on
+    the seam at +-180 deg where the azimuth wraps."""
+    from preform.compare import load_run, locate_faces
+
+    r = load_run(run, {"angle"})
+    polys = r.unrolled()
+    a, b, c = polys[:, 0], polys[:, 1], polys[:, 2]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+    faces = np.flatnonzero(area > 1e-9)           # the end caps are edges in this plane
+    centre = polys[faces].mean(axis=1)
+    phi = (centre[:, 1] + 180.0) % 360.0 - 180.0  # as a user gives them, -180..180
+    assert np.array_equal(locate_faces(polys, centre[:, 0], phi), faces)
+    seam = faces[np.abs(np.abs(centre[:, 1]) - 180.0) < 10.0]
+    assert len(seam) > 0
+
+
 def _write(path, header, rows):
     np.savetxt(path, np.asarray(rows, dtype=float), delimiter=",", header=header, comments="")
     return path
