@@ -456,6 +456,10 @@ def _search(config_path, base, run_data, measurements, params, kinds, noise, out
             if np.linalg.matrix_rank(JtJ) == len(free):
                 cov = np.linalg.inv(JtJ)
         for j, p in enumerate(free):
+            if J is None:
+                estimates[p.key] = Estimate(p.key, False, how="no uncertainty: a run of the slopes "
+                                            "at the best point failed (see calibrate.csv)")
+                continue
             s = math.sqrt(delta * cov[j, j]) if np.isfinite(cov[j, j]) and cov[j, j] >= 0 else math.inf
             estimates[p.key] = interval(p, float(best[p.key]), s, "from the misfit's slopes at the "
                                         "best run (least squares: Delta chi2 along the profile)")

@@ -392,7 +392,7 @@ def add_calibrate_parser(sub) -> None:
                           "default 5); repeat for more")
     cal.add_argument("--noise", action="append", metavar="KIND=SIGMA",
                      help="standard deviation of one measurement: angle=DEG, convergence=M, yarn=M "
-                          "(default: estimated from the best run's residuals)")
+                          "(default: per kind the least RMS residual over the runs)")
     cal.add_argument("--out", metavar="DIR", help="output folder (default: results/<config>_calibration)")
     where = cal.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N", help="worker processes of the LocalCluster")

@@ -336,6 +336,11 @@ def load_run(folder, kinds=KINDS) -> RunData:
         run.vertices = np.asarray(mesh.points, dtype=np.float64)
         run.faces = np.asarray(mesh.cells_dict["triangle"], dtype=np.int64)
         run.cell_data = {name: np.asarray(values[0]) for name, values in mesh.cell_data.items()}
+        missing = [k for k in ("braid_angle_deg", "braid_angle_warp_deg", "braid_angle_weft_deg",
+                               "reached_warp", "reached_weft") if k not in run.cell_data]
+        if missing:
+            raise MeasurementError(f"{vtu}: no cell array {', '.join(missing)}: not the surface "
+                                   "fields of a preform run")
         run.centerline = _run_centerline(folder, summary)
     if CONVERGENCE in kinds:
         hist = _need(folder / "history.csv", "holds the convergence lengths", "convergence length")
@@ -454,7 +459,7 @@ def compare_angles(meas: Measurements, run: RunData) -> Comparison:
             status.append("off the part (no face of the field mesh at this arc length and azimuth)")
             continue
         if g < 0:
-            reached = data.get("reached_warp", np.ones(1))[f] > 0 or data.get("reached_weft", np.ones(1))[f] > 0
+            reached = any(data[k][f] > 0 for k in ("reached_warp", "reached_weft"))
             value = float(data["braid_angle_deg"][f])
         else:
             name = ("warp", "weft")[g]
