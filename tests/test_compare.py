@@ -155,3 +155,55 @@ def test_a_bad_value_names_its_line_and_column(tmp_path):
     f.write_text("# measured 2026-12-01\nbraided_length_m,convergence_length_m\n0.01,0.07\n0.02,abc\n")
     with pytest.raises(Exception, match=r"line 4: convergence_length_m = 'abc'"):
         read_measurements(f)
+
+
+@pytest.fixture(scope="module")
+def layered(tmp_path_factory):
+    """Two kinematic layers on the cylinder, the second shorter."""
+    d = tmp_path_factory.mktemp("layers")
+    case = write_cylinder_case(d, carriers=8, braid=0.06, snapshots=2, out=d / "res",
+                               output_extra="pictures = false",
+                               extra="[[layer]]\n\n[[layer]]\n[layer.process]\nbraid_length = 0.04\n")
+    assert main(["run", str(case), "--no-progress"]) == 0
+    return d / "res"
+
+
+def test_a_layer_is_compared_with_its_own_fields_and_history(layered, tmp_path):
+    """Without a ``layer`` column the outermost layer's angles (what a picture of the part
+    sees), with it the layer named; H of layer 2 from ``layer2/history.csv``."""
+    import meshio
+
+    from preform.compare import compare_run, load_run
+
+    r = load_run(layered, {"angle"})
+    assert r.n_layers == 2
+    mesh = meshio.read(layered / "surface.vtu")
+    polys = r.unrolled()
+    centre = polys.mean(axis=1)
+    rows = {}
+    for k in (1, 2):
+        a = mesh.cell_data[f"layer{k}_braid_angle_deg"][0]
+        faces = np.flatnonzero(a > 0)[::9]
+        rows[k] = (faces, a)
+    outer = _write(tmp_path / "outer.csv", "arc_length_m,azimuth_deg,braid_angle_deg",
+                   [[centre[f, 0], (centre[f, 1] + 180) % 360 - 180, rows[2][1][f]] for f in rows[2][0]])
+    inner = _write(tmp_path / "inner.csv", "arc_length_m,azimuth_deg,braid_angle_deg,layer",
+                   [[centre[f, 0], (centre[f, 1] + 180) % 360 - 180, rows[1][1][f], 1] for f in rows[1][0]])
+    h = np.genfromtxt(layered / "layer2" / "history.csv", delimiter=",", names=True)
+    L, H = h["braided_length_m"], h["convergence_length_mean_m"]
+    once = np.array([np.sum(L == x) == 1 for x in L])
+    conv = _write(tmp_path / "H2.csv", "braided_length_m,convergence_length_m,layer",
+                  np.column_stack([L[once], H[once], np.full(once.sum(), 2)]))
+    out = compare_run(layered, [outer, inner, conv])
+    for c in out:
+        assert c.ok.all() and np.abs(c.difference).max() == 0.0
+    # the outer layer's angles against the inner layer's fields differ (the second layer is
+    # braided on a thicker part): the layer taken matters, so the zeros above can fail
+    as_inner = _write(tmp_path / "as_inner.csv", "arc_length_m,azimuth_deg,braid_angle_deg,layer",
+                      [[centre[f, 0], (centre[f, 1] + 180) % 360 - 180, rows[2][1][f], 1.0]
+                       for f in rows[2][0]])
+    (c,) = compare_run(layered, [as_inner])
+    assert np.nanmax(np.abs(c.difference)) > 0.01
+    bad = _write(tmp_path / "bad.csv", "braided_length_m,convergence_length_m,layer", [[0.01, 0.07, 3]])
+    with pytest.raises(Exception, match="layer = 3: the run braided 2 layers"):
+        compare_run(layered, [bad])

@@ -12,14 +12,17 @@ Three kinds of measurement are read from CSV files, each recognised by its heade
     plane (:func:`preform.io.maps.unrolled_coordinates`): ``braid_angle_deg`` (the mean of the
     groups present), or ``braid_angle_warp_deg`` / ``braid_angle_weft_deg`` when ``group`` is
     given. The field is constant on a face (the mean over the yarn pieces in it), so the sample
-    is the value written in the file, not a value interpolated between faces.
+    is the value written in the file, not a value interpolated between faces. On a run of
+    several ``[[layer]]`` s an optional ``layer`` column (from 1, the layer on the mandrel)
+    names the layer measured; without it the outermost, the one a picture of the part sees.
 ``convergence``
     convergence lengths during the run: ``braided_length_m, convergence_length_m``. The
     simulated value is ``history.csv``'s ``convergence_length_mean_m`` (the mean over the yarns
     of the fell point's axial distance to the supply plane) interpolated linearly in
     ``braided_length_m``; of rows with the same braided length (the start, before the mandrel
     moves the braid on) the last is used; within one time step's braided length beyond the
-    run's first or last row, that row's value.
+    run's first or last row, that row's value. An optional ``layer`` column takes
+    ``layer<k>/history.csv`` of a run of several layers (without it the first layer's).
 ``yarn``
     yarn coordinates in the convergence zone: ``x_m, y_m, z_m`` in the machine frame and an
     optional ``time_s``. The deviation is the distance from the point to the nearest segment
@@ -58,7 +61,7 @@ COLUMNS = {ANGLE: ("arc_length_m", "azimuth_deg", "braid_angle_deg"),
            CONVERGENCE: ("braided_length_m", "convergence_length_m"),
            YARN: ("x_m", "y_m", "z_m")}
 #: optional columns of each kind
-OPTIONAL = {ANGLE: ("group",), CONVERGENCE: (), YARN: ("time_s",)}
+OPTIONAL = {ANGLE: ("group", "layer"), CONVERGENCE: ("layer",), YARN: ("time_s",)}
 #: what each kind's difference is, and its unit, for messages and the JSON
 QUANTITY = {ANGLE: ("braid angle", "deg"), CONVERGENCE: ("convergence length", "m"),
             YARN: ("yarn deviation", "m")}
@@ -92,13 +95,15 @@ SETTINGS = CompareSettings()
 @dataclass(frozen=True)
 class Measurements:
     """One file's points: kind, the columns (name -> float array), the file's line of each
-    point (for messages), and ``group`` (-1: not given, 0 warp, 1 weft) for angles."""
+    point (for messages), ``group`` (-1: not given, 0 warp, 1 weft) for angles and ``layer``
+    (0: not given, else the layer from 1) for angles and convergence lengths."""
 
     kind: str
     path: Path
     values: dict
     lines: np.ndarray
     group: np.ndarray | None = None
+    layer: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.lines)
@@ -159,6 +164,16 @@ def read_measurements(path) -> Measurements:
                                            "weft (or 0, 1)")
                 data[c].append(GROUPS[cell.lower()])
                 continue
+            if c == "layer":   # a whole number, as a spreadsheet may write it (2.0)
+                try:
+                    k = float(cell)
+                except ValueError:
+                    k = 0.0
+                if not (math.isfinite(k) and k.is_integer() and k >= 1):
+                    raise MeasurementError(f"{path} line {n}: layer = {cell!r}: expected the "
+                                           "layer's number, 1 for the one on the mandrel")
+                data[c].append(int(k))
+                continue
             try:
                 value = float(cell)
             except ValueError:
@@ -172,9 +187,13 @@ def read_measurements(path) -> Measurements:
     group = np.asarray(data.pop("group"), dtype=np.int64) if "group" in data else None
     if kind == ANGLE and group is None:
         group = np.full(len(lines), -1, dtype=np.int64)
+    layer = np.asarray(data.pop("layer"), dtype=np.int64) if "layer" in data else None
+    if kind in (ANGLE, CONVERGENCE) and layer is None:
+        layer = np.zeros(len(lines), dtype=np.int64)
     values = {c: np.asarray(v, dtype=np.float64) for c, v in data.items()}
     _check_values(path, kind, values, np.asarray(lines))
-    return Measurements(kind=kind, path=path, values=values, lines=np.asarray(lines), group=group)
+    return Measurements(kind=kind, path=path, values=values, lines=np.asarray(lines), group=group,
+                        layer=layer)
 
 
 def _check_values(path, kind, values, lines) -> None:
@@ -237,10 +256,23 @@ class RunData:
     faces: np.ndarray | None = None
     cell_data: dict = field(default_factory=dict)
     history: dict = field(default_factory=dict)
+    #: layer (from 2) -> its history (``layer<k>/history.csv``); ``history`` is the first's
+    layer_histories: dict = field(default_factory=dict)
     snapshot_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     snapshot_files: list = field(default_factory=list)
     _polys: np.ndarray | None = None
     _snapshots: dict = field(default_factory=dict)
+
+    @property
+    def n_layers(self) -> int:
+        """The layers braided: 1, or the count of ``layer<k>_braid_angle_deg`` fields."""
+        k = 1
+        while f"layer{k + 1}_braid_angle_deg" in self.cell_data or (k + 1) in self.layer_histories:
+            k += 1
+        return k
+
+    def history_of(self, layer: int) -> dict:
+        return self.history if layer <= 1 else self.layer_histories.get(layer, {})
 
     @property
     def centerline_length(self) -> float:
@@ -344,9 +376,11 @@ def load_run(folder, kinds=KINDS) -> RunData:
         run.centerline = _run_centerline(folder, summary)
     if CONVERGENCE in kinds:
         hist = _need(folder / "history.csv", "holds the convergence lengths", "convergence length")
-        table = np.genfromtxt(hist, delimiter=",", names=True)
-        table = np.atleast_1d(table)
-        run.history = {name: np.asarray(table[name], dtype=np.float64) for name in table.dtype.names}
+        run.history = _read_history(hist)
+        k = 2
+        while (folder / f"layer{k}" / "history.csv").is_file():
+            run.layer_histories[k] = _read_history(folder / f"layer{k}" / "history.csv")
+            k += 1
     if YARN in kinds:
         pvd = _need(folder / "convergence.pvd", "lists the convergence-zone snapshots", "yarn")
         times, files = _read_pvd(pvd)
@@ -355,6 +389,14 @@ def load_run(folder, kinds=KINDS) -> RunData:
                                    "yarn coordinates cannot be compared; run with snapshots")
         run.snapshot_times, run.snapshot_files = times, files
     return run
+
+
+def _read_history(path: Path) -> dict:
+    try:
+        table = np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True))
+        return {name: np.asarray(table[name], dtype=np.float64) for name in table.dtype.names}
+    except (OSError, ValueError, TypeError) as err:
+        raise MeasurementError(f"{path} cannot be read as a history table: {err}") from None
 
 
 def _read_pvd(path: Path):
@@ -451,55 +493,74 @@ def compare_angles(meas: Measurements, run: RunData) -> Comparison:
     face = locate_faces(run.unrolled(), s, phi)
     data = run.cell_data
     n = len(meas)
+    n_layers = run.n_layers
+    layers = np.where(meas.layer > 0, meas.layer, n_layers)   # unsaid: the outermost, as seen
+    _check_layers(meas, n_layers)
     sim = np.full(n, np.nan)
     status = []
     for i in range(n):
         f, g = int(face[i]), int(meas.group[i])
+        prefix = f"layer{layers[i]}_" if n_layers > 1 else ""
         if f < 0:
             status.append("off the part (no face of the field mesh at this arc length and azimuth)")
             continue
         if g < 0:
-            reached = any(data[k][f] > 0 for k in ("reached_warp", "reached_weft"))
-            value = float(data["braid_angle_deg"][f])
+            reached = any(data[prefix + k][f] > 0 for k in ("reached_warp", "reached_weft"))
+            value = float(data[prefix + "braid_angle_deg"][f])
         else:
             name = ("warp", "weft")[g]
-            reached = data[f"reached_{name}"][f] > 0
-            value = float(data[f"braid_angle_{name}_deg"][f])
+            reached = data[f"{prefix}reached_{name}"][f] > 0
+            value = float(data[f"{prefix}braid_angle_{name}_deg"][f])
         if not reached or value <= 0:
             status.append("off the braid (no yarn reached this face" + ("" if g < 0 else f" in the {name} group") + ")")
             continue
         sim[i] = value
         status.append(OK)
     return Comparison(meas, sim, sim - meas.values["braid_angle_deg"], status,
-                      extra={"face": face})
+                      extra={"face": face, "layer": layers if n_layers > 1 else None})
 
 
-def history_curve(run: RunData):
-    """(braided length, convergence length) of ``history.csv`` as the curve sampled: rows whose
-    braided length repeats the one before are replaced by the last of them."""
-    L = run.history["braided_length_m"]
-    H = run.history["convergence_length_mean_m"]
+def _check_layers(meas: Measurements, n_layers: int) -> None:
+    bad = np.flatnonzero(meas.layer > n_layers)
+    if len(bad):
+        i = int(bad[0])
+        raise MeasurementError(f"{meas.path} line {meas.lines[i]}: layer = {meas.layer[i]}: the run "
+                               f"braided {n_layers} layer{'s' if n_layers > 1 else ''}")
+
+
+def history_curve(run: RunData, layer: int = 1):
+    """(braided length, convergence length) of ``history.csv`` (layer k's
+    ``layer<k>/history.csv``) as the curve sampled: rows whose braided length repeats the one
+    before are replaced by the last of them."""
+    history = run.history_of(layer)
+    L = history["braided_length_m"]
+    H = history["convergence_length_mean_m"]
     keep = np.ones(len(L), dtype=bool)
     keep[:-1] = L[1:] > L[:-1]
     return L[keep], H[keep]
 
 
 def compare_convergence(meas: Measurements, run: RunData) -> Comparison:
-    L, H = history_curve(run)
+    _check_layers(meas, run.n_layers)
     x = meas.values["braided_length_m"]
-    sim = np.interp(x, L, H) if len(L) else np.full(len(x), np.nan)
-    # a run ends on the step that passes braid_length, one run a little before another: within
-    # one step of its ends the end value stands
-    step = float(np.mean(np.diff(L))) if len(L) > 1 else 0.0
-    status = []
-    for i, v in enumerate(x):
-        if not len(L) or v < L[0] - step or v > L[-1] + step:
-            span = f"{L[0]:.4g}-{L[-1]:.4g} m" if len(L) else "none"
-            status.append(f"off the run (braided length outside the run's {span})")
-            sim[i] = np.nan
-        else:
-            status.append(OK)
-    return Comparison(meas, sim, sim - meas.values["convergence_length_m"], status)
+    layers = np.maximum(meas.layer, 1)                        # unsaid: the first layer
+    sim = np.full(len(x), np.nan)
+    status = [OK] * len(x)
+    for k in np.unique(layers):
+        rows = np.flatnonzero(layers == k)
+        L, H = history_curve(run, int(k))
+        if len(L):
+            sim[rows] = np.interp(x[rows], L, H)
+        # a run ends on the step that passes braid_length, one run a little before another:
+        # within one step of its ends the end value stands
+        step = float(np.mean(np.diff(L))) if len(L) > 1 else 0.0
+        for i in rows:
+            if not len(L) or x[i] < L[0] - step or x[i] > L[-1] + step:
+                span = f"{L[0]:.4g}-{L[-1]:.4g} m" if len(L) else "none"
+                status[i] = f"off the run (braided length outside the run's {span})"
+                sim[i] = np.nan
+    return Comparison(meas, sim, sim - meas.values["convergence_length_m"], status,
+                      extra={"layer": layers if run.n_layers > 1 else None})
 
 
 def point_segment_distance(points, a, b) -> tuple[np.ndarray, np.ndarray]:
@@ -622,7 +683,7 @@ def off_lines(comparisons, limit: int = 5) -> list[str]:
     return out
 
 
-CSV_COLUMNS = ("kind", "file", "line", "arc_length_m", "azimuth_deg", "group", "braided_length_m",
+CSV_COLUMNS = ("kind", "file", "line", "layer", "arc_length_m", "azimuth_deg", "group", "braided_length_m",
                "x_m", "y_m", "z_m", "time_s", "measured", "simulated", "difference", "unit", "status")
 
 
@@ -646,6 +707,8 @@ def comparison_rows(comparisons):
                     row[col] = m.values[col][i]
             if kind == ANGLE and m.group[i] >= 0:
                 row["group"] = ("warp", "weft")[m.group[i]]
+            if c.extra.get("layer") is not None:
+                row["layer"] = int(c.extra["layer"][i])
             if kind == YARN:
                 row["time_s"] = c.extra["snapshot_time_s"][i] if "time_s" not in m.values else m.values["time_s"][i]
             yield row
