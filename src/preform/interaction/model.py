@@ -303,6 +303,9 @@ class InteractionZone:
         self.staged = 0               # steps solved in stages (``_staged``)
         self.wall_resolves = 0        # steps solved again with every crossing's plane (``step``)
         self.t = 0.0
+        self.stage = ""               # the part of the step under way (a fault's message names it)
+        self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
+        self._own = None              # (Snapshot, uids, positions) of the last such step
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
@@ -357,6 +360,7 @@ class InteractionZone:
         bc = self.boundary(t1, F_machine)
         st = self.state
         fell_start = st.material_fell.copy()
+        self.stage = "the new crossings (the fell points' anchoring, the carriers' passes)"
         st.material_fell[:] = self.fell_anchor(st, bc, self.fell_ref, pose_end)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
@@ -368,6 +372,7 @@ class InteractionZone:
         # again with every crossing's plane or in stages
         posed = {name: getattr(st, name)[: st.m].copy()
                  for name in ("pos", "material", "tension", "bound", "slip", "offset")}
+        self.stage = "the solve of the zone's crossings"
         try:
             wall, clear = self._with_near_wall(bc)
             self.last_report = self.solve_zone(st, wall, settings=self.settings, where=where,
@@ -385,7 +390,9 @@ class InteractionZone:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
                 raise
             bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
+        self._check_step(where, posed["bound"])
         self.f_top = self.last_report.f_top
+        self.stage = "the guide ring's contact"
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
             u = self.ring_material(st, bc)
@@ -395,6 +402,12 @@ class InteractionZone:
             self.ring_u = u
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
             self._ring_flow()
+        if self.snapshot_due:
+            # the state the step solved, before its deposit: what its snapshot writes
+            self._own = (_snapshot(st, bc, self.last_report.f_top, t1, self.machine,
+                                   self.settings, wall="reaction"),
+                         st.uid[: st.m].copy(), st.pos[: st.m].copy())
+        self.stage = "the deposit of crossings on the mandrel"
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
         for k, p in deposits:
@@ -412,6 +425,57 @@ class InteractionZone:
         return ZoneStep(G_mid=G_mid, G_end=G_end, deposits=deposits, contacts=st.m,
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
+
+    def _check_step(self, where, held):
+        """SimulationError where the step's solve left no state of the model: a slack yarn
+        (``ZoneSettings.slack_tension``) or a residual above ``max_step_residual``; the message
+        names the step, the figure and the likely cause, from the crossing where it was found
+        (``_likely_cause``). ``held``: the bounds the step held (its posed state's; non-finite
+        for new crossings)."""
+        st, zs = self.state, self.settings.zone
+        m = st.m
+        residual = float(self.last_report.residual)
+        if m == 0:
+            return
+        ten = st.tension[:m]
+        c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
+        if ten[c, side] < zs.slack_tension * self.f_spool:
+            k = int(st.yarn[c, side])
+            raise SimulationError(
+                f"the yarn-interaction model has a slack yarn {where}: {self._yarn_name(k)}'s "
+                f"segment below crossing {int(st.uid[c])} carries {ten[c, side]:.3g} N (spool "
+                f"tension {self.f_spool:g} N; the model admits no slack yarn, every free yarn is "
+                f"pulled by its carrier), residual {residual:.3g}; likely cause: "
+                f"{self._likely_cause(c, side)}")
+        if not residual <= zs.max_step_residual:
+            change = np.abs(st.bound[:m] - held)
+            change = np.where(np.isfinite(change), change, -1.0)
+            c, side = np.unravel_index(int(np.argmax(change)), change.shape)
+            raise SimulationError(
+                f"the yarn-interaction model did not converge {where}: residual {residual:.3g} "
+                f"(limit {zs.max_step_residual:g}: the friction bounds the step held differ from "
+                f"those of its solution by more than the tensions they bound), largest at "
+                f"{self._yarn_name(int(st.yarn[c, side]))}'s crossing {int(st.uid[c])}; likely "
+                f"cause: {self._likely_cause(c, side)}")
+
+    def _yarn_name(self, k) -> str:
+        n = self.machine.n_per_group
+        return f"warp yarn {k}" if k < n else f"weft yarn {k - n}"
+
+    def _likely_cause(self, c, side) -> str:
+        """Where crossing c of yarn side ``side`` sits, as the likely cause of a failed step: under
+        the guide ring (its yarn's highest crossing), next to the mandrel (its lowest: the pose),
+        or in between (the yarns' friction)."""
+        st = self.state
+        k = int(st.yarn[c, side])
+        if self.machine.has_ring and st.highest[k] == c:
+            return ("the guide ring (the yarn's highest crossing, under its ring point: [machine] "
+                    "guide_ring, [yarn] ring_friction)")
+        if st.lowest[k] == c:
+            return ("the pose (the yarn's lowest crossing, next to the mandrel: [process] "
+                    "pose_lead, eccentricity, and the mandrel's bends and sections there)")
+        return ("the friction between the yarns (a crossing inside the zone: [yarn] friction, "
+                "[model] time_step)")
 
     def _staged(self, t0, t1, bc, where, centre, fell_start, posed):
         """The step solved again with its boundary moved in the ``boundary_stages`` (fell points
@@ -456,10 +520,39 @@ class InteractionZone:
         return bcl
 
     def snapshot(self, t, F_machine) -> Snapshot:
-        """Polyline per yarn: fell point, its crossings upwards, ring point, spool point.
+        """Polyline per yarn: fell point, its crossings upwards, ring point, spool point: the
+        state the last step solved (before its deposit, with the fell points and ring points it
+        was solved with; ``snapshot_due``), or, before the first step, the zone as it is.
 
-        The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
-        are in balance with the exported fell points."""
+        The snapshot is checked by a re-balance (``rebalanced``, on a copy): the zone brought to
+        balance with the fell points given and friction bounds iterated to convergence; the
+        written state stays the run's own, and ``rebalance_shift_m`` says how far its crossings
+        are from the re-balanced ones (``rebalance_error`` where the re-balance failed)."""
+        own = self._own
+        self._own = None
+        if own is None or own[0].time_s != float(t):
+            bc = self._with_wall(self.boundary(t, F_machine))
+            st = self.state
+            own = (_snapshot(st, bc, self.f_top, t, self.machine, self.settings, wall="reaction"),
+                   st.uid[: st.m].copy(), st.pos[: st.m].copy())
+        snap, uids, pos = own
+        try:
+            checked, st = self._rebalanced(t, F_machine)
+        except SimulationError as err:
+            return dataclasses.replace(snap, rebalance_error=str(err))
+        at = {int(u): i for i, u in enumerate(st.uid[: st.m].tolist())}
+        common = [(i, at[int(u)]) for i, u in enumerate(uids.tolist()) if int(u) in at]
+        shift = 0.0
+        if common:
+            a, b = np.array(common).T
+            shift = float(np.max(np.linalg.norm(pos[a] - st.pos[b], axis=1)))
+        return dataclasses.replace(snap, rebalance_shift_m=shift, rebalanced=checked)
+
+    def _rebalanced(self, t, F_machine):
+        """(Snapshot, state) of the zone re-balanced on a copy with the fell points given: the
+        ring points and the zone solved in turn, the friction bounds to convergence
+        (``FrontalSettings.snapshot_tolerance``), crossings the re-solve lays on the mandrel
+        deposited."""
         st = self.state.copy()
         # each yarn's friction centre at each crossing (``frontal.solve_zone_inplace``)
         anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
@@ -499,7 +592,7 @@ class InteractionZone:
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
                                  where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
-        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings), st
 
     def slide_rings(self, st, bc, theta):
         """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
@@ -821,18 +914,29 @@ def creation_point(px, gx, po, go, lowest=0.0):
     return out[:3], out[3:]
 
 
-def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT) -> Snapshot:
+def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT,
+              wall="penalty") -> Snapshot:
     """The zone as a :class:`Snapshot`: per yarn its fell point, its crossings' centerline
     points, its ring point (guide ring) and its top point; ``external_force_N`` at a crossing's
     points the jamming and wall forces (``frontal.point_forces``), at a ring point the ring's
     contact force (normal and friction: the point is held by the ring, so it balances the two
     tensions there), zero at the fell and spool points (held ends: their supports, the laid yarn
-    and the carrier, are outside the zone)."""
+    and the carrier, are outside the zone).
+
+    ``wall``: "penalty", the wall force of Newton's penalty (its crossings sit the micrometre
+    behind their planes that carries it); "reaction", for a state either solver left: at a
+    crossing on or behind its tangent plane (``wall_contact``) the wall takes the yarns' pull
+    into the mandrel along the plane's normal, as the relaxation's exact wall does (a
+    non-negative normal force; the pull along the plane stays unbalanced where it is)."""
     n = machine.n_per_group
     ny = machine.n_yarns
     ring = machine.has_ring
     e = settings.energy
-    ext_c = frontal.point_forces(st, bc, settings)
+    if wall == "reaction" and bc.plane is not None and st.m:
+        ext_c = frontal.point_forces(st, dataclasses.replace(bc, plane=None), settings)
+        _add_wall_reaction(st, bc, ext_c, f_top)
+    else:
+        ext_c = frontal.point_forces(st, bc, settings)
     points, offsets, tension, cid, slip, ext = [], [0], [], [], [], []
     for k in range(ny):
         side = 0 if k < n else 1
@@ -869,6 +973,40 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
                     contact_id=np.array(cid, dtype=np.int64),
                     slip=np.array(slip, dtype=np.int8), group=machine.group.copy(),
                     external_force_N=np.array(ext, dtype=float).reshape(-1, 3))
+
+
+#: m, a crossing within this of its tangent plane (or behind it) rests on the wall in a
+#: snapshot's "reaction" forces: the relaxation's wall tolerance (``RelaxSettings.wall_release``)
+#: is 1e-7 m and Newton's penalty holds crossings about 1 um behind their planes
+WALL_CONTACT = 1e-5
+
+
+def _add_wall_reaction(st, bc, ext_c, f_top):
+    """Add to ``ext_c`` (m, 2, 3) the wall's reaction at the crossings resting on their tangent
+    planes (``WALL_CONTACT``): the normal part of the net force of the four segments' tensions
+    and ``ext_c`` pressing into the mandrel, on the inner yarn's point (``point_forces``)."""
+    m = st.m
+    plane = bc.plane[:m]
+    pos = st.pos[:m]
+    sd = np.einsum("ij,ij->i", pos - plane[:, :3], plane[:, 3:])
+    resting = np.nonzero(sd < WALL_CONTACT)[0]
+    if not len(resting):
+        return
+    net = ext_c[:m].sum(axis=1)
+    for c in resting.tolist():
+        for side in range(2):
+            here = st.centerline_point(c, side, bc.h)
+            lo = st.low[c, side]
+            k = int(st.yarn[c, side])
+            below = st.centerline_point(lo, side, bc.h) if lo >= 0 else bc.fell[k]
+            up = st.up[c, side]
+            above = st.centerline_point(up, side, bc.h) if up >= 0 else bc.top[k]
+            f_hi = st.tension[up, side] if up >= 0 else f_top[k]
+            net[c] += st.tension[c, side] * _unit(below - here) + f_hi * _unit(above - here)
+    normal = plane[resting, 3:]
+    push = np.maximum(-np.einsum("ij,ij->i", net[resting], normal), 0.0)
+    inner = np.where(st.over[resting] > 0, 1, 0)
+    ext_c[resting, inner] += push[:, None] * normal
 
 
 def _unit(v):
