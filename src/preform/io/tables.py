@@ -135,6 +135,32 @@ def flag_counts(yarns) -> dict:
     return {name: int(np.count_nonzero(flags & bit)) for bit, name in FLAG_NAMES.items()}
 
 
+def _snapshot_checks(result):
+    """The written snapshots against the re-balance that checks each (the written state is the
+    run's own): the largest distance of a crossing from its re-balanced place (m) and the
+    snapshots whose re-balance failed; None where no snapshot was checked."""
+    shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
+    failed = [s.time_s for s in result.snapshots if s.rebalance_error]
+    if not shifts and not failed:
+        return None
+    return {"rebalance_shift_max_m": max(shifts) if shifts else None,
+            "rebalance_failed_at_s": failed}
+
+
+def _interlacing(result):
+    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``)."""
+    from ..interlacing import interlacing
+
+    if result.centerline is None or not len(result.yarns.points):
+        return None
+    il = interlacing(result.yarns, result.centerline)
+    if il is None:
+        return None
+    return {"band_m": [il.s_start, il.s_end], "crossings": il.measured,
+            "pattern_crossings": il.pattern, "ratio": il.ratio,
+            "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
+
+
 def summary_dict(result, extra=None) -> dict:
     """Everything summary.json holds, as JSON-able data (non-finite numbers become null)."""
     from .._version import __version__
@@ -169,6 +195,8 @@ def summary_dict(result, extra=None) -> dict:
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
+        "snapshot_checks": _snapshot_checks(result),
+        "interlacing": _interlacing(result),
         "inputs": echo_inputs(config),
     }
     if extra:
