@@ -249,3 +249,18 @@ def test_snapshot_reasons_flag_a_state_far_from_its_rebalance_and_a_failed_rebal
     assert "could not be checked" in quality.snapshot_reasons([failed], 0.2)[0]
     slack = dataclasses.replace(base, tension_N=np.array([0.0]))
     assert "slack yarn" in quality.snapshot_reasons([slack], 0.2)[0]
+
+
+def test_the_interaction_note_gives_this_runs_steps(tmp_path):
+    """Before an interaction run starts, its note gives the work estimate's step count (the
+    figure the estimate prints after the run), not a fixed sentence about large machines."""
+    from preform.pipeline import checked_geometry, estimate
+
+    cfg = _cylinder_interaction(tmp_path)
+    mandrel, cl, notes = checked_geometry(cfg)
+    steps = estimate(cfg, mandrel, cl).steps
+    (line,) = [n for n in notes if '[model] kind = "interaction"' in n]
+    assert line.startswith("note: ") and f"about {steps:,} time steps" in line
+    assert "slow on large machines" not in " ".join(notes)
+    kin = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="kinematic"))
+    assert not [n for n in checked_geometry(kin)[2] if "[model] kind" in n]

@@ -48,13 +48,16 @@ class WorkEstimate:
     model: str = "kinematic"
 
     def lines(self) -> list[str]:
-        out = [f"estimated work: {self.field_faces:,} field faces, {self.steps:,} time steps, "
-               f"about {self.result_bytes / 1e6:.0f} MB of results"]
-        if self.model == "interaction":
-            out.append(f'[model] kind = "interaction": each of the {self.steps:,} time steps '
-                       "solves all crossings of the convergence zone at once; a step that does "
-                       "not converge stops the run, which keeps the results up to it")
-        return out
+        return [f"estimated work: {self.field_faces:,} field faces, {self.steps:,} time steps, "
+                f"about {self.result_bytes / 1e6:.0f} MB of results"]
+
+    def model_line(self) -> str:
+        """What the run's model costs, said before it starts ("" for the kinematic model)."""
+        if self.model != "interaction":
+            return ""
+        return (f'[model] kind = "interaction": about {self.steps:,} time steps, each a solve '
+                "of every crossing of the convergence zone; a step that does not converge "
+                "stops the run, which keeps the results up to it")
 
 
 def braiding_time(config) -> float:
