@@ -89,13 +89,13 @@ def crossing_balance(yarns, external):
     return float(size.max() / f_max), float(rel.max()), len(net), len(pushed)
 
 
-def checked_snapshot_files(snapshots, out_dir, mu):
+def checked_snapshot_files(snapshots, out_dir, mu, rebalanced=False):
     """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance
     (with ``external_force_N``) at every crossing (issue 14); the written snapshots are the run's
     own states, whose friction law holds to the step's lag of the bounds, so the friction law
     (issue 4) is asserted on the re-balanced copies that check them (``Snapshot.rebalanced``),
     written and read back the same way, which must balance too. The yarns (``read_snapshot``)
-    of every written file that has crossings."""
+    of every written file that has crossings (``rebalanced``: of the re-balanced copies')."""
     out = []
     checked = [s.rebalanced for s in snapshots]
     assert all(c is not None for c in checked), "a snapshot was not checked by a re-balance"
@@ -112,5 +112,5 @@ def checked_snapshot_files(snapshots, out_dir, mu):
         err, _, _, _ = crossing_balance(re, read_external_forces(q))
         assert err < 1e-3
         assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
-        out.append(yarns)
+        out.append(re if rebalanced else yarns)
     return out
