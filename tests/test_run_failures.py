@@ -264,3 +264,16 @@ def test_the_interaction_note_gives_this_runs_steps(tmp_path):
     assert "slow on large machines" not in " ".join(notes)
     kin = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="kinematic"))
     assert not [n for n in checked_geometry(kin)[2] if "[model] kind" in n]
+
+
+def test_interlacing_reasons():
+    """Warp and weft crossing below half the pattern's count separate; a band where the pattern
+    gives less than half a crossing per pair is not judged."""
+    from preform.interlacing import Interlacing
+
+    il = dict(s_start=0.0, s_end=0.1, area_m2=0.01, pairs=100)
+    assert quality.interlacing_reasons(Interlacing(measured=60, pattern=100.0, **il)) == []
+    (r,) = quality.interlacing_reasons(Interlacing(measured=40, pattern=100.0, **il))
+    assert "warp and weft separate: 40 warp-weft crossings" in r and "0.40" in r
+    assert quality.interlacing_reasons(Interlacing(measured=0, pattern=40.0, **il)) == []
+    assert quality.interlacing_reasons(None) == []

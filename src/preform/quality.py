@@ -153,13 +153,19 @@ def fell_jump_reasons(history, take_up_speed, settings: QualitySettings = QUALIT
             f"in one step ({jump[k]:.3g}x, at t = {t[k + 1]:.4g} s)"]
 
 
-def interlacing_reasons(result, settings: QualitySettings = QUALITY) -> list[str]:
-    """Reasons to doubt a run whose warp and weft separate (``preform.interlacing``)."""
+def run_interlacing(result):
+    """``preform.interlacing.interlacing`` of a run's laid yarns (None without yarns or a
+    centerline)."""
     from .interlacing import interlacing
 
     if result.centerline is None or not len(result.yarns.points):
-        return []
-    il = interlacing(result.yarns, result.centerline)
+        return None
+    return interlacing(result.yarns, result.centerline)
+
+
+def interlacing_reasons(il, settings: QualitySettings = QUALITY) -> list[str]:
+    """Reasons to doubt a run whose warp and weft separate: ``il`` its interlacing
+    (:func:`run_interlacing`, or None)."""
     if il is None or il.pattern < settings.min_pattern_per_pair * il.pairs:
         return []
     if il.ratio < settings.min_interlacing:
@@ -317,9 +323,10 @@ def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
     return reasons
 
 
-def assess(result, settings: QualitySettings = QUALITY) -> dict:
-    """The verdict on a Result from its history, yarn flags and convergence-zone snapshots (see
-    module docstring)."""
+def assess(result, settings: QualitySettings = QUALITY, interlacing=False) -> dict:
+    """The verdict on a Result from its status, history, laid yarns and convergence-zone
+    snapshots (see module docstring). ``interlacing``: the run's :func:`run_interlacing` where
+    the caller has it (False: computed here)."""
     reasons = []
     if result.status != "done":
         reasons.append(f"the run did not finish: status {result.status}"
@@ -332,7 +339,8 @@ def assess(result, settings: QualitySettings = QUALITY) -> dict:
                                          settings)
     reasons += yarn_reasons(result.yarns.flags, settings)
     reasons += slip_reasons(result.yarns.flags, settings)
-    reasons += interlacing_reasons(result, settings)
+    reasons += interlacing_reasons(run_interlacing(result) if interlacing is False else interlacing,
+                                   settings)
     if result.snapshots and result.config is not None:
         reasons += snapshot_reasons(result.snapshots, float(result.config.yarn.friction), settings,
                                     width=float(result.config.yarn.width))

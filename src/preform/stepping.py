@@ -250,8 +250,8 @@ class Stepper:
         step are kept (``simulation.simulate``)."""
         return SimulationError(
             f"step {self.step + 1} (t = {t1:.6g} s, {self.braided:.4g} m braided) failed in {part}: "
-            f"{type(exc).__name__}: {exc or 'no message'} (an internal fault on this part; the "
-            "results up to the last good step are written: please report it with the config)")
+            f"{type(exc).__name__}: {exc or 'no message'} (an internal fault, not an input error; "
+            "the results up to the last good step are kept: please report it with the config)")
 
     def _deposit(self, deposits, pose):
         """Crossings that reached the mandrel become fell points (interaction model).

@@ -451,12 +451,15 @@ class InteractionZone:
             change = np.abs(st.bound[:m] - held)
             change = np.where(np.isfinite(change), change, -1.0)
             c, side = np.unravel_index(int(np.argmax(change)), change.shape)
+            what = (f"largest at {self._yarn_name(int(st.yarn[c, side]))}'s crossing "
+                    f"{int(st.uid[c])}; likely cause: {self._likely_cause(c, side)}"
+                    if change[c, side] >= 0.0 else
+                    "at the crossings the step created; likely cause: the creation of crossings "
+                    "(the carriers' passes, [machine] guide_ring)")
             raise SimulationError(
                 f"the yarn-interaction model did not converge {where}: residual {residual:.3g} "
                 f"(limit {zs.max_step_residual:g}: the friction bounds the step held differ from "
-                f"those of its solution by more than the tensions they bound), largest at "
-                f"{self._yarn_name(int(st.yarn[c, side]))}'s crossing {int(st.uid[c])}; likely "
-                f"cause: {self._likely_cause(c, side)}")
+                f"those of its solution by more than the tensions they bound), {what}")
 
     def _yarn_name(self, k) -> str:
         n = self.machine.n_per_group

@@ -122,10 +122,10 @@ def _steady_state(result):
     return steady_state(result.history)
 
 
-def _quality(result, fields_reasons=()):
+def _quality(result, fields_reasons=(), interlacing=False):
     from ..quality import assess, verdict
 
-    q = assess(result)
+    q = assess(result, interlacing=interlacing)
     return verdict([*q["reasons"], *fields_reasons])
 
 
@@ -147,13 +147,9 @@ def _snapshot_checks(result):
             "rebalance_failed_at_s": failed}
 
 
-def _interlacing(result):
-    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``)."""
-    from ..interlacing import interlacing
-
-    if result.centerline is None or not len(result.yarns.points):
-        return None
-    il = interlacing(result.yarns, result.centerline)
+def _interlacing(il):
+    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``;
+    ``il``: ``quality.run_interlacing``'s)."""
     if il is None:
         return None
     return {"band_m": [il.s_start, il.s_end], "crossings": il.measured,
@@ -169,6 +165,9 @@ def summary_dict(result, extra=None) -> dict:
     model = config.model.kind if config is not None else None
     extra = dict(extra or {})
     steady = _steady_state(result) or {}
+    from ..quality import run_interlacing
+
+    interlaced = run_interlacing(result)
     summary = {
         "preform_version": __version__,
         "model": model,
@@ -190,13 +189,13 @@ def summary_dict(result, extra=None) -> dict:
             "steady": steady["convergence_length_m"] if steady.get("reached") else None,
         },
         "steady_state": steady or None,
-        "quality": _quality(result, (extra or {}).pop("quality_reasons", ())),
+        "quality": _quality(result, (extra or {}).pop("quality_reasons", ()), interlaced),
         "mandrel_repairs": list(result.mandrel.repairs) if result.mandrel is not None else [],
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
         "snapshot_checks": _snapshot_checks(result),
-        "interlacing": _interlacing(result),
+        "interlacing": _interlacing(interlaced),
         "inputs": echo_inputs(config),
     }
     if extra:
