@@ -244,7 +244,11 @@ def test_snapshot_reasons_flag_a_state_far_from_its_rebalance_and_a_failed_rebal
     near = dataclasses.replace(base, rebalance_shift_m=0.019)
     assert quality.snapshot_reasons([near], 0.2, width=4e-3) == []
     (r,) = quality.snapshot_reasons([far], 0.2, width=4e-3)
-    assert "21 mm" in r and "run's own state" in r
+    assert "21 mm" in r and "run's own states" in r
+    # one reason a kind, with the worst snapshot and the count
+    (r,) = quality.snapshot_reasons([far, near, dataclasses.replace(far, rebalance_shift_m=0.03)],
+                                    0.2, width=4e-3)
+    assert r.startswith("2 of 3 convergence-zone snapshots") and "30 mm" in r
     failed = dataclasses.replace(base, rebalance_error="no balance")
     assert "could not be checked" in quality.snapshot_reasons([failed], 0.2)[0]
     slack = dataclasses.replace(base, tension_N=np.array([0.0]))

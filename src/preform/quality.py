@@ -285,41 +285,65 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
 
 def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
                      width: float | None = None) -> list[str]:
-    """Reasons to doubt the written convergence-zone snapshots: crossings out of balance beyond
-    ``settings``' threshold (:func:`snapshot_checks`), a slack segment, and, where a re-balance
-    checked the snapshot (``Snapshot.rebalanced``): the re-balanced copy outside the friction
-    cone, the re-balance failing, or the written crossings further than
+    """Reasons to doubt the written convergence-zone snapshots, one a kind (the worst snapshot
+    and how many): crossings out of balance beyond ``max_snapshot_imbalance``
+    (:func:`snapshot_checks`), a slack segment, and, where a re-balance checked the snapshot
+    (``Snapshot.rebalanced``): the re-balanced copy outside the friction cone
+    (``max_snapshot_psi``), the re-balance failing, or the written crossings further than
     ``max_snapshot_shift_widths`` yarn widths (``width``, m) from the re-balanced ones. A
     snapshot without a re-balanced copy is checked for the friction cone itself."""
-    reasons = []
+    found = {"imbalance": [], "psi": [], "slack": [], "failed": [], "shift": []}
     for snap in snapshots:
         imbalance, psi = snapshot_checks(snap, mu)
         if snap.rebalanced is not None:
             psi = snapshot_checks(snap.rebalanced, mu)[1]
         ten = np.asarray(snap.tension_N, dtype=float)
-        if len(ten) and float(ten.min()) <= 0.0:
-            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s has a slack "
-                           f"yarn (a segment at {float(ten.min()):.3g} N; convergence.pvd)")
-        if snap.rebalance_error:
-            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s could not be "
-                           f"checked: its re-balance found no balanced state "
-                           f"({snap.rebalance_error})")
         shift = float(snap.rebalance_shift_m)
-        if width is not None and np.isfinite(shift) and shift > settings.max_snapshot_shift_widths * width:
-            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s is the run's own "
-                           f"state, and a crossing of it lies {shift * 1e3:.3g} mm from where the "
-                           f"re-balance that checks it puts it (above "
-                           f"{settings.max_snapshot_shift_widths:g} yarn widths): the step was "
-                           "far from balance with its converged friction bounds")
+        t = snap.time_s
         if imbalance > settings.max_snapshot_imbalance:
-            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s has crossings out "
-                           f"of balance by up to {imbalance:.2g} of its largest tension (above "
-                           f"{settings.max_snapshot_imbalance:g}; convergence.pvd)")
+            found["imbalance"].append((imbalance, t))
         if psi > settings.max_snapshot_psi:
-            reasons.append(f"the convergence-zone snapshot at t = {snap.time_s:.4g} s has crossings "
-                           f"outside the friction cone by up to {psi:.2g} of their tension (above "
-                           f"{settings.max_snapshot_psi:g}): its friction bounds did not settle "
-                           f"(convergence.pvd)")
+            found["psi"].append((psi, t))
+        if len(ten) and float(ten.min()) <= 0.0:
+            found["slack"].append((-float(ten.min()), t))
+        if snap.rebalance_error:
+            found["failed"].append((0.0, t, snap.rebalance_error))
+        if width is not None and np.isfinite(shift) and shift > settings.max_snapshot_shift_widths * width:
+            found["shift"].append((shift, t))
+    n = len(snapshots)
+    reasons = []
+
+    def worst(kind):
+        items = found[kind]
+        return len(items), max(items, key=lambda x: x[0])
+
+    if found["imbalance"]:
+        k, (v, t) = worst("imbalance")
+        reasons.append(f"{k} of {n} convergence-zone snapshots have crossings out of balance, by up "
+                       f"to {v:.2g} of their largest tension at t = {t:.4g} s (above "
+                       f"{settings.max_snapshot_imbalance:g}; convergence.pvd)")
+    if found["psi"]:
+        k, (v, t) = worst("psi")
+        reasons.append(f"{k} of {n} convergence-zone snapshots have crossings outside the friction "
+                       f"cone, by up to {v:.2g} of their tension at t = {t:.4g} s (above "
+                       f"{settings.max_snapshot_psi:g}): their friction bounds did not settle "
+                       f"(convergence.pvd)")
+    if found["slack"]:
+        k, (v, t) = worst("slack")
+        reasons.append(f"{k} of {n} convergence-zone snapshots have a slack yarn (a segment at "
+                       f"{-v:.3g} N at t = {t:.4g} s; convergence.pvd)")
+    if found["failed"]:
+        k = len(found["failed"])
+        _, t, why = found["failed"][0]
+        reasons.append(f"{k} of {n} convergence-zone snapshots could not be checked: their "
+                       f"re-balance found no balanced state (first at t = {t:.4g} s: {why})")
+    if found["shift"]:
+        k, (v, t) = worst("shift")
+        reasons.append(f"{k} of {n} convergence-zone snapshots (the run's own states) have "
+                       f"crossings more than {settings.max_snapshot_shift_widths:g} yarn widths "
+                       f"from where the re-balance that checks them puts them, up to "
+                       f"{v * 1e3:.3g} mm at t = {t:.4g} s: the steps were far from balance with "
+                       f"their converged friction bounds")
     return reasons
 
 

@@ -386,10 +386,13 @@ class InteractionZone:
                 self.last_report = self.solve_zone(st, wall, settings=self.settings,
                                                    where=where, centre=centre)
             bc = wall
-        except SimulationError:
+        except SimulationError as err:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
-                raise
-            bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
+                raise self._with_cause(err) from None
+            try:
+                bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
+            except SimulationError as again:
+                raise self._with_cause(again) from None
         self._check_step(where, posed["bound"])
         self.f_top = self.last_report.f_top
         self.stage = "the guide ring's contact"
@@ -460,6 +463,23 @@ class InteractionZone:
                 f"the yarn-interaction model did not converge {where}: residual {residual:.3g} "
                 f"(limit {zs.max_step_residual:g}: the friction bounds the step held differ from "
                 f"those of its solution by more than the tensions they bound), {what}")
+
+    def _with_cause(self, err) -> SimulationError:
+        """A solver's failure with the likely cause read off the iterate it left: a slack yarn
+        (the lowest tension, below ``slack_tension``), else where the crossing with the lowest
+        tension sits (``_likely_cause``)."""
+        st = self.state
+        if st.m == 0:
+            return err
+        ten = st.tension[: st.m]
+        c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
+        if ten[c, side] < self.settings.zone.slack_tension * self.f_spool:
+            cause = (f"a slack yarn ({self._yarn_name(int(st.yarn[c, side]))} at "
+                     f"{ten[c, side]:.3g} N below crossing {int(st.uid[c])} in the last iterate), "
+                     f"at {self._likely_cause(c, side)}")
+        else:
+            cause = self._likely_cause(c, side)
+        return SimulationError(f"{err}; likely cause: {cause}")
 
     def _yarn_name(self, k) -> str:
         n = self.machine.n_per_group
