@@ -281,3 +281,25 @@ def test_interlacing_reasons():
     assert "warp and weft separate: 40 warp-weft crossings" in r and "0.40" in r
     assert quality.interlacing_reasons(Interlacing(measured=0, pattern=40.0, **il)) == []
     assert quality.interlacing_reasons(None) == []
+
+
+def test_a_solve_that_fails_also_in_stages_names_its_likely_cause(tmp_path):
+    """A solver that gives up from step 3 on (also on the staged retries): the error keeps the
+    solver's message and adds the likely cause read off the zone."""
+    cfg = _cylinder_interaction(tmp_path)
+    mandrel, cl = load_geometry(cfg)
+    cfg = resolve_pose_lead(cfg, mandrel, cl)
+    machine = Machine.from_config(cfg.machine)
+    calls = [0]
+
+    def solve(state, bc, **kw):
+        calls[0] += 1
+        if calls[0] >= 3 and state.m:
+            raise SimulationError("the solver gave up at this step")
+        from preform.interaction.frontal import solve_zone_inplace
+        return solve_zone_inplace(state, bc, **kw)
+
+    s = Stepper(cfg, machine, mandrel, cl, InteractionZone(cfg, machine, mandrel, solve_zone=solve))
+    with pytest.raises(SimulationError) as err:
+        s.run(progress=False)
+    assert "the solver gave up at this step; likely cause: " in str(err.value)
