@@ -75,7 +75,7 @@ from ..errors import SimulationError
 from .. import plain
 from ..result import Snapshot
 from ..zone import ZoneStep
-from . import frontal
+from . import frontal, step_check
 from .ring import ring_arguments, ring_point
 from .settings import DEFAULT, InteractionSettings
 from .zone_state import ZoneState
@@ -388,12 +388,12 @@ class InteractionZone:
             bc = wall
         except SimulationError as err:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
-                raise self._with_cause(err) from None
+                raise step_check.with_cause(self, err) from None
             try:
                 bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
             except SimulationError as again:
-                raise self._with_cause(again) from None
-        self._check_step(where, posed["bound"])
+                raise step_check.with_cause(self, again) from None
+        step_check.check_step(self, where, posed["bound"])
         self.f_top = self.last_report.f_top
         self.stage = "the guide ring's contact"
         if self.machine.has_ring:
@@ -428,77 +428,6 @@ class InteractionZone:
         return ZoneStep(G_mid=G_mid, G_end=G_end, deposits=deposits, contacts=st.m,
                         iterations=self.last_report.iterations,
                         residual=self.last_report.residual)
-
-    def _check_step(self, where, held):
-        """SimulationError where the step's solve left no state of the model: a slack yarn
-        (``ZoneSettings.slack_tension``) or a residual above ``max_step_residual``; the message
-        names the step, the figure and the likely cause, from the crossing where it was found
-        (``_likely_cause``). ``held``: the bounds the step held (its posed state's; non-finite
-        for new crossings)."""
-        st, zs = self.state, self.settings.zone
-        m = st.m
-        residual = float(self.last_report.residual)
-        if m == 0:
-            return
-        ten = st.tension[:m]
-        c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
-        if ten[c, side] < zs.slack_tension * self.f_spool:
-            k = int(st.yarn[c, side])
-            raise SimulationError(
-                f"the yarn-interaction model has a slack yarn {where}: {self._yarn_name(k)}'s "
-                f"segment below crossing {int(st.uid[c])} carries {ten[c, side]:.3g} N (spool "
-                f"tension {self.f_spool:g} N; the model admits no slack yarn, every free yarn is "
-                f"pulled by its carrier), residual {residual:.3g}; likely cause: "
-                f"{self._likely_cause(c, side)}")
-        if not residual <= zs.max_step_residual:
-            change = np.abs(st.bound[:m] - held)
-            change = np.where(np.isfinite(change), change, -1.0)
-            c, side = np.unravel_index(int(np.argmax(change)), change.shape)
-            what = (f"largest at {self._yarn_name(int(st.yarn[c, side]))}'s crossing "
-                    f"{int(st.uid[c])}; likely cause: {self._likely_cause(c, side)}"
-                    if change[c, side] >= 0.0 else
-                    "at the crossings the step created; likely cause: the creation of crossings "
-                    "(the carriers' passes, [machine] guide_ring)")
-            raise SimulationError(
-                f"the yarn-interaction model did not converge {where}: residual {residual:.3g} "
-                f"(limit {zs.max_step_residual:g}: the friction bounds the step held differ from "
-                f"those of its solution by more than the tensions they bound), {what}")
-
-    def _with_cause(self, err) -> SimulationError:
-        """A solver's failure with the likely cause read off the iterate it left: a slack yarn
-        (the lowest tension, below ``slack_tension``), else where the crossing with the lowest
-        tension sits (``_likely_cause``)."""
-        st = self.state
-        if st.m == 0:
-            return err
-        ten = st.tension[: st.m]
-        c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
-        if ten[c, side] < self.settings.zone.slack_tension * self.f_spool:
-            cause = (f"a slack yarn ({self._yarn_name(int(st.yarn[c, side]))} at "
-                     f"{ten[c, side]:.3g} N below crossing {int(st.uid[c])} in the last iterate), "
-                     f"at {self._likely_cause(c, side)}")
-        else:
-            cause = self._likely_cause(c, side)
-        return SimulationError(f"{err}; likely cause: {cause}")
-
-    def _yarn_name(self, k) -> str:
-        n = self.machine.n_per_group
-        return f"warp yarn {k}" if k < n else f"weft yarn {k - n}"
-
-    def _likely_cause(self, c, side) -> str:
-        """Where crossing c of yarn side ``side`` sits, as the likely cause of a failed step: under
-        the guide ring (its yarn's highest crossing), next to the mandrel (its lowest: the pose),
-        or in between (the yarns' friction)."""
-        st = self.state
-        k = int(st.yarn[c, side])
-        if self.machine.has_ring and st.highest[k] == c:
-            return ("the guide ring (the yarn's highest crossing, under its ring point: [machine] "
-                    "guide_ring, [yarn] ring_friction)")
-        if st.lowest[k] == c:
-            return ("the pose (the yarn's lowest crossing, next to the mandrel: [process] "
-                    "pose_lead, eccentricity, and the mandrel's bends and sections there)")
-        return ("the friction between the yarns (a crossing inside the zone: [yarn] friction, "
-                "[model] time_step)")
 
     def _staged(self, t0, t1, bc, where, centre, fell_start, posed):
         """The step solved again with its boundary moved in the ``boundary_stages`` (fell points
