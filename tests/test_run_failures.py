@@ -303,3 +303,17 @@ def test_a_solve_that_fails_also_in_stages_names_its_likely_cause(tmp_path):
     with pytest.raises(SimulationError) as err:
         s.run(progress=False)
     assert "the solver gave up at this step; likely cause: " in str(err.value)
+
+
+def test_the_summary_says_which_snapshots_differ_from_their_rebalance(tmp_path):
+    """summary.json's snapshot_checks: the largest shift, the tolerance (5 yarn widths) and the
+    snapshots beyond it, from a short interaction run whose snapshots' shifts are set."""
+    cfg = _cylinder_interaction(tmp_path)
+    res = pf.simulate(cfg, progress=False)
+    assert all(np.isfinite(s.rebalance_shift_m) for s in res.snapshots)   # every one checked
+    snaps = [dataclasses.replace(s, rebalance_shift_m=v)
+             for s, v in zip(res.snapshots, (0.001, 0.05, 0.0))]
+    s = summary_dict(dataclasses.replace(res, snapshots=snaps))["snapshot_checks"]
+    assert s["rebalance_shift_max_m"] == 0.05
+    assert s["rebalance_shift_tolerance_m"] == pytest.approx(5 * cfg.yarn.width)
+    assert s["beyond_tolerance_at_s"] == [snaps[1].time_s] and s["rebalance_failed_at_s"] == []

@@ -137,13 +137,22 @@ def flag_counts(yarns) -> dict:
 
 def _snapshot_checks(result):
     """The written snapshots against the re-balance that checks each (the written state is the
-    run's own): the largest distance of a crossing from its re-balanced place (m) and the
-    snapshots whose re-balance failed; None where no snapshot was checked."""
+    run's own): the largest distance of a crossing from its re-balanced place (m), the tolerance
+    the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
+    times of the snapshots beyond it and of those whose re-balance failed; None where no
+    snapshot was checked."""
+    from ..quality import QUALITY
+
     shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
     failed = [s.time_s for s in result.snapshots if s.rebalance_error]
     if not shifts and not failed:
         return None
+    tolerance = (QUALITY.max_snapshot_shift_widths * float(result.config.yarn.width)
+                 if result.config is not None else None)
+    beyond = [s.time_s for s in result.snapshots if tolerance is not None
+              and np.isfinite(s.rebalance_shift_m) and s.rebalance_shift_m > tolerance]
     return {"rebalance_shift_max_m": max(shifts) if shifts else None,
+            "rebalance_shift_tolerance_m": tolerance, "beyond_tolerance_at_s": beyond,
             "rebalance_failed_at_s": failed}
 
 
