@@ -319,3 +319,24 @@ def test_the_summary_says_which_snapshots_differ_from_their_rebalance(tmp_path):
     assert s["rebalance_shift_max_m"] == 0.05
     assert s["rebalance_shift_tolerance_m"] == pytest.approx(5 * cfg.yarn.width)
     assert s["beyond_tolerance_at_s"] == [snaps[1].time_s] and s["rebalance_failed_at_s"] == []
+
+
+def test_crossing_shift_matches_yarn_points_by_crossing():
+    """The shift compares each yarn's point at each crossing with the same yarn's at the same
+    crossing in the other snapshot; crossings in only one (deposited by the re-balance) and the
+    fell, ring and spool points are not compared."""
+    from preform.interaction.model import crossing_shift
+    from preform.result import Snapshot
+
+    def snap(points, cid):
+        n = len(points) // 2
+        return Snapshot(time_s=0.0, points=np.array(points, dtype=float),
+                        offsets=np.array([0, n, 2 * n]), tension_N=np.ones(2 * n - 2),
+                        contact_id=np.array(cid), slip=np.zeros(2 * n, dtype=np.int8),
+                        group=np.array([0, 1], dtype=np.int8))
+
+    a = snap([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2]], [-1, 7, -1, -1, 7, -1])
+    b = snap([[5, 0, 0], [0, 0.003, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [9, 0, 2]], [-1, 7, -1, -1, 7, -1])
+    assert crossing_shift(a, b) == pytest.approx(0.003)
+    gone = snap([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2]], [-1, 8, -1, -1, 8, -1])
+    assert crossing_shift(a, gone) == 0.0

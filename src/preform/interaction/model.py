@@ -305,7 +305,7 @@ class InteractionZone:
         self.t = 0.0
         self.stage = ""               # the part of the step under way (a fault's message names it)
         self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
-        self._own = None              # (Snapshot, uids, positions) of the last such step
+        self._own = None              # the Snapshot of the last such step's solved state
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
@@ -407,9 +407,8 @@ class InteractionZone:
             self._ring_flow()
         if self.snapshot_due:
             # the state the step solved, before its deposit: what its snapshot writes
-            self._own = (_snapshot(st, bc, self.last_report.f_top, t1, self.machine,
-                                   self.settings, wall="reaction"),
-                         st.uid[: st.m].copy(), st.pos[: st.m].copy())
+            self._own = _snapshot(st, bc, self.last_report.f_top, t1, self.machine,
+                                  self.settings, wall="reaction")
         self.stage = "the deposit of crossings on the mandrel"
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
@@ -478,31 +477,24 @@ class InteractionZone:
 
         The snapshot is checked by a re-balance (``rebalanced``, on a copy): the zone brought to
         balance with the fell points given and friction bounds iterated to convergence; the
-        written state stays the run's own, and ``rebalance_shift_m`` says how far its crossings
-        are from the re-balanced ones (``rebalance_error`` where the re-balance failed)."""
-        own = self._own
-        self._own = None
-        if own is None or own[0].time_s != float(t):
+        written state stays the run's own, and ``rebalance_shift_m`` says how far its yarns'
+        points at the crossings are from the re-balanced ones (``rebalance_error`` where the
+        re-balance failed)."""
+        snap, self._own = self._own, None
+        if snap is None or snap.time_s != float(t):
             bc = self._with_wall(self.boundary(t, F_machine))
-            st = self.state
-            own = (_snapshot(st, bc, self.f_top, t, self.machine, self.settings, wall="reaction"),
-                   st.uid[: st.m].copy(), st.pos[: st.m].copy())
-        snap, uids, pos = own
+            snap = _snapshot(self.state, bc, self.f_top, t, self.machine, self.settings,
+                             wall="reaction")
         try:
-            checked, st = self._rebalanced(t, F_machine)
+            checked = self._rebalanced(t, F_machine)
         except SimulationError as err:
             return dataclasses.replace(snap, rebalance_error=str(err))
-        at = {int(u): i for i, u in enumerate(st.uid[: st.m].tolist())}
-        common = [(i, at[int(u)]) for i, u in enumerate(uids.tolist()) if int(u) in at]
-        shift = 0.0
-        if common:
-            a, b = np.array(common).T
-            shift = float(np.max(np.linalg.norm(pos[a] - st.pos[b], axis=1)))
-        return dataclasses.replace(snap, rebalance_shift_m=shift, rebalanced=checked)
+        return dataclasses.replace(snap, rebalance_shift_m=crossing_shift(snap, checked),
+                                   rebalanced=checked)
 
-    def _rebalanced(self, t, F_machine):
-        """(Snapshot, state) of the zone re-balanced on a copy with the fell points given: the
-        ring points and the zone solved in turn, the friction bounds to convergence
+    def _rebalanced(self, t, F_machine) -> Snapshot:
+        """The zone re-balanced on a copy with the fell points given: the ring points and the
+        zone solved in turn, the friction bounds to convergence
         (``FrontalSettings.snapshot_tolerance``), crossings the re-solve lays on the mandrel
         deposited."""
         st = self.state.copy()
@@ -544,7 +536,7 @@ class InteractionZone:
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
                                  where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
-        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings), st
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def slide_rings(self, st, bc, theta):
         """Ring angles (2n,) for the next solve: each yarn's ring point sticks or slips across the
@@ -959,6 +951,21 @@ def _add_wall_reaction(st, bc, ext_c, f_top):
     push = np.maximum(-np.einsum("ij,ij->i", net[resting], normal), 0.0)
     inner = np.where(st.over[resting] > 0, 1, 0)
     ext_c[resting, inner] += push[:, None] * normal
+
+
+def crossing_shift(a: Snapshot, b: Snapshot) -> float:
+    """m: the largest distance between a yarn's point at a crossing in snapshot ``a`` and the
+    same yarn's point at the same crossing (contact id) in ``b``; 0 where they share none."""
+    def keyed(snap):
+        yarn = np.repeat(np.arange(len(snap.offsets) - 1), np.diff(snap.offsets))
+        cid = np.asarray(snap.contact_id)
+        at = np.nonzero(cid >= 0)[0]
+        return cid[at] * (len(snap.offsets) - 1) + yarn[at], np.asarray(snap.points)[at]
+
+    ka, pa = keyed(a)
+    kb, pb = keyed(b)
+    _, ia, ib = np.intersect1d(ka, kb, assume_unique=True, return_indices=True)
+    return float(np.max(np.linalg.norm(pa[ia] - pb[ib], axis=1))) if len(ia) else 0.0
 
 
 def _unit(v):

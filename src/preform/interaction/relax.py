@@ -628,7 +628,7 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
     return again
 
 
-def _lag_change(lat, res, held, top_tensions, f_top, floor):
+def _lag_change(lat, res, held, top_tensions, f_top, floor=DEFAULT.frontal.change_scale_floor):
     """(change, top tensions): the relative change from the held bounds ``held`` and top
     tensions ``res.f_top`` to those of the converged geometry of ``res`` (:func:`_bound_change`;
     the top tensions' relative to themselves, behind a guide ring, where ``top_tensions`` gives
@@ -640,7 +640,7 @@ def _lag_change(lat, res, held, top_tensions, f_top, floor):
     return change, f_top
 
 
-def _bound_change(lat, new, old, tension, f_top, floor):
+def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_scale_floor):
     """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn, at
     least ``floor`` times the yarn's top tension (``FrontalSettings.change_scale_floor``): a
     scale that cannot vanish where a yarn goes slack."""
