@@ -194,9 +194,9 @@ class ZoneSettings:
     #: they bound, no lag of an explicit update but a step the model has not solved (the
     #: verdict calls a run suspect from 0.1 on: ``quality.QualitySettings``)
     max_step_residual: float = 1.0
-    #: a yarn segment of the zone below this fraction of the spool tension is slack, which the
-    #: model does not admit (every free yarn is pulled by its carrier's tensioner): the run stops
-    #: as failed at that step
+    #: a yarn segment of the zone at or below this fraction of the spool tension is slack, which
+    #: the model does not admit (every free yarn is pulled by its carrier's tensioner): the run
+    #: stops as failed at that step
     slack_tension: float = 0.0
 
 

@@ -30,7 +30,7 @@ def check_step(zone, where, held) -> None:
         return
     ten = st.tension[:m]
     c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
-    if ten[c, side] < zs.slack_tension * zone.f_spool:
+    if ten[c, side] <= zs.slack_tension * zone.f_spool:
         k = int(st.yarn[c, side])
         raise SimulationError(
             f"the yarn-interaction model has a slack yarn {where}: {yarn_name(zone, k)}'s "
@@ -62,7 +62,7 @@ def with_cause(zone, err) -> SimulationError:
         return err
     ten = st.tension[: st.m]
     c, side = np.unravel_index(int(np.argmin(ten)), ten.shape)
-    if ten[c, side] < zone.settings.zone.slack_tension * zone.f_spool:
+    if ten[c, side] <= zone.settings.zone.slack_tension * zone.f_spool:
         cause = (f"a slack yarn ({yarn_name(zone, int(st.yarn[c, side]))} at "
                  f"{ten[c, side]:.3g} N below crossing {int(st.uid[c])} in the last iterate), "
                  f"at {likely_cause(zone, c, side)}")
