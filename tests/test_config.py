@@ -1,4 +1,5 @@
-"""TOML config loading and validation (DESIGN.md §1): every error names the key and what is expected."""
+"""TOML config loading and validation (docs/guide/configuration.md): every error names the key
+and what is expected."""
 
 from __future__ import annotations
 

@@ -102,3 +102,15 @@ def test_cited_sections_exist():
                 cited.setdefault(number, p.relative_to(ROOT))
         unknown = {n: str(p) for n, p in cited.items() if n not in sections}
         assert not unknown, f"{page}: sections cited but absent: {unknown}"
+
+
+def test_the_configuration_reference_names_every_key():
+    from preform.config import GUIDE_RING_KEYS, KEYS, LAYER_KEYS
+
+    page = (ROOT / "docs" / "guide" / "configuration.md").read_text(encoding="utf-8")
+    for section, keys in KEYS.items():
+        assert f"`[{section}]`" in page, section
+        for key in keys:
+            assert f"| `{key}` |" in page, f"[{section}] {key}"
+    for key in (*GUIDE_RING_KEYS, *LAYER_KEYS):
+        assert f"`{key}" in page or f"{key} =" in page, key

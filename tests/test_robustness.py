@@ -1,4 +1,4 @@
-"""Bad input never ends in a traceback (issue 5): CLI messages, and property-based tests over
+"""Bad input never ends in a traceback: CLI messages, and property-based tests over
 config values and damaged mandrels."""
 
 from __future__ import annotations

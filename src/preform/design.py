@@ -1,9 +1,9 @@
-"""Take-up speed design for a target braid angle (issue 18 item 2; ``preform design``).
+"""Take-up speed design for a target braid angle (``preform design``).
 
 Given a config and a target braid angle (constant, or a table against centerline arc length),
 find the take-up speed table ``[[L, v], ...]`` (braided length -> speed) that lays it:
 
-1. **Quasi-static start** (DESIGN.md §3.2): on a slowly varying section of perimeter-equivalent
+1. **Quasi-static start** (docs/theory.md §2): on a slowly varying section of perimeter-equivalent
    radius ``r = P / 2 pi``, ``tan(alpha) = omega r / (v sqrt(1 + r'^2))``, so
    ``v0(L) = omega r(L) / (tan(alpha_target(L)) sqrt(1 + r'(L)^2))``.
 2. **Iterate the forward model** (kinematic or interaction): the angle laid at braided length

@@ -1,4 +1,4 @@
-"""Parameter sweeps on Dask (issue 18; DESIGN.md §1 ``preform sweep``).
+"""Parameter sweeps on Dask (docs/guide/studies.md).
 
 A sweep file names a base config and the values to vary, as a full grid and/or a list of points::
 
@@ -15,7 +15,7 @@ A sweep file names a base config and the values to vary, as a full grid and/or a
 
 Every point is an ordinary run (:func:`preform.pipeline.run_case`, the same path as
 ``preform run``) with its own results folder under the sweep's, executed on a Dask cluster: a
-``distributed.LocalCluster`` on this machine by default (one single-threaded worker process per
+``distributed.LocalCluster`` on the local machine by default (one single-threaded worker process per
 run, since each run is numba-bound), or an existing scheduler (``scheduler="tcp://host:port"``;
 ``dask-jobqueue`` starts one on SLURM or PBS). A failed point does not stop the sweep: its error
 is recorded. A finished point (complete ``summary.json`` with status done, and the same inputs
