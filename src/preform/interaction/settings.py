@@ -122,6 +122,22 @@ class FrontalSettings:
     #: reported as slipping (it uses more than 99.5 % of its bound)
     slip_report_creeps: float = 10.0
 
+    #: behind a guide ring, solves a time step takes at most to bring what has no state of its
+    #: own to that of its converged geometry, the other crossings' friction bounds held
+    #: (lagged, above): the tension below the ring (Capstan, eq. 9, of the deflection at the
+    #: ring point of the step's result) and the friction bounds of the crossings created in
+    #: the step. The posed ones come from the posed geometry, whose new crossings (below the
+    #: ring) the solve moves by centimetres (case-B-like, 96 carriers, yarn friction 0: top
+    #: tensions up to 23 % off, residual p99 0.21); the map contracts by a factor ~15 a solve.
+    #: Without a ring the new crossings keep their posed bounds, as case A was validated
+    #: (docs/decisions.md, "The step's problem behind a guide ring")
+    posed_iterations: int = 8
+    #: that iteration stops once they change by less than this, relative to the tensions:
+    #: the snapshots' frontal tolerance (snapshot_tolerance; a step's state then meets Psi to
+    #: the 1e-3 the written crossings must); below 1e-5 the balance tolerance's soft modes
+    #: (micrometres) slow the iteration to a factor ~0.6 a solve on the first rows
+    posed_tolerance: float = 1e-4
+
     #: iterate every time step's bounds and top tensions to those of its own converged geometry
     #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
     #: start (issue 14 item 3); off by default: such steps go to Newton (the relaxation does not
