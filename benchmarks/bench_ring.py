@@ -121,7 +121,7 @@ def run_mode(args):
         for i in range(args.repeat):
             with tempfile.TemporaryDirectory() as tmp:
                 t = time.perf_counter()
-                p = subprocess.run([sys.executable, "-m", "preform", "run", toml, "--model",
+                p = subprocess.run([sys.executable, "-m", "preform.cli", "run", toml, "--model",
                                     "interaction", "--out", tmp], capture_output=True, text=True)
                 wall = time.perf_counter() - t
                 if p.returncode != 0:
