@@ -1145,7 +1145,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
 
     A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
     held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
-    into ``state.bound`` for the next step. With ``FrontalSettings.max_iterations`` k > 1 it is up
+    into ``state.bound`` for the next step. Behind a guide ring it is solved again with the top
+    tensions and the new crossings' bounds of its converged geometry until they settle
+    (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``), as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up
     to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
     the same friction centres), until the bounds change by less than ``friction_tolerance``, as
     Newton's frontal iteration. A call that asks for the frontal iteration of the
