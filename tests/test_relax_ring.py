@@ -264,7 +264,7 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
                   width=bc.width, plane=bc.plane,
                   settings=dataclasses.replace(rs, preconditioner=rs.ring_preconditioner),
                   model=model, top_tensions=R.ring_top_tensions(st, bc),
-                  fresh=~np.isfinite(st.bound[:m]))
+                  fresh=R._posed_bounds(st, model))
     assert res.converged and res.residual < TIGHT
     assert np.abs(res.pos - ref.pos[:m]).max() < 1e-6
     assert np.abs(res.tension - ref.tension[:m]).max() < 1e-6 * bc.f_spool

@@ -390,9 +390,9 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     time_step = max_iter is None and friction_tol is None
     # a time step with consistent bounds: the frontal iteration to convergence, mixed
     consistent = fr.consistent_bounds and time_step
-    # behind a guide ring a time step's top tensions (Capstan, eq. 9) and new crossings'
-    # bounds are those of its own converged geometry, the other bounds held
-    # (``FrontalSettings.posed_iterations``)
+    # behind a guide ring a time step's top tensions (Capstan, eq. 9) and friction bounds
+    # (``posed_all_bounds``; else the new crossings' only) are those of its own converged
+    # geometry (``FrontalSettings.posed_iterations``)
     posed_left = fr.posed_iterations - 1 if time_step and not consistent and bc.has_ring else 0
     tol = settings.newton.balance_tolerance if tol is None else tol
     if consistent:
@@ -412,6 +412,8 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     net.tension[:] = state.tension[:m]
     bound0, _, f_top0 = net.bounds()
     fresh = ~np.isfinite(state.bound[:m]) | consistent
+    # the bounds the posed iteration takes of the converged geometry
+    posed = np.ones((m, 2), dtype=bool) if fr.posed_all_bounds else fresh
     net.bound = np.where(fresh, bound0, state.bound[:m])
     net.f_top = f_top0
     if start is not None:
@@ -430,7 +432,7 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
         newton += steps
         while residual < tol and posed_left > 0:
             bound1, _, f_top1 = net.bounds()
-            bound1 = np.where(fresh, bound1, net.bound)
+            bound1 = np.where(posed, bound1, net.bound)
             if not _relative_change(state, net, bound1, f_top1) >= fr.posed_tolerance:
                 break
             posed_left -= 1

@@ -1117,6 +1117,13 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     return np.where(np.isfinite(old), old, g0), f_top
 
 
+def _posed_bounds(state, settings):
+    """(m, 2) bool: the bounds a time step behind a guide ring takes of its converged geometry
+    (``FrontalSettings.posed_all_bounds``: all, else the new crossings')."""
+    fresh = ~np.isfinite(state.bound[:state.m])
+    return np.ones_like(fresh) if settings.frontal.posed_all_bounds else fresh
+
+
 def ring_top_tensions(state, bc):
     """Function of the positions giving the top tensions (guide ring: Capstan, eq. 9), for
     consistent bounds; None without a ring (the spool tension)."""
@@ -1203,7 +1210,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
-                fresh=~np.isfinite(state.bound[:m]) if bc.has_ring else None)
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None)
     ITERATIONS.append(res.iterations)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
