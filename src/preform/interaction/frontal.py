@@ -480,10 +480,10 @@ def _relative_change(state, net, bound1, f_top1):
         u = state.up[:m, side]
         f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
                          f_top1[state.yarn[:m, side]])
-        # no less than a thousandth of the yarn's top tension (``relax.SLACK_SCALE``): a
-        # slack yarn's change is large, not divided by zero
+        # a scale that cannot vanish where a yarn goes slack (``change_scale_floor``)
         scale[:, side] = np.maximum(net.tension[:, side] + f_ext,
-                                    1e-3 * f_top1[state.yarn[:m, side]])
+                                    net.settings.frontal.change_scale_floor
+                                    * f_top1[state.yarn[:m, side]])
     return max(float(np.max(np.abs(bound1 - net.bound) / scale)),
                float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
 
