@@ -128,24 +128,29 @@ def _elements(deck):
 
 def end_loads(ids, xyz, elements, end):
     """The END nodes and their axial forces (nodes, (n,)) of a uniform traction round the end,
-    N_x = const with resultant FORCE, each boundary edge's share in proportion to its length
-    round the axis, spread over its corner, middle and corner nodes as 1/6, 4/6, 1/6 (the
-    quadratic edge's consistent loads). The END loop is ragged (its edges zig-zag along the
-    axis): equal nodal forces would load it unevenly round, and a thin tube carries the low
-    harmonics of an uneven end load far into it (semi-membrane decay over R sqrt(R / t) / n^2)."""
+    N_x = const with resultant FORCE: each boundary edge's share in proportion to its signed
+    length round the axis (along z x its element's normal, in the element's winding), spread
+    over its corner, middle and corner nodes as 1/6, 4/6, 1/6 (the quadratic edge's consistent
+    loads). The END loop is ragged (it zig-zags along the axis and back round it): equal nodal
+    forces would load it unevenly round, and a thin tube carries the low harmonics of an uneven
+    end load far into it (semi-membrane decay over R sqrt(R / t) / n^2)."""
     where = {i: k for k, i in enumerate(ids)}
     on_end = set(int(i) for i in end)
-    count = {}
+    count, directed = {}, []
     for row in elements:
+        corners = [xyz[where[v]] for v in row[:3]]
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        hoop = np.cross([0.0, 0.0, 1.0], normal)
+        hoop /= np.linalg.norm(hoop)
         for a, b, m in ((row[0], row[1], row[3]), (row[1], row[2], row[4]), (row[2], row[0], row[5])):
-            key = (min(a, b), max(a, b), m)
+            key = (min(a, b), max(a, b))
             count[key] = count.get(key, 0) + 1
+            directed.append((key, a, b, m, hoop))
     weight = {}
-    for (a, b, m), n in count.items():
-        if n != 1 or not {a, b, m} <= on_end:
+    for key, a, b, m, hoop in directed:
+        if count[key] != 1 or not {a, b, m} <= on_end:
             continue
-        d = xyz[where[b]] - xyz[where[a]]
-        around = math.hypot(d[0], d[1])
+        around = float(np.dot(xyz[where[b]] - xyz[where[a]], hoop))
         for node, share in ((a, 1 / 6), (b, 1 / 6), (m, 4 / 6)):
             weight[node] = weight.get(node, 0.0) + share * around
     nodes = np.array(sorted(weight))

@@ -192,7 +192,8 @@ def deck_text(nodes, connectivity, plies: Plies, groups: Groups, fm: FibreMatrix
         for p in here:
             w(f"{_fmt(groups.thickness_m[g, p])},{PLY_POINTS},{material_name(groups.vf[g, p])},"
               f"O{e + 1}_{p + 1},{names[p]}\n")
-    w(_template(len(end), end_axis))
+    axis = np.asarray(end_axis, dtype=float)
+    w(_template(end, end_weights(nodes, connectivity, end, axis), axis))
     return out.getvalue()
 
 
@@ -203,15 +204,46 @@ def _id_lines(w, card, ids, per_line=16):
         w(",".join(ids[k:k + per_line]) + "\n")
 
 
-def _template(n_end: int, axis) -> str:
-    """A commented axial tension step: TIP held, 1 kN spread over the END nodes along the axis."""
-    per_node = 1000.0 / max(n_end, 1)
-    lines = ["", "---- template: axial tension (remove the leading '** ' to use) ----",
-             "TIP held in translation; 1000 N along the mandrel's axis at END, shared by its",
-             f"{n_end} nodes ({per_node:.6g} N each); results to preform.frd",
-             "*STEP", "*STATIC", "*BOUNDARY", "TIP, 1, 3", "*CLOAD"]
-    lines += [f"END, {k + 1}, {per_node * float(axis[k]):.9e}" for k in range(3) if abs(axis[k]) > 1e-12]
-    lines += ["*NODE FILE", "U", "*EL FILE", "S, E", "*END STEP"]
+def end_weights(nodes, connectivity, end, axis) -> np.ndarray:
+    """(len(end),) shares (sum 1) of a uniform traction round the END loop: each boundary edge's
+    share in proportion to its length round the axis, signed (its component along the hoop
+    direction ``axis x normal`` of its element, in the element's winding), spread over its
+    corner, middle and corner nodes as 1/6, 4/6, 1/6 (a quadratic edge's consistent loads). The
+    loop is ragged (its edges zig-zag along the axis and back round it): equal nodal forces, or
+    shares by unsigned length, would load it unevenly round and bend the part."""
+    C = np.asarray(connectivity)
+    P = np.asarray(nodes, dtype=float)
+    owner = np.tile(np.arange(len(C)), 3)
+    edges = np.concatenate([C[:, [0, 1, 3]], C[:, [1, 2, 4]], C[:, [2, 0, 5]]])
+    key = np.sort(edges[:, :2], axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    free = counts[inverse.ravel()] == 1
+    on_end = np.zeros(len(P), dtype=bool)
+    on_end[np.asarray(end, dtype=np.int64)] = True
+    free &= on_end[edges].all(axis=1)
+    edges, owner = edges[free], owner[free]
+    normal = np.cross(P[C[owner, 1]] - P[C[owner, 0]], P[C[owner, 2]] - P[C[owner, 0]])
+    hoop = np.cross(axis, normal)
+    hoop /= np.maximum(np.linalg.norm(hoop, axis=1), 1e-300)[:, None]
+    around = np.einsum("ij,ij->i", P[edges[:, 1]] - P[edges[:, 0]], hoop)
+    weight = np.zeros(len(P))
+    for column, share in ((0, 1 / 6), (1, 1 / 6), (2, 4 / 6)):
+        np.add.at(weight, edges[:, column], share * around)
+    w = weight[np.asarray(end, dtype=np.int64)]
+    total = w.sum()
+    return w / total if abs(total) > 0 else np.full(len(w), 1.0 / max(len(w), 1))
+
+
+def _template(end, weights, axis, force=1000.0) -> str:
+    """A commented axial tension step: TIP held, ``force`` N along the axis at END as a uniform
+    traction round it (:func:`end_weights`)."""
+    lines = ["", "---- template: axial tension (remove the leading '** ' of the lines below the next",
+             f"---- one to use it). TIP held in translation; {force:g} N along the mandrel's axis at END,",
+             "---- spread evenly round it; results to <job>.frd and <job>.dat",
+             "----", "*STEP", "*STATIC", "*BOUNDARY", "TIP, 1, 3", "*CLOAD"]
+    for node, w in zip(np.asarray(end, dtype=np.int64) + 1, weights):
+        lines += [f"{node}, {k + 1}, {force * w * float(axis[k]):.9e}" for k in range(3) if abs(axis[k]) > 1e-12]
+    lines += ["*NODE FILE", "U", "*EL FILE", "S, E", "*NODE PRINT, NSET=END", "U", "*END STEP"]
     return "".join(f"** {line}\n" if line else "**\n" for line in lines)
 
 

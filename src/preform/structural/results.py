@@ -66,3 +66,34 @@ def displacements(path, node_set: str) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"{path}: no displacements printed for node set {node_set} (add "
                          f"*NODE PRINT, NSET={node_set} / U to the step)")
     return found[-1].nodes, found[-1].values
+
+
+def read_mesh(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(node numbers (n,), coordinates (n, 3) m, elements (ne, 6) node numbers) of a deck written
+    by :func:`preform.structural.deck.write_deck` (its ``*NODE`` and ``*ELEMENT`` blocks)."""
+    lines = Path(path).read_text().splitlines()
+    blocks = {"*NODE": [], "*ELEMENT": []}
+    current = None
+    for line in lines:
+        if line.startswith("**"):
+            continue
+        if line.startswith("*"):
+            card = line.split(",")[0].strip().upper()
+            current = blocks.get(card)
+            continue
+        if current is not None and line.strip():
+            current.append([float(v) for v in line.split(",")])
+    nodes, elements = np.array(blocks["*NODE"]), np.array(blocks["*ELEMENT"])
+    if len(nodes) == 0 or len(elements) == 0:
+        raise ValueError(f"{path}: no *NODE or *ELEMENT block")
+    return nodes[:, 0].astype(np.int64), nodes[:, 1:4], elements[:, 1:7].astype(np.int64)
+
+
+def template_step(deck_text: str) -> str:
+    """The deck's commented axial tension step, uncommented (the lines after its ``** ----``
+    line), to append to the deck for a first analysis."""
+    lines = deck_text.splitlines()
+    start = next((k for k, line in enumerate(lines) if line == "** ----"), None)
+    if start is None:
+        raise ValueError("the deck has no template step (not written by preform?)")
+    return "".join(line[3:] + "\n" for line in lines[start + 1:] if line.startswith("** "))
