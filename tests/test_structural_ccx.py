@@ -336,3 +336,22 @@ def test_the_fields_own_laminate_agrees_within_the_binning(solved):
             bound[k] += 0.5 * abs(moved[k] / (strain_clt, hoop_clt)[k] - 1.0)
     assert strain == pytest.approx(strain_clt, rel=TOL + bound[0] + 3 * strain_se / strain)
     assert hoop == pytest.approx(hoop_clt, rel=TOL + bound[1] + 3 * hoop_se / hoop)
+
+
+def test_the_structural_example_solves_the_cone_and_draws_it(tmp_path):
+    """examples/structural_chain.py on 0.6 m of each layer (they overlap on 0.4-0.6 m) and a
+    coarse field mesh: the deck of four plies solved under its template tension, the picture."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "structural_chain.py"
+    spec = importlib.util.spec_from_file_location("structural_chain", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    png = example.main(["--length", "0.6", "--edge", "0.03", "--out", str(tmp_path / "out")])
+    assert png.is_file() and png.stat().st_size > 10_000
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["structural"]["plies"] == ["L1WARP", "L1WEFT", "L2WARP", "L2WEFT"]
+    nodes, u = displacements(tmp_path / "out" / "fe" / "tension.dat", "END")
+    assert np.all(np.isfinite(u)) and np.mean(u[:, 2]) > 0   # pulled along +z, the cone's axis

@@ -71,14 +71,17 @@ def parse(path):
     return out
 
 
-def braided(alphas, folder, settings=None):
+def braided(alphas, folder, settings=None, axial=(0, 4e-3, 2.5e-4, None)):
     """write_structural of ideal helices at each braid angle in ``alphas`` (deg), one layer per
-    angle on one field mesh; (fields, summary, parsed deck, layup rows)."""
-    base = map_to_surface(make_result(cylinder(), helices(math.radians(alphas[0]), N_GROUP)), edge_length=0.012)
+    angle on one field mesh, with ``axial`` yarns (count, width, thickness, tex) in the first;
+    (fields, summary, parsed deck, layup rows)."""
+    first = make_result(cylinder(), helices(math.radians(alphas[0]), N_GROUP))
+    first.config.axial = lambda: axial
+    base = map_to_surface(first, edge_length=0.012)
     mesh = (base.vertices, base.faces, base.source_faces, base.edge_length_m)
     config = NS(yarn=NS(linear_density_tex=TEX, fibre_density=RHO, fibre_radius=3.5e-6, has_material=True),
                 rtm=NS(cavity_thickness=CAVITY, permeability="gebart", packing="hexagonal"),
-                axial=lambda: (0, 4e-3, 2.5e-4, None), material=NS(constituents=FM), source=None)
+                axial=lambda: axial, material=NS(constituents=FM), source=None)
     layers = [base] + [map_to_surface(make_result(cylinder(), helices(math.radians(a), N_GROUP)), mesh=mesh)
                        for a in alphas[1:]]
     tangents = np.tile([0.0, 0.0, 1.0], (len(base.faces), 1))
@@ -225,3 +228,19 @@ def test_without_material_nothing_is_written_and_the_summary_says_why(tmp_path, 
     result.config = NS(material=NS(constituents=FM), yarn=NS(has_material=False), source=None)
     paths, said = write_structural(result, fields, tmp_path)
     assert not said["written"] and "linear_density_tex" in said["reason"]
+
+
+def test_axial_yarns_are_a_third_ply_along_the_axis(tmp_path):
+    """Triaxial: 16 axial yarns of the braid's tex. Per face, fibre volume per area goes as the
+    yarn length per area: 2 x 24 helices / (2 pi R cos 30) against 16 / (2 pi R) axial."""
+    fields, said, deck, rows = braided([30.0], tmp_path, axial=(16, 3e-3, 3e-4, None))
+    assert said["plies"] == ["L1WARP", "L1WEFT", "L1AXIAL"]
+    share = 16 / (16 + 2 * N_GROUP / math.cos(math.radians(30)))
+    inner = [r for r in rows if 0.05 < float(r["z_m"]) < 0.15]
+    assert inner
+    for r in inner:
+        assert float(r["ply3_angle_deg"]) == pytest.approx(0.0, abs=said["binning_error"]["angle_deg"] + 1e-9)
+        t = [float(r[f"ply{k}_thickness_m"]) for k in (1, 2, 3)]
+        # 5 %: the pooled helix lengths' few % (test_rtm_fields' triaxial areal weight: 3 %)
+        assert t[2] / sum(t) == pytest.approx(share, rel=0.05)
+        assert r["ply3_family"] == "axial"
