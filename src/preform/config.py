@@ -839,13 +839,14 @@ def _dump_sections(config: Config) -> dict:
     """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
 
     Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a
-    number when constant, else the table. Absent optional values are None.
+    number when constant, else the table. Absent optional values are None; `"material"` is there
+    only when the config has the section.
     """
     mc, ma, y, p, mo, out = (config.mandrel, config.machine, config.yarn, config.process,
                              config.model, config.output)
     ring = ma.guide_ring
     speeds = [list(row) for row in p.take_up_speed]
-    return {
+    out = {
         "source": _str_or_none(config.source),
         "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
                     "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
@@ -873,10 +874,11 @@ def _dump_sections(config: Config) -> dict:
                 "packing": config.rtm.packing,
                 "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
                 "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
-        "material": None if config.material is None else {
-            "preset": config.material.preset,
-            **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}},
     }
+    if config.material is not None:   # echoed when given (a run without it hashes as before)
+        out["material"] = {"preset": config.material.preset,
+                           **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}
+    return out
 
 
 def _str_or_none(value) -> str | None:

@@ -42,15 +42,15 @@ def write_structural(result, fields, out_dir, layer_results=(), settings=None) -
     fields : its SurfaceFields with the RTM arrays (``preform.rtm``), stacked for several layers
     settings : layup.BinSettings (None: the defaults)
     """
+    reason = missing_inputs(result, fields)
+    if reason:
+        _remove_earlier(out_dir)
+        return [], {"written": False, "reason": reason}
     from ..fields import face_geometry, surface_tangent
     from ..io.atomic import safe_folder
     from .deck import largest_component, write_deck
     from .layup import BinSettings, bin_plies, face_plies
 
-    reason = missing_inputs(result, fields)
-    if reason:
-        _remove_earlier(out_dir)
-        return [], {"written": False, "reason": reason}
     cd = fields.cell_data
     configs = [result.config, *(r.config for r in layer_results)]
     stacked = sum(1 for k in range(1, len(configs) + 1) if f"layer{k}_thickness_m" in cd)
