@@ -846,7 +846,7 @@ def _dump_sections(config: Config) -> dict:
                              config.model, config.output)
     ring = ma.guide_ring
     speeds = [list(row) for row in p.take_up_speed]
-    out = {
+    echo = {
         "source": _str_or_none(config.source),
         "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
                     "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
@@ -876,9 +876,9 @@ def _dump_sections(config: Config) -> dict:
                 "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
     if config.material is not None:   # echoed when given (a run without it hashes as before)
-        out["material"] = {"preset": config.material.preset,
-                           **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}
-    return out
+        echo["material"] = {"preset": config.material.preset,
+                            **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}
+    return echo
 
 
 def _str_or_none(value) -> str | None:
