@@ -5,9 +5,9 @@ family: warp, weft and, in a triaxial braid, axial. A ply's
 
 * **direction** is the family's mean fibre direction on the face (``<family>_direction``), its
   **angle** measured in the face's plane from the local 1-axis, the surface projection of the
-  mandrel's axis (the centerline tangent; ``fields.local_frames`` where that is undefined), about
-  the outward normal: warp and weft come out at about ``+alpha`` and ``-alpha`` (which of them is
-  positive follows the machine's sense of rotation), axial at 0;
+  mandrel's axis (the centerline tangent; ``fields.local_frames`` where that is undefined),
+  positive about the outward normal (local 2-axis = normal x 1-axis): warp and weft come out at
+  ``+alpha`` and ``-alpha`` or the other way round, as the machine turns, axial at 0;
 * **thickness** is its share of the layer's thickness ``t_k`` in proportion to its fibre volume
   per area, ``L_g tex_g / sum_h L_h tex_h`` (``L`` the yarn length per area): the layer's
   thickness is the one its fibre volume fraction is computed over (``preform.rtm``: the preform's
