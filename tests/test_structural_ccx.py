@@ -36,13 +36,13 @@ WINDOW = (0.235, 0.275)
 FORCE, PRESSURE = 1000.0, 1.0e5   # N, Pa
 H = 0.0125   # m, the field mesh's edge: h / R = 0.31
 #: CalculiX takes a ply's axes per element as fixed 3-D vectors (tangent at the centroid): on a
-#: curved element the fibres tilt out of the surface towards its edges by up to h / (2 R), which
-#: softens a +-45 tube by 0.09 (h / R)^2 in tension (measured on regular tube meshes at
-#: h / R = 0.31 and 0.16: -0.9 %, -0.24 %); axial and hoop loads meet the +-45 fibres alike.
-#: 0.15 (h / R)^2 bounds it for the field mesh's irregular triangles, plus 0.3 % for the
-#: thin shell's curvature, O((t / R)^2) = 3e-5, and for averaging the elements' stiffnesses as
-#: parallel strips (second order in their ~1 % scatter)
-TOL = 0.15 * (H / R) ** 2 + 3e-3
+#: curved element the fibres tilt out of the surface towards its edges, by up to h / (2 R), and
+#: the strains err by c (h / R)^2, measured on regular tube meshes of +-45 plies at h / R = 0.31
+#: and 0.16: c = 0.09 in tension (-0.91 %, -0.24 %), 0.29 under pressure (+2.86 %, +0.79 %). The field mesh's edges reach 4/3 h (fields.field_mesh), so the bound is
+#: c (4 h / 3 R)^2; plus 0.3 % for the thin shell's curvature, O((t / R)^2) = 3e-5, and for
+#: averaging the elements' stiffnesses as parallel strips (second order in their ~1 % scatter)
+TOL_AXIAL = 0.09 * (4 * H / (3 * R)) ** 2 + 3e-3
+TOL_HOOP = 0.29 * (4 * H / (3 * R)) ** 2 + 3e-3
 
 
 def _case(folder):
@@ -285,11 +285,11 @@ def _measured(solved):
     p, u = _window_nodes(ids, xyz, runs["pressure"])
     r = np.hypot(p[:, 0], p[:, 1])
     u_r = (p[:, 0] * u[:, 0] + p[:, 1] * u[:, 1]) / r
-    # u_r = eps_theta r plus the tube's non-axisymmetric modes, harmonics n = 1..3 round it
-    # varying linearly along it (a sideways shift, an ovalling, ... that the ragged ends leave),
-    # fitted beside
+    # u_r = eps_theta r plus the tube's non-axisymmetric modes, harmonics n = 1..6 round it
+    # varying linearly along it (a sideways shift, an ovalling 4x the mean u_r, ... that the
+    # ragged ends and irregular triangles leave), fitted beside
     theta, z = np.arctan2(p[:, 1], p[:, 0]), p[:, 2] - np.mean(p[:, 2])
-    modes = [f(n * theta) * zz for n in (1, 2, 3) for f in (np.cos, np.sin) for zz in (1.0, z)]
+    modes = [f(n * theta) * zz for n in range(1, 7) for f in (np.cos, np.sin) for zz in (1.0, z)]
     A = np.column_stack([r, *modes])
     coef, res, *_ = np.linalg.lstsq(A, u_r, rcond=None)
     sigma2 = float(res[0]) / max(len(r) - A.shape[1], 1) if len(res) else 0.0
@@ -310,10 +310,10 @@ def test_tension_and_pressure_match_laminate_theory_of_the_decks_plies(solved):
     assert n > 30
     P = _section(solved[3])
     strain_clt, hoop_clt = _predicted(a, P)
-    # Tolerance: the laminate is the deck's own (layup.csv), so binning does not enter; TOL (above)
+    # Tolerance: the laminate is the deck's own (layup.csv), so binning does not enter; TOL_* (above)
     # and 3 standard errors of the least-squares fits
-    assert strain == pytest.approx(strain_clt, rel=TOL + 3 * strain_se / strain)
-    assert hoop == pytest.approx(hoop_clt, rel=TOL + 3 * hoop_se / hoop)
+    assert strain == pytest.approx(strain_clt, rel=TOL_AXIAL + 3 * strain_se / strain)
+    assert hoop == pytest.approx(hoop_clt, rel=TOL_HOOP + 3 * hoop_se / hoop)
 
 
 def test_the_fields_own_laminate_agrees_within_the_binning(solved):
@@ -323,7 +323,7 @@ def test_the_fields_own_laminate_agrees_within_the_binning(solved):
     strain_clt, hoop_clt = _predicted(_field_laminate(out), P)
     # Tolerance: the deck's plies are binned (summary "binning_error": ply angles, relative
     # thicknesses, fibre fractions); their largest effect, every ply moved at once by the largest
-    # error of each in the direction that hurts, bounds binning; plus TOL and the
+    # error of each in the direction that hurts, bounds binning; plus TOL_* and the
     # half-and-half split of the cavity between warp and weft (their fibre differs by < 1 % in
     # steady state: a +-alpha laminate's in-plane stiffness is even in that split to first order
     # along x and round, so < 1e-4).
@@ -334,8 +334,8 @@ def test_the_fields_own_laminate_agrees_within_the_binning(solved):
         moved = _predicted(_field_laminate(out, **d), P)
         for k in range(2):
             bound[k] += 0.5 * abs(moved[k] / (strain_clt, hoop_clt)[k] - 1.0)
-    assert strain == pytest.approx(strain_clt, rel=TOL + bound[0] + 3 * strain_se / strain)
-    assert hoop == pytest.approx(hoop_clt, rel=TOL + bound[1] + 3 * hoop_se / hoop)
+    assert strain == pytest.approx(strain_clt, rel=TOL_AXIAL + bound[0] + 3 * strain_se / strain)
+    assert hoop == pytest.approx(hoop_clt, rel=TOL_HOOP + bound[1] + 3 * hoop_se / hoop)
 
 
 def test_the_structural_example_solves_the_cone_and_draws_it(tmp_path):
