@@ -27,7 +27,7 @@ from simcase import case_b_like_config
 
 MU_R = 0.17
 #: steps of the run: the first crossings form below the ring by step ~60, rows are deposited
-#: from step ~250 (the start-up the issue's runs failed in)
+#: from step ~250 (the start-up, where runs behind a ring had failed to converge)
 STEPS = 420
 #: the history's residual on 99 % of the steps, and its largest value (the target the run's
 #: verdict uses: a lag of the held friction bounds below 1 % of the tensions)
