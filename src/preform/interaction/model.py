@@ -48,15 +48,14 @@ The numerical settings (deposit height, creation, staging, the snapshot's ring a
 everything the solver uses) are an :class:`~preform.interaction.settings.InteractionSettings`,
 passed to the constructor.
 
-Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
-Only the bottom rows come near the mandrel, so the faces are looked up only for the crossings a
+Distances to the mandrel are to the closest point of its surface (exact, signed by the face's
+outward normal), the wall's tangent planes those of the closest faces. Only the bottom rows come near the mandrel, so the faces are looked up only for the crossings a
 bound does not prove far from it (``MandrelDistance.near``: the bounding box, then a KD-tree of
 face samples with a per-crossing cache of its distances, 1-Lipschitz): the tangent planes for the
 crossings that may lie within ``NearSettings.wall_clearance`` of the surface at the step's start
 (the others have no wall; if the solve moves one of them as far as it was from the mandrel, the
 step is solved again with every crossing's plane), the deposit test for those that may lie within
-the deposit height (a crossing proven further from the surface is not deposited even where the
-nearest face's plane passes close to it, at an edge). Where no iterate of the solve reaches the
+the deposit height. Where no iterate of the solve reaches the
 plane of a crossing that has none, the states are those with every crossing's plane (measured:
 case A, bent tube and bulge histories bit-identical, ``docs/decisions.md``).
 """
@@ -111,7 +110,11 @@ NEAR = NearSettings()
 
 class MandrelDistance:
     """Signed distance (m, positive outside) of points to a mandrel, mandrel frame: the distance
-    to the plane of the face with the nearest centroid (KD-tree), good to the facet size.
+    to the closest point of the surface (``Mandrel.closest_points``, exact), signed by the
+    outward normal of the face it lies on; the tangent planes of the wall are those faces'
+    planes. (The face with the nearest centroid is not the closest face where faces are long
+    and thin, as CAD exports make them: on a sliver triangulation its plane can lie millimetres
+    off the surface under a crossing, which moved the deposit and the wall, docs/decisions.md.)
 
     ``near`` bounds the true distance to the surface from below by a second KD-tree of face
     samples, so that the faces are looked up only where a crossing may be close (``settings``:
@@ -125,13 +128,21 @@ class MandrelDistance:
         self.centroids = self._triangles.mean(axis=1)
         self.normals = np.asarray(mandrel.face_normals, dtype=float)
         self.tree = cKDTree(self.centroids)
+        closest = getattr(mandrel, "closest_points", None)
+        if closest is None:     # a plain (vertices, faces, face_normals) holder
+            from ..geometry import mandrel_from_arrays
+
+            closest = mandrel_from_arrays(v, faces, check=False).closest_points
+        self._closest = closest
         self._box = v[np.unique(faces)].min(axis=0), v[np.unique(faces)].max(axis=0)
         self._samples = None
 
     def __call__(self, points):
         points = np.atleast_2d(points)
-        _, f = self.tree.query(points)
-        return np.einsum("ij,ij->i", points - self.centroids[f], self.normals[f])
+        c, f = self._closest(points)
+        d = points - c
+        side = np.einsum("ij,ij->i", d, self.normals[f])
+        return np.where(side < 0.0, -1.0, 1.0) * np.linalg.norm(d, axis=1)
 
     def _sample_tree(self):
         """(KD-tree of face samples, spacing m): each face on a barycentric grid whose cells'
@@ -219,13 +230,14 @@ class MandrelDistance:
         return out
 
     def planes(self, points, pose):
-        """(n, 6): point and outward unit normal of the nearest face's plane, machine frame, for
+        """(n, 6): point and outward unit normal of the closest face's plane, machine frame, for
         points given in the machine frame (pose: the mandrel's)."""
-        _, f = self.tree.query(np.atleast_2d(pose.to_mandrel(points)))
-        return self._planes_of(f, pose)
+        c, f = self._closest(np.atleast_2d(pose.to_mandrel(points)))
+        return self._planes_of(c, f, pose)
 
-    def _planes_of(self, f, pose):
-        c = self.centroids[f]
+    def _planes_of(self, c, f, pose):
+        """(n, 6): the planes through the surface points c (n, 3) of faces f (n,), mandrel
+        frame, with those faces' outward normals, in the machine frame."""
         p0 = np.asarray(pose.to_machine(c), dtype=float)
         n = np.asarray(pose.to_machine(c + self.normals[f]), dtype=float) - p0
         n /= np.linalg.norm(n, axis=1)[:, None]
@@ -241,16 +253,14 @@ class MandrelDistance:
         out = np.tile(NO_PLANE, (len(points), 1))
         idx = np.nonzero(near)[0]
         if len(idx):
-            _, f = self.tree.query(pose.to_mandrel(points[idx]))
-            out[idx] = self._planes_of(f, pose)
+            c, f = self._closest(pose.to_mandrel(points[idx]))
+            out[idx] = self._planes_of(c, f, pose)
         return out, np.where(near, np.inf, lower)
 
     def below(self, points, height, cache=None):
         """(k,) bool for points (k, 3), mandrel frame: signed distance (``__call__``) below
         ``height``, looked up only for the points ``near`` does not prove further than
-        ``height`` from the surface (those are not below it: the nearest face's plane of a
-        point far from the surface may pass close to it at an edge, but the point is not close
-        to the mandrel)."""
+        ``height`` from the surface (those are not below it)."""
         points = np.atleast_2d(points)
         near, _ = self.near(points, height, cache)
         out = np.zeros(len(points), dtype=bool)
