@@ -7,7 +7,7 @@ Every part of the family (single bends of 30, 60 and 90 deg, an S-bend, rectangl
 circle-to-rectangle transitions, a taper, the 744 mm S-bent tube of a user's part) on a
 case-B-like machine (ring 0.17 m, spool 0.85 m, 18 deg/s, 26.3 mm/s, tip 0.2 m beyond the
 ring), well-shaped in metres and with CAD slivers in millimetres, with the guide ring and
-eccentric by 10 mm, and without the ring; each case with the kinematic model and with the
+eccentric by 10 mm, and without the ring (the spools at the ring's 0.17 m); each case with the kinematic model and with the
 interaction model at each ``--friction`` (the ring's friction 0.17 where the yarns' is not 0).
 For every run one line: part, triangulation, ring, model and friction, status, steps, residual
 median / p99 / max (``history.csv``'s), and against the kinematic run of the same case the
@@ -35,7 +35,9 @@ def _config(stl, unit, kind, friction, ring, carriers, length):
     from simcase import make_config
 
     mu_r = 0.17 if (ring and friction > 0.0) else 0.0
-    cfg = make_config(stl, "auto", stl_unit=unit, carriers=carriers, spool_radius=0.85,
+    # without the ring the spools take its place (0.17 m): the same convergence length
+    cfg = make_config(stl, "auto", stl_unit=unit, carriers=carriers,
+                      spool_radius=0.85 if ring else 0.17,
                       friction=friction, ring_friction=mu_r,
                       guide_ring=(0.17, 0.0) if ring else None, initial_position=0.2,
                       angular_speed=np.radians(18.0), take_up_speed=0.0263, braid_length=length,
@@ -89,12 +91,12 @@ def main(argv=None):
     ap.add_argument("--friction", type=float, nargs="*", default=[0.0, 0.25])
     ap.add_argument("--repeat", type=int, default=1, help="runs per case (medians)")
     ap.add_argument("--no-slivers", action="store_true", help="the well-shaped meshes only")
-    ap.add_argument("--no-ring", dest="no_ring", action="store_true", help="behind a ring only")
+    ap.add_argument("--ring-only", action="store_true", help="behind a ring only")
     a = ap.parse_args(argv)
     parts = a.parts or (["s_bend", "rect_to_circle"] if a.quick else list(shapes.FAMILY))
     length = a.length or (0.06 if a.quick else 0.1)
     meshes = [("even", "m", 1.0)] + ([] if a.no_slivers else [("sliver", "mm", 1000.0)])
-    rings = [True] if a.no_ring else [True, False]
+    rings = [True] if a.ring_only else [True, False]
     head = (f"{'part':15s} {'mesh':9s} {'ring':4s} {'model':14s} {'status':6s} {'steps':>5s} "
             f"{'res med':>8s} {'res p99':>8s} {'res max':>8s} {'d angle':>7s} {'d H %':>6s} "
             f"{'geom s':>6s} {'sim s':>6s}")
