@@ -123,3 +123,33 @@ def test_braid_with_friction_stays_interlaced(runs, parts):
     P = 2 * np.pi * 0.025
     # the laid angle varies over the band (median against the mean of tan): a fifth
     assert it.measured_per_m2 == pytest.approx(2 * n * n * tan_alpha / P ** 2, rel=0.2)
+
+
+@pytest.mark.parametrize("tri", ["even", "sliver"])
+def test_mandrel_distance_is_the_closest_points_on_a_sliver_mesh(tri):
+    """``MandrelDistance``'s signed distance of points near the S-tube (up to 6 mm off its
+    surface, where crossings are looked up; the wall holds them outside) against the exact
+    closest points (``Mandrel.closest_points``) on both triangulations: to 1e-5 m (a point over
+    a face but beside a concave ridge of the bends is nearer the face's plane than the
+    polyhedron; the facets' chord error is 0.1 mm), where the plane of the face with the
+    nearest centroid is off by millimetres beside a sliver."""
+    from preform.geometry import mandrel_from_arrays
+    from preform.interaction.model import MandrelDistance
+
+    V, F, _ = shapes.family_part("s_tube", triangulation=tri)
+    m = mandrel_from_arrays(V, F)
+    rng = np.random.default_rng(5)
+    f = rng.integers(len(F), size=2000)
+    foot = np.einsum("ij,ijk->ik", rng.dirichlet([1.0, 1.0, 1.0], len(f)), V[F[f]])
+    n = np.asarray(m.face_normals)
+    P = foot + n[f] * rng.uniform(0.0, 6e-3, (len(f), 1))
+    c, fc = m.closest_points(P)
+    exact = np.linalg.norm(P - c, axis=1) * np.sign(np.einsum("ij,ij->i", P - c, n[fc]))
+    d = MandrelDistance(m)
+    err = np.abs(d(P) - exact)
+    assert err.max() < 1e-5
+    # the nearest centroid's plane, which the deposit and the wall used
+    _, g = d.tree.query(P)
+    centroid = np.abs(np.einsum("ij,ij->i", P - d.centroids[g], n[g]) - exact)
+    if tri == "sliver":
+        assert centroid.max() > 1e-3
