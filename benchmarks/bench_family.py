@@ -3,7 +3,8 @@
 ``python benchmarks/bench_family.py [--quick] [--carriers 24] [--length 0.1] [--friction 0 0.25]
 [--parts bend30 s_tube ...] [--repeat 3]``
 
-Every part of the family (single bends of 30, 60 and 90 deg, an S-bend, rectangle-to-circle and
+Every part of the family (single bends of 30, 60 and 90 deg, S-bends from 0.15 m and from 30 mm
+of the tip, rectangle-to-circle and
 circle-to-rectangle transitions, a taper, the 744 mm S-bent tube of a user's part) on a
 case-B-like machine (ring 0.17 m, spool 0.85 m, 18 deg/s, 26.3 mm/s, tip 0.2 m beyond the
 ring), well-shaped in metres and with CAD slivers in millimetres, with the guide ring and
@@ -16,7 +17,7 @@ braid angle (mean of warp and weft) and H at ten braided lengths: the largest di
 (deg, %; ``skip``: the lengths left out where a kinematic yarn caught on a bend in the zone),
 the share of laid points caught or bridged (``flag %``), and the wall time split into the
 geometry (load, repair, automatic centerline) and the simulation (median of ``--repeat``
-runs). ``--quick``: the suite's size (two parts, 0.06 m).
+runs). The parts' own centerlines are given (CSV), so the geometry time is the load and repair. ``--quick``: the suite's size (two parts, 0.06 m).
 """
 
 from __future__ import annotations
@@ -34,12 +35,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 
-def _config(stl, unit, kind, friction, ring, carriers, length):
+def _config(stl, centerline, unit, kind, friction, ring, carriers, length):
     from simcase import make_config
 
     mu_r = 0.17 if (ring and friction > 0.0) else 0.0
     # without the ring the spools take its place (0.17 m): the same convergence length
-    cfg = make_config(stl, "auto", stl_unit=unit, carriers=carriers,
+    cfg = make_config(stl, centerline, stl_unit=unit, carriers=carriers,
                       spool_radius=0.85 if ring else 0.17,
                       friction=friction, ring_friction=mu_r,
                       guide_ring=(0.17, 0.0) if ring else None, initial_position=0.2,
@@ -98,7 +99,7 @@ def _flagged(res):
 
 def main(argv=None):
     from preform.geometry import shapes
-    from simcase import write_stl
+    from simcase import write_centerline, write_stl
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="the suite's size: two parts, 0.06 m")
@@ -123,12 +124,15 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         for name in parts:
             for tri, unit, scale in meshes:
-                V, F, _ = shapes.family_part(name, triangulation=tri, scale=scale)
+                V, F, path = shapes.family_part(name, triangulation=tri, scale=scale)
                 stl = write_stl(Path(tmp) / f"{name}_{tri}.stl", V, F)
+                # the part's own centerline (the automatic one does not start on a part that
+                # bends 30 mm from its tip, s_bend_tip)
+                csv = write_centerline(Path(tmp) / f"{name}_{tri}.csv", path)
                 for ring in rings:
                     ref = None
                     for kind, mu in [("kinematic", 0.0)] + [("interaction", m) for m in a.friction]:
-                        cfg = _config(stl, unit, kind, mu, ring, a.carriers, length)
+                        cfg = _config(stl, csv, unit, kind, mu, ring, a.carriers, length)
                         res, geo, sim = _run(cfg, a.repeat)
                         r = res.history["residual"]
                         if ref is None:

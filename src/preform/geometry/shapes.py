@@ -372,6 +372,9 @@ def _family():
         "bend90": PartSpec("bend90", (("line", 0.2), ("arc", 0.4, 90.0), ("line", 0.4)), 0.025),
         "s_bend": PartSpec("s_bend", (("line", 0.15), ("arc", S, 35.0), ("line", 0.08),
                                       ("arc", S, -35.0), ("line", 0.3)), 0.025),
+        # the S-bend from near the tip: a short braid lies on its first bend
+        "s_bend_tip": PartSpec("s_bend_tip", (("line", 0.03), ("arc", S, 35.0), ("line", 0.05),
+                                              ("arc", S, -35.0), ("line", 0.4)), 0.025),
         "rect_to_circle": PartSpec("rect_to_circle", (("line", 0.9),), 0.025,
                                    rectangle=(0.06, 0.04, 0.01), change=(0.25, 0.45)),
         "circle_to_rect": PartSpec("circle_to_rect", (("line", 0.9),), 0.025,
