@@ -121,6 +121,9 @@ class OutputConfig:
     #: also write the fields on the mandrel's own (STL) triangles, surface_input.vtu
     #: (``fields.fields_on_input``, area-weighted), for a next tool that needs its mesh
     input_mesh_fields: bool = False
+    #: draw the pictures (plots/*.png); false leaves the data files alone, for the many runs of
+    #: a calibration or a large sweep, where the pictures would take most of each run's time
+    pictures: bool = True
 
 
 @dataclass(frozen=True)
@@ -209,7 +212,7 @@ KEYS = {
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed", "solver", "frontal_iterations"),
-    "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields"),
+    "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields", "pictures"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
 }
@@ -742,6 +745,7 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
         snapshots=sec.integer("snapshots", "a non-negative integer", default=OutputConfig.snapshots,
                               minimum=0),
         input_mesh_fields=_flag(sec, "input_mesh_fields", OutputConfig.input_mesh_fields),
+        pictures=_flag(sec, "pictures", OutputConfig.pictures),
     )
 
 
@@ -808,7 +812,8 @@ def _dump_sections(config: Config) -> dict:
                   "solver": mo.solver, "frontal_iterations": mo.frontal_iterations},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots,
-                                            "input_mesh_fields": out.input_mesh_fields},
+                                            "input_mesh_fields": out.input_mesh_fields,
+                                            "pictures": out.pictures},
         "axial_yarn": {"width": config.axial_yarn.width, "thickness": config.axial_yarn.thickness,
                        "linear_density_tex": config.axial_yarn.linear_density_tex},
         "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,

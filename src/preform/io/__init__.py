@@ -44,6 +44,9 @@ def _picture_jobs(result, fields, out_dir):
 
     plots = out_dir / PLOTS
     drawn, rendered = [], []
+    output = getattr(result.config, "output", None)
+    if output is not None and not output.pictures:    # [output] pictures = false
+        return drawn, rendered, []
     if fields is not None and result.centerline is not None:
         from .maps import MAP
 
