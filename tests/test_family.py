@@ -82,7 +82,7 @@ def test_frictionless_interaction_reproduces_the_kinematic_model_on_a_bend(runs)
         for L in AT:
             a_k, h_k = _at(kin, L)
             a_i, h_i = _at(inter, L)
-            # the tolerances: 1 deg and 3 % (measured: 0.45 deg, 1.3 %)
+            # the agreement asked of the two models: 1 deg and 3 % (measured: 0.45 deg, 1.3 %)
             assert a_i == pytest.approx(a_k, abs=1.0), (tri, L)
             assert h_i == pytest.approx(h_k, rel=0.03), (tri, L)
 
