@@ -39,7 +39,13 @@ class InterlacingSettings:
     #: grid points along the band at most: the pairs' azimuth differences are sampled there
     #: (a crossing and its undoing within one grid interval would be missed; a braid's
     #: differences are monotone, so only the band's ends depend on the grid)
-    max_grid: int = 2000
+    max_grid: int = 500
+    #: points of a laid yarn used at most (every k-th, its last point kept): case A's yarns
+    #: have ~4500 points over 7 turns, 1000 of them turn by ~2.5 deg from one to the next
+    points_per_yarn: int = 1000
+    #: rad, a yarn turning further than this about the centerline between two of the points
+    #: used is taken with all its points (the azimuth is unwrapped along the yarn)
+    max_turn_step: float = 0.5
     #: the band's grid spacing (m) at least, as a fraction of the median point spacing of the
     #: laid yarns along the centerline: finer adds nothing the polylines hold
     spacing_fraction: float = 1.0
@@ -97,6 +103,29 @@ def yarn_curve(s, phi):
     return s[ahead], phi[ahead]
 
 
+def _yarn_curves(points, off, centerline, settings):
+    """``yarn_curve`` of every yarn from every k-th of its points (``points_per_yarn``), a yarn
+    that turns by more than ``max_turn_step`` between two of them from all its points."""
+    picks = []
+    for k in range(len(off) - 1):
+        n = off[k + 1] - off[k]
+        step = max(1, int(np.ceil(n / max(settings.points_per_yarn, 2))))
+        idx = np.arange(off[k], off[k + 1], step)
+        if n and idx[-1] != off[k + 1] - 1:
+            idx = np.append(idx, off[k + 1] - 1)
+        picks.append(idx)
+    cut = np.cumsum([0] + [len(i) for i in picks])
+    s_all, phi_all = azimuths(points[np.concatenate(picks)] if picks else points[:0], centerline)
+    curves = []
+    for k, idx in enumerate(picks):
+        s, phi = s_all[cut[k]:cut[k + 1]], phi_all[cut[k]:cut[k + 1]]
+        if len(idx) > 1 and np.max(np.abs(np.diff(np.unwrap(phi)))) > settings.max_turn_step \
+                and len(idx) < off[k + 1] - off[k]:
+            s, phi = azimuths(points[off[k]:off[k + 1]], centerline)
+        curves.append(yarn_curve(s, phi))
+    return curves
+
+
 def count_crossings(warp, weft, grid):
     """(measured crossings, pattern crossings) of warp and weft curves over ``grid`` (g,) m.
 
@@ -120,10 +149,8 @@ def interlacing(yarns, centerline, s_range=None,
     centerline ``s_range`` (m; default: where every yarn has been laid, from the furthest tie
     point to the least advanced end). None where the band is empty or a group has no yarn."""
     group = np.asarray(yarns.group)
-    off = np.asarray(yarns.offsets)
-    s_all, phi_all = azimuths(yarns.points, centerline)
-    curves = [yarn_curve(s_all[off[k]:off[k + 1]], phi_all[off[k]:off[k + 1]])
-              for k in range(len(off) - 1)]
+    curves = _yarn_curves(np.asarray(yarns.points, dtype=float), np.asarray(yarns.offsets),
+                          centerline, settings)
     curves = [(k, c) for k, c in enumerate(curves) if len(c[0]) >= 2]
     if not curves:
         return None
@@ -151,7 +178,8 @@ def band_area(centerline, yarns, lo, hi) -> float:
     if centerline.perimeter is not None:
         per = np.interp(grid, centerline.s, centerline.perimeter)
     else:
-        s, d = centerline.project(yarns.points)
+        points = np.asarray(yarns.points, dtype=float)
+        s, d = centerline.project(points[:: max(1, len(points) // 20000)])   # a mean: a sample
         inside = (s >= lo) & (s <= hi)
         per = np.full_like(grid, TWO_PI * float(np.mean(d[inside] if np.any(inside) else d)))
     return float(np.sum(0.5 * (per[1:] + per[:-1]) * np.diff(grid)))

@@ -553,7 +553,7 @@ class _Anderson:
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
           width, plane=None, settings: RelaxSettings = RelaxSettings(),
-          model: InteractionSettings = DEFAULT, top_tensions=None):
+          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
@@ -562,27 +562,35 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
     the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
-    held. Returns a :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
+    held. fresh: (m, 2) bool, the bounds of crossings created in the step; given, a step with
+    held bounds is solved again with them and the top tensions taken of its converged geometry
+    (``_posed_fixed_point``). Returns a :class:`RelaxResult` (``converged`` False if ``tol``
+    was not reached).
 
     Consistent bounds: an outer fixed point, as Newton's frontal loop (``frontal.solve_zone``):
     the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
     from its converged geometry and tensions, and the step is solved again from there until they
     change by less than ``friction_tol`` relative to the tensions."""
-    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
-                              f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                              settings=settings, model=model)
+    kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
+              model=model)
+    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
+    if fresh is not None and not settings.consistent_bounds and res.converged and m:
+        res, bounds = _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh,
+                                         top_tensions, kw)
     if not settings.consistent_bounds or not res.converged:
         if res.converged and m:
             # bounds held at the last step's (lagged): how far they are from those of the
             # converged geometry, the change Newton's frontal loop reports after its one
             # iteration (history.csv's residual)
-            res.bound_change = _lag_change(lat, res, bounds, top_tensions, f_top)[0]
+            res.bound_change = _lag_change(lat, res, bounds, top_tensions, f_top,
+                                           model.frontal.change_scale_floor)[0]
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
     change = np.inf
     for _ in range(settings.bound_iterations):
-        change, f_top = _lag_change(lat, res, bounds, top_tensions, f_top) if m else (0.0, f_top)
+        change, f_top = (_lag_change(lat, res, bounds, top_tensions, f_top,
+                                     model.frontal.change_scale_floor) if m else (0.0, f_top))
         if change < settings.friction_tol:
             break
         bounds = res.bounds
@@ -599,6 +607,39 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res.bound_change = change
     res.converged = res.converged and change < settings.friction_tol
     return res
+
+
+def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_tensions, kw):
+    """The step solved again with what has no state of its own taken of its converged
+    geometry (``FrontalSettings.posed_iterations``): the top tensions behind a guide ring
+    (``top_tensions`` of the result's positions: Capstan, eq. 9) and the friction bounds of the
+    new crossings (``fresh`` (m, 2) bool: theirs of the result), the other bounds held, until
+    these change by less than ``posed_tolerance`` relative to the tensions or after
+    ``posed_iterations`` solves; each solve starts from the last one's result. The iterations,
+    histories and times of all are summed into the returned result (the last converged one)."""
+    fr = kw["model"].frontal
+    iterations, history, times = res.iterations, [res.history], dict(res.times)
+    f_top = res.f_top
+    for _ in range(fr.posed_iterations - 1):
+        change = _bound_change(lat, np.where(fresh, res.bounds, bounds), bounds, res.tension,
+                               res.f_top, fr.change_scale_floor)
+        if top_tensions is not None:
+            f_top = np.asarray(top_tensions(res.pos), dtype=float)
+            change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
+        if not change >= fr.posed_tolerance:
+            break
+        bounds = np.where(fresh, res.bounds, bounds)
+        nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+                                  **kw)
+        iterations += nxt.iterations
+        history.append(nxt.history)
+        for key, v in nxt.times.items():
+            times[key] = times.get(key, 0.0) + v
+        if not nxt.converged:
+            break
+        res = nxt
+    res.iterations, res.history, res.times = iterations, np.concatenate(history), times
+    return res, bounds
 
 
 def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
@@ -626,26 +667,29 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
     return again
 
 
-def _lag_change(lat, res, held, top_tensions, f_top):
+def _lag_change(lat, res, held, top_tensions, f_top, floor=DEFAULT.frontal.change_scale_floor):
     """(change, top tensions): the relative change from the held bounds ``held`` and top
     tensions ``res.f_top`` to those of the converged geometry of ``res`` (:func:`_bound_change`;
     the top tensions' relative to themselves, behind a guide ring, where ``top_tensions`` gives
     them; else ``f_top`` is returned as it is)."""
-    change = _bound_change(lat, res.bounds, held, res.tension, res.f_top)
+    change = _bound_change(lat, res.bounds, held, res.tension, res.f_top, floor)
     if top_tensions is not None:
         f_top = np.asarray(top_tensions(res.pos), dtype=float)
         change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
     return change, f_top
 
 
-def _bound_change(lat, new, old, tension, f_top):
-    """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn."""
+def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_scale_floor):
+    """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn, at
+    least ``floor`` times the yarn's top tension (``FrontalSettings.change_scale_floor``): a
+    scale that cannot vanish where a yarn goes slack."""
     scale = np.empty_like(tension)
     for side in range(2):
         u = lat.up[:, side]
-        scale[:, side] = tension[:, side] + np.where(
-            u >= 0, tension[np.maximum(u, 0), side], f_top[lat.yarn[:, side]])
-    return float(np.max(np.abs(new - old) / np.maximum(scale, 1e-300)))
+        top = f_top[lat.yarn[:, side]]
+        scale[:, side] = np.maximum(tension[:, side] + np.where(
+            u >= 0, tension[np.maximum(u, 0), side], top), floor * top)
+    return float(np.max(np.abs(new - old) / scale))
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
@@ -1070,6 +1114,13 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     return np.where(np.isfinite(old), old, g0), f_top
 
 
+def _posed_bounds(state, settings):
+    """(m, 2) bool: the bounds a time step behind a guide ring takes of its converged geometry
+    (``FrontalSettings.posed_all_bounds``: all, else the new crossings')."""
+    fresh = ~np.isfinite(state.bound[:state.m])
+    return np.ones_like(fresh) if settings.frontal.posed_all_bounds else fresh
+
+
 def ring_top_tensions(state, bc):
     """Function of the positions giving the top tensions (guide ring: Capstan, eq. 9), for
     consistent bounds; None without a ring (the spool tension)."""
@@ -1098,7 +1149,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
 
     A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
     held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
-    into ``state.bound`` for the next step. With ``FrontalSettings.max_iterations`` k > 1 it is up
+    into ``state.bound`` for the next step. Behind a guide ring it is solved again with the top
+    tensions and the new crossings' bounds of its converged geometry until they settle
+    (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``), as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up
     to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
     the same friction centres), until the bounds change by less than ``friction_tolerance``, as
     Newton's frontal iteration. A call that asks for the frontal iteration of the
@@ -1153,7 +1206,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
-                top_tensions=ring_top_tensions(state, bc))
+                top_tensions=ring_top_tensions(state, bc),
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None)
     ITERATIONS.append(res.iterations)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:

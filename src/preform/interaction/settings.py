@@ -92,6 +92,11 @@ class FrontalSettings:
     #: convergence of the outer iteration: change of the bounds and top tensions between
     #: iterations, relative to the tensions; bounds Psi / (f_int + f_ext) of the result
     friction_tolerance: float = 1e-6
+    #: the change of a crossing's bounds is relative to f_int + f_ext there, but at least to
+    #: this fraction of the yarn's top tension: a slack yarn's tensions vanish, and a change
+    #: relative to them read 1e298 in history.csv; a crossing with tensions above 1 % of the
+    #: top tension is measured as before
+    change_scale_floor: float = 1e-2
     #: outer iterations per time step (Newton and the relaxation): the bounds lag the geometry by
     #: up to a step (an explicit update of a state variable; history.csv's residual says by how
     #: much). Each iteration costs about a solve; on 48-carrier case A runs the lag of 1 moves H
@@ -121,6 +126,27 @@ class FrontalSettings:
     #: a yarn whose material lies more than this many friction_creep from its friction centre is
     #: reported as slipping (it uses more than 99.5 % of its bound)
     slip_report_creeps: float = 10.0
+
+    #: behind a guide ring, solves a time step takes at most to bring the tension below the
+    #: ring (Capstan, eq. 9, of the deflection at the ring point of the step's result) and the
+    #: friction bounds (``posed_all_bounds``; else only those of the crossings created in the
+    #: step, the others lagged as above) to those of its converged geometry. The posed ones come from the posed geometry, whose new crossings (below the
+    #: ring) the solve moves by centimetres (case-B-like, 96 carriers, yarn friction 0: top
+    #: tensions up to 23 % off, residual p99 0.21); the map contracts by a factor ~15 a solve.
+    #: Without a ring the new crossings keep their posed bounds, as case A was validated
+    #: (docs/decisions.md, "The step's problem behind a guide ring")
+    posed_iterations: int = 8
+    #: that iteration takes every crossing's bound of the converged geometry, not only the new
+    #: crossings' (case-B-like, 16 carriers, yarn friction 0.5: residual max 0.085 with the new
+    #: crossings' alone, 0.012 with all, p99 5.5e-3); off: at yarn friction 0.25 some steps
+    #: cycle between stick and slip states and end at the solve limit (top tensions 2.7e-4
+    #: off eq. 9, a cone exceeded by 1.3e-3, the two solvers 2.8 mm apart), docs/decisions.md
+    posed_all_bounds: bool = False
+    #: that iteration stops once they change by less than this, relative to the tensions:
+    #: the snapshots' frontal tolerance (snapshot_tolerance; a step's state then meets Psi to
+    #: the 1e-3 the written crossings must); below 1e-5 the balance tolerance's soft modes
+    #: (micrometres) slow the iteration to a factor ~0.6 a solve on the first rows
+    posed_tolerance: float = 1e-4
 
     #: iterate every time step's bounds and top tensions to those of its own converged geometry
     #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
@@ -183,6 +209,16 @@ class ZoneSettings:
     #: hardly any is drawn over the ring). "tension" stays the default until "laid"'s break of
     #: the case-B mirror symmetry (0.37 deg) is understood (docs/decisions.md)
     fell_material: str = "tension"
+    #: a step whose residual (history.csv's: its balance, or the change of the friction bounds
+    #: it held to those of its converged geometry, relative to the tensions) exceeds this stops
+    #: the run as failed: the bounds then differ from the step's own by more than the tensions
+    #: they bound, no lag of an explicit update but a step the model has not solved (the
+    #: verdict calls a run suspect from 0.1 on: ``quality.QualitySettings``)
+    max_step_residual: float = 1.0
+    #: a yarn segment of the zone at or below this fraction of the spool tension is slack, which
+    #: the model does not admit (every free yarn is pulled by its carrier's tensioner): the run
+    #: stops as failed at that step
+    slack_tension: float = 0.0
 
 
 @dataclass(frozen=True)
