@@ -250,7 +250,10 @@ def test_default_step_from_any_start_lands_on_one_state(name, runs, captured):
         assert np.abs(x.pos[:m] - ref.pos[:m]).max() < 1e-6, label
         assert np.abs(x.material[:m] - ref.material[:m]).max() < 1e-6, label
         assert np.array_equal(x.slip[:m], ref.slip[:m]), label
-        assert np.array_equal(rep_x.f_top, rep.f_top), label
+        # behind a ring the top tensions are iterated to the Capstan of the converged geometry
+        # until they change by less than posed_tolerance (relative): equal to that, not bitwise
+        assert np.abs(rep_x.f_top - rep.f_top).max() <= (
+            DEFAULT.frontal.posed_tolerance * np.abs(rep.f_top).max()), label
         y = _relaxed(st, bc, centre, LONG, start=start)
         assert np.abs(y.pos[:m] - rel.pos[:m]).max() < 1e-6, label
         assert np.abs(y.material[:m] - rel.material[:m]).max() < 1e-6, label
