@@ -24,6 +24,7 @@ import naive_relax as naive
 from simcase import advanced_stepper, capture_step
 from preform._kernels import frontal as FK
 from preform._kernels import relax as RK
+from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
 
@@ -149,11 +150,13 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     plane[:, 5] = 1.0
     grad = np.zeros((m, 5))
     cap = FK.triplet_capacity(m, ny)
-    FK.assemble(m, ny, stE.yarn, stE.pos, stE.normal, stE.over, stE.low, stE.highest, fell, top,
-                stE.material, stE.material_fell, s_old[:m], f_top, g, EA, E.compression,
-                E.geometric_floor, eps_f, kappa0, bc.h, eps2, E.top_smoothing2, plane, 0.0,
-                l_jam, k_jam, grad, np.empty(cap, np.int64), np.empty(cap, np.int64),
-                np.empty(cap))
+    FK.assemble(KZ.Lattice(m, ny, stE.yarn, stE.low, stE.up, stE.over, stE.normal, stE.lowest,
+                           stE.highest),
+                KZ.law(EA, E.compression, eps_f, kappa0, bc.h, eps2, E.top_smoothing2, l_jam,
+                       k_jam, E.geometric_floor),
+                KZ.problem(fell, top, stE.material_fell, s_old[:m], g, f_top), stE.pos,
+                stE.material, plane, 0.0, grad, np.empty(cap, np.int64),
+                np.empty(cap, np.int64), np.empty(cap))
     assert np.abs(force + grad[:, :3]).max() < 1e-9 * np.abs(force).max()
     assert np.abs(grad[:, 3:]).max() < 1e-9 * f_top.max()
     # Laplacian of the fixed pattern against the dense one, with some wall rows
@@ -252,8 +255,11 @@ def test_block_jacobi_matches_its_definition(captured):
     plane = np.hstack([st.pos[:m], nrm])
     delta = np.empty((m, 3))
     reg = 0.05
-    RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, ten, f_top,
-                    l_jam, k_jam, 1e-3, reg, np.inf, force, plane, active, np.empty((m, 3, 3)),
+    RK.block_jacobi(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
+                    KZ.Problem(fell, top, np.zeros(ny), np.zeros((m, 2)), np.zeros((m, 2)),
+                               f_top),
+                    KZ.Segments(d_below, l_below, d_top, l_top), ten, reg, np.inf, force, plane,
+                    active, np.empty((m, 3, 3)),
                     np.empty(m), delta)
     H = np.zeros((m, 3, 3))
     I3 = np.eye(3)
@@ -373,9 +379,11 @@ def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
                                      k_jam, 1e-3, 1e-3, plane, active)
     blk = R._BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))
-    RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, ten, f_top,
-                    l_jam, k_jam, 1e-3, 1e-3, plane, active, blk.slot_diag, blk.slot_below,
-                    blk.below_first, blk.vals, blk.Dg)
+    RK.block_values(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
+                    KZ.Problem(fell, top, np.zeros(ny), np.zeros((m, 2)), np.zeros((m, 2)),
+                               f_top),
+                    KZ.Segments(d_below, l_below, d_top, l_top), ten, 1e-3, plane, active,
+                    blk.slots, blk.vals, blk.Dg)
     K = np.zeros((3 * m, 3 * m))
     for col in range(m):
         for q in range(blk.Ap[col], blk.Ap[col + 1]):

@@ -15,6 +15,7 @@ import pytest
 
 from naive_relax import block_fill, pattern_keys
 from preform._kernels import relax as RK
+from preform._kernels import zone as KZ
 
 
 def band_lattice(width, rows, seed=0):
@@ -351,12 +352,12 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
                                fr.friction_creep, e.kappa0, 1e-10, 60, a["tension"], a["chain"],
                                a["work"], a["stats"], a["l_prev"] if predict else None)
         a["l_prev"][:] = a["l_below"]
-        wb = RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
-                      lat.highest, fell, top, bc.h, e.length_smoothing, e.top_smoothing2, b["s"],
-                      st.material_fell, s_old[:m], g, f_top, EA, e.compression,
-                      fr.friction_creep, e.kappa0, 1e-10, 60, b["d_below"], b["l_below"],
-                      b["d_top"], b["l_top"], b["tension"], b["chain"], b["work"], b["stats"],
-                      b["l_prev"], predict, True)
+        wb = RK.sweep(lat, KZ.law(EA, e.compression, fr.friction_creep, e.kappa0, bc.h,
+                                  e.length_smoothing, e.top_smoothing2, 0.0, 0.0, 1e-3),
+                      KZ.problem(fell, top, st.material_fell, s_old[:m], g, f_top), pos, b["s"],
+                      KZ.Segments(b["d_below"], b["l_below"], b["d_top"], b["l_top"]),
+                      b["tension"], b["chain"], b["work"], b["stats"], b["l_prev"], predict,
+                      True, 1e-10, 60)
         assert wa == wb
         for key in a:
             assert np.array_equal(a[key], b[key]), key
@@ -370,15 +371,19 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     RK.forces(*common, o["force"], o["w_below"], o["w_top"], o["total"], o["W"])
     ra = RK.wall_residual(m, o["force"], o["total"], plane, active, o["W"], 1e-7, o["res"])
     o = out[1]
-    rb = RK.forces_residual(*common, plane, active, 1e-7, o["force"], o["w_below"], o["w_top"],
-                            o["total"], o["W"], o["res"])
+    law = KZ.law(EA, e.compression, fr.friction_creep, e.kappa0, bc.h, e.length_smoothing,
+                 e.top_smoothing2, l_jam, k_jam, 1e-3)
+    prob = KZ.problem(fell, top, st.material_fell, s_old[:m], g, f_top)
+    seg = KZ.Segments(a["d_below"], a["l_below"], a["d_top"], a["l_top"])
+    rb = RK.forces_residual(lat, law, prob, seg, a["tension"], plane, active, 1e-7,
+                            KZ.Forces(o["force"], o["w_below"], o["w_top"], o["total"], o["W"],
+                                      o["res"]))
     assert ra == rb
     for key in out[0]:
         assert np.array_equal(out[0][key], out[1][key]), key
     blk = R._BlockStiffness(lat, pos)
-    RK.block_values(m, ny, lat.low, lat.highest, a["d_below"], a["l_below"], a["d_top"],
-                    a["l_top"], a["tension"], f_top, l_jam, k_jam, 1e-3, 1e-3, plane, active,
-                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals, blk.Dg)
+    RK.block_values(lat, law, prob, seg, a["tension"], 1e-3, plane, active, blk.slots, blk.vals,
+                    blk.Dg)
     assert blk.factor()
     force = out[0]["force"]
     for cap in (1e9, 1e-3):         # no scaling, and a cap that scales the update down

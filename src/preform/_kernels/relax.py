@@ -450,8 +450,7 @@ def _add_block(H, c, w_perp, w_axial, dx, dy, dz):
 
 
 @njit(cache=True)
-def block_jacobi(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tension, f_top,
-                 l_jam, k_jam, floor, reg, cap, force, plane, active, H, lmin, delta):
+def block_jacobi(lat, law, prob, seg, tension, reg, cap, force, plane, active, H, lmin, delta):
     """One block-Jacobi correction of the positions with each crossing's own 3 x 3 stiffness:
     delta_c = H_c^-1 force_c, H_c = sum over its segments of (f - f_jam) / l (I - d d^T) (floored
     at floor / l) + k_jam d d^T (jamming) + reg sum f / l I; at a crossing on the wall (active)
@@ -459,6 +458,9 @@ def block_jacobi(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
     the plane's frame). A move longer than cap times the crossing's shortest segment is
     shortened to that (the local model holds for moves small against the segments). H (m, 3, 3)
     and lmin (m,) are scratch; delta (m, 3) receives the moves."""
+    m, n_yarns, low, highest = lat.m, lat.n_yarns, lat.low, lat.highest
+    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
+    f_top, l_jam, k_jam, floor = prob.f_top, law.l_jam, law.k_jam, law.floor
     for c in range(m):
         lmin[c] = np.inf
         for i in range(3):
@@ -573,8 +575,7 @@ def _project_block(B, pa, na, pb, nb, out, scale):
 
 
 @njit(cache=True)
-def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tension, f_top, l_jam,
-                 k_jam, floor, reg, plane, active, slot_diag, slot_below, below_first, vals, Dg):
+def block_values(lat, law, prob, seg, tension, reg, plane, active, slots, vals, Dg):
     """Blocks of the lattice's geometric stiffness K (3m x 3m, 3 x 3 blocks per pair of
     crossings) into vals (nslots, 3, 3), the upper triangle of a fixed pattern in an elimination
     order: per segment ``B = w (I - d d^T) + k_j d d^T + reg max(f, floor) / l I`` with ``w =
@@ -585,6 +586,10 @@ def block_values(m, n_yarns, low, highest, d_below, l_below, d_top, l_top, tensi
     columns are projected, ``P K P + n n^T``. Slots: slot_diag (m,), slot_below (m, 2) the slot of
     the pair (c, low[c, side]) (-1 none), below_first (m, 2) True where that slot holds the
     block (low, c) (low first in the order), else (c, low). Dg (m, 3, 3) is scratch."""
+    m, n_yarns, low, highest = lat.m, lat.n_yarns, lat.low, lat.highest
+    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
+    f_top, l_jam, k_jam, floor = prob.f_top, law.l_jam, law.k_jam, law.floor
+    slot_diag, slot_below, below_first = slots.diag, slots.below, slots.below_first
     n = n_yarns // 2
     B = np.empty((3, 3))
     T = np.empty((3, 3))
@@ -1129,14 +1134,21 @@ def anderson_combine(n, gx, DX, DR, gamma, k, out):
 
 
 @njit(cache=True)
-def sweep(m, n_yarns, yarn, pos, normal, over, low, up, lowest, highest, fell, top, h, eps2,
-          eps2_top, s, s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0, tol, max_newton,
-          d_below, l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict, keep):
+def sweep(lat, law, prob, pos, s, seg, tension, chain, work, stats, l_prev, predict, keep, tol,
+          max_newton):
     """One material sweep at the positions pos in one call: the segments
     (``segment_vectors``), then every yarn's material and tensions (``material_sweep``,
     started from the strains of the lengths l_prev where ``predict``); with ``keep`` the new
     lengths go into l_prev for the next sweep's start. Returns the sweep's largest relative
-    material residual."""
+    material residual. ``lat``, ``law``, ``prob``, ``seg``: ``_kernels.zone``'s Lattice, Law,
+    Problem and Segments (written)."""
+    m, n_yarns, yarn, low, up = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.up
+    lowest, highest, normal, over = lat.lowest, lat.highest, lat.normal, lat.over
+    fell, top, s_fell, s_old = prob.fell, prob.top, prob.s_fell, prob.s_old
+    g, f_top = prob.g, prob.f_top
+    h, eps2, eps2_top = law.h, law.eps2, law.eps2_top
+    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
+    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
     segment_vectors(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, h, eps2,
                     eps2_top, d_below, l_below, d_top, l_top)
     if predict:
@@ -1155,14 +1167,14 @@ def sweep(m, n_yarns, yarn, pos, normal, over, low, up, lowest, highest, fell, t
 
 
 @njit(cache=True)
-def forces_residual(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension,
-                    f_top, l_jam, k_jam, floor, plane, active, release, force, w_below, w_top,
-                    total, W, res_c):
-    """``forces`` then ``wall_residual`` (res_c (m,) the imbalance per crossing) in one call;
-    returns the largest relative imbalance (0 without crossings)."""
-    forces(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top,
-           l_jam, k_jam, floor, force, w_below, w_top, total, W)
-    return wall_residual(m, force, total, plane, active, W, release, res_c)
+def forces_residual(lat, law, prob, seg, tension, plane, active, release, out):
+    """``forces`` then ``wall_residual`` in one call, into ``out`` (``_kernels.zone.Forces``;
+    its ``res`` the imbalance per crossing); returns the largest relative imbalance (0 without
+    crossings)."""
+    forces(lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest, seg.d_below, seg.l_below,
+           seg.d_top, seg.l_top, tension, prob.f_top, law.l_jam, law.k_jam, law.floor, out.force,
+           out.w_below, out.w_top, out.total, out.W)
+    return wall_residual(lat.m, out.force, out.total, plane, active, out.W, release, out.res)
 
 
 @njit(cache=True)
@@ -1339,9 +1351,7 @@ def _projected(A, pa, na, pb, nb, out):
 
 
 @njit(cache=True)
-def full_values(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top, s,
-                s_fell, s_old, g, EA, compression, eps_f, kappa0, l_jam, k_jam, floor, reg, plane,
-                active, slot_diag, slot_below, below_first, vals, Dg):
+def full_values(lat, law, prob, seg, tension, s, reg, plane, active, slots, vals, Dg):
     """Blocks of the Hessian of the zone's energy in the positions and materials together, 5 x 5
     per pair of crossings (unknowns of a crossing: its position, then its material on the warp
     and on the weft), into vals (nslots, 5, 5) at the slots of ``block_values``' pattern (the
@@ -1355,7 +1365,14 @@ def full_values(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, 
     ``g eps_f^2 / r^3 + kappa0`` to its material's diagonal; the top segment adds its geometric
     block (its tension f_top is held: no axial term). A crossing resting on the wall (active)
     moves in its tangent plane: its position rows and columns projected, ``P H P + n n^T``.
-    Dg (m, 5, 5) is scratch."""
+    Dg (m, 5, 5) is scratch. ``lat``, ``law``, ``prob``, ``seg``, ``slots``: ``_kernels.zone``'s
+    Lattice, Law, Problem, Segments and BlockSlots."""
+    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
+    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
+    s_fell, s_old, g, f_top = prob.s_fell, prob.s_old, prob.g, prob.f_top
+    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
+    l_jam, k_jam, floor = law.l_jam, law.k_jam, law.floor
+    slot_diag, slot_below, below_first = slots.diag, slots.below, slots.below_first
     A = np.empty((4, 4))
     T = np.empty((4, 4))
     B = np.empty((3, 3))
@@ -1604,8 +1621,7 @@ def ldl_solve5(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
 
 
 @njit(cache=True)
-def reduced_energy(m, n_yarns, yarn, low, highest, l_below, l_top, s, s_fell, s_old, g, f_top,
-                   EA, compression, eps_f, kappa0, l_jam, k_jam, s_ref):
+def reduced_energy(lat, law, prob, seg, s, s_ref):
     """The step energy E (``_kernels.frontal.energy``) of the lengths ``l_below`` (m, 2),
     ``l_top`` (2n,) (``segment_vectors``) and materials ``s`` (m, 2), without its wall term (the
     relaxation keeps crossings outside their planes exactly): per segment the stretch ``k (l -
@@ -1616,7 +1632,12 @@ def reduced_energy(m, n_yarns, yarn, low, highest, l_below, l_top, s, s_fell, s_
     the top material ``s_ref`` (2n,) so that its metres do not swamp the round-off). With the
     materials swept for the lengths (``material_sweep``) it is the reduced energy of the
     positions alone, whose negative gradient is ``forces``' net force. inf where a material
-    length is not positive."""
+    length is not positive. The lengths are ``seg``'s."""
+    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
+    l_below, l_top = seg.l_below, seg.l_top
+    s_fell, s_old, g, f_top = prob.s_fell, prob.s_old, prob.g, prob.f_top
+    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
+    l_jam, k_jam = law.l_jam, law.k_jam
     n = n_yarns // 2
     E = 0.0
     for c in range(m):

@@ -88,6 +88,7 @@ import pymetis
 import scipy.sparse as sp
 
 from .._kernels import frontal as frontal_kernels
+from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
@@ -210,24 +211,31 @@ class _Network:
                                      factoriser=factoriser)
         return p
 
-    def _args(self, pos, material):
+    def _args(self):
+        """The kernels' (Lattice, Law, Problem) of the state and the frontal loop's iterate."""
         st, bc, e = self.st, self.bc, self.settings.energy
-        return (st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest, bc.fell,
-                bc.top, material, st.material_fell, self.centre, self.f_top, self.bound, self.EA,
-                e.compression, e.geometric_floor, self.settings.frontal.friction_creep, e.kappa0,
-                bc.h, e.length_smoothing, e.top_smoothing2, self.plane, e.wall_stiffness,
-                bc.width, e.jam_force * bc.f_spool / max(bc.width, 1e-300))
+        lat = zone_kernels.Lattice(st.m, st.n_yarns, st.yarn, st.low, st.up, st.over, st.normal,
+                                   st.lowest, st.highest)
+        law = zone_kernels.law(self.EA, e.compression, self.settings.frontal.friction_creep,
+                               e.kappa0, bc.h, e.length_smoothing, e.top_smoothing2, bc.width,
+                               e.jam_force * bc.f_spool / max(bc.width, 1e-300),
+                               e.geometric_floor)
+        prob = zone_kernels.Problem(bc.fell, bc.top, st.material_fell, self.centre, self.bound,
+                                    self.f_top)
+        return lat, law, prob
 
     def assemble(self):
         """(E, nnz): the energy at the state's iterate, its gradient into ``grad`` and its
         Hessian's triplets into ``rows``, ``cols``, ``vals``."""
         st = self.st
-        return frontal_kernels.assemble(*self._args(st.pos, st.material), self.grad, self.rows,
-                                        self.cols, self.vals)
+        return frontal_kernels.assemble(*self._args(), st.pos, st.material, self.plane,
+                                        self.settings.energy.wall_stiffness, self.grad,
+                                        self.rows, self.cols, self.vals)
 
     def energy(self, pos, material):
         """E at crossing positions ``pos`` (m, 3) and material coordinates ``material`` (m, 2)."""
-        return frontal_kernels.energy(*self._args(pos, material))
+        return frontal_kernels.energy(*self._args(), pos, material, self.plane,
+                                      self.settings.energy.wall_stiffness)
 
     def update_tensions(self):
         """The segment tensions of the state's iterate into ``tension`` (m, 2)."""

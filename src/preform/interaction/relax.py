@@ -116,6 +116,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._kernels import relax as RK
+from .._kernels import zone as KZ
+from .._kernels.zone import Lattice
 from ..errors import SimulationError
 from .settings import DEFAULT, InteractionSettings
 
@@ -281,28 +283,6 @@ class RelaxSettings:
 
 
 @dataclass
-class Lattice:
-    """Connectivity of the crossings (``zone_state.py``'s layout): yarn, low, up (m, 2) int64;
-    over (m,) float64; normal (m, 3) contact normals; lowest, highest (2n,) int64."""
-
-    yarn: np.ndarray
-    low: np.ndarray
-    up: np.ndarray
-    over: np.ndarray
-    normal: np.ndarray
-    lowest: np.ndarray
-    highest: np.ndarray
-
-    @property
-    def m(self):
-        return self.yarn.shape[0]
-
-    @property
-    def n_yarns(self):
-        return self.lowest.shape[0]
-
-
-@dataclass
 class RelaxResult:
     """pos (m, 3), s (m, 2), tension (m, 2) N, bounds (m, 2) N (the newest: of the converged
     geometry), psi (m, 2) Psi / (f_int + f_ext), f_top (2n,) N, wall_force (m,) N (>= 0),
@@ -430,6 +410,7 @@ class _BlockStiffness:
         self.below_first = np.empty((m, 2), dtype=np.bool_)
         self.nslots = RK.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
                                        self.slot_below, self.below_first)
+        self.slots = KZ.BlockSlots(self.slot_diag, self.slot_below, self.below_first)
         self.Ai = Ai[:self.nslots]
         self.vals = np.zeros((self.nslots, nb, nb))
         self.Dg = np.empty((m, nb, nb))
@@ -703,6 +684,10 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     g_new = np.empty((m, 2))
     psi = np.zeros((m, 2))
     active = np.zeros(m, dtype=np.bool_)
+    law = KZ.law(EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, st.floor)
+    prob = KZ.Problem(fell, top, s_fell, s_old, g, f_top)
+    seg = KZ.Segments(d_below, l_below, d_top, l_top)
+    fo = KZ.Forces(force, w_below, w_top, total, W, res_c)
     if has_wall:
         RK.wall_distance(m, pos, plane, dist)
         active[:] = dist < st.wall_contact
@@ -746,6 +731,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         d_t, l_t = np.empty((m, 2, 3)), np.empty((m, 2))
         dtop_t, ltop_t = np.empty((ny, 3)), np.empty(ny)
         s_t, ten_t = np.empty((m, 2)), np.empty((m, 2))
+        seg_t = KZ.Segments(d_t, l_t, dtop_t, ltop_t)
         damped_refactor = False
 
         def merit(trial):
@@ -763,9 +749,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_t, s_t, s_fell, s_old, g,
                               f_top, EA, compression, eps_f, kappa0, st.material_tol,
                               st.material_newton, ten_t, chain, work, stats, l_below)
-            return RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_t, ltop_t, s_t,
-                                     s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
-                                     l_jam, k_jam, s_ref)
+            return RK.reduced_energy(lat, law, prob, seg_t, s_t, s_ref)
     swept = False
     while True:
         t0 = time.perf_counter()
@@ -777,22 +761,15 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             if predict_on:
                 l_prev[:] = l_below
         else:
-            RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
-                     lat.highest, fell, top, h, eps2, eps2_top, s, s_fell, s_old, g, f_top, EA,
-                     compression, eps_f, kappa0, st.material_tol, st.material_newton, d_below,
-                     l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict,
-                     predict_on)
+            RK.sweep(lat, law, prob, pos, s, seg, tension, chain, work, stats, l_prev, predict,
+                     predict_on, st.material_tol, st.material_newton)
         predict = predict_on
         t1 = time.perf_counter()
-        residual = RK.forces_residual(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
-                                      d_top, l_top, tension, f_top, l_jam, k_jam, st.floor,
-                                      plane, active, st.wall_release, force, w_below, w_top,
-                                      total, W, res_c)
+        residual = RK.forces_residual(lat, law, prob, seg, tension, plane, active,
+                                      st.wall_release, fo)
         history.append(residual)
         if search:
-            E_cur = RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_below, l_top, s,
-                                      s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
-                                      l_jam, k_jam, s_ref)
+            E_cur = RK.reduced_energy(lat, law, prob, seg, s, s_ref)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
         times["forces"] += t2 - t1
@@ -848,19 +825,14 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                         # a pivot lost (a material whose yarn slides freely on both sides
                         # has only kappa0): the isotropic share of the positions raised, up
                         # to 1e6 times; beyond that the step is not converged (Newton's)
-                        RK.full_values(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
-                                       d_top, l_top, tension, f_top, s, s_fell, s_old, g, EA,
-                                       compression, eps_f, kappa0, l_jam, k_jam, st.floor, reg,
-                                       plane, active, blk.slot_diag, blk.slot_below,
-                                       blk.below_first, blk.vals, blk.Dg)
+                        RK.full_values(lat, law, prob, seg, tension, s, reg, plane, active,
+                                       blk.slots, blk.vals, blk.Dg)
                         if blk.factor() or reg > 1e6 * st.block_reg:
                             break
                         reg *= 10.0
                         continue
-                    RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
-                                    tension, f_top, l_jam, k_jam, st.floor, reg, plane, active,
-                                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
-                                    blk.Dg)
+                    RK.block_values(lat, law, prob, seg, tension, reg, plane, active, blk.slots,
+                                    blk.vals, blk.Dg)
                     if blk.factor():
                         break
                     reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
@@ -918,8 +890,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 predict = True
             RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
                       tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
-            RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
-                            f_top, l_jam, k_jam, st.floor, st.smoothing_reg, st.smoothing_cap,
+            RK.block_jacobi(lat, law, prob, seg, tension, st.smoothing_reg, st.smoothing_cap,
                             force, plane, active, H3, lmin, delta)
             new += st.smoothing_weight * delta
         t6 = time.perf_counter()
@@ -1036,9 +1007,9 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
 def lattice_of(state) -> Lattice:
     """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
     m = state.m
-    return Lattice(yarn=state.yarn[:m], low=state.low[:m], up=state.up[:m],
-                   over=state.over[:m], normal=state.normal[:m], lowest=state.lowest,
-                   highest=state.highest)
+    return Lattice(m=m, n_yarns=state.n_yarns, yarn=state.yarn[:m], low=state.low[:m],
+                   up=state.up[:m], over=state.over[:m], normal=state.normal[:m],
+                   lowest=state.lowest, highest=state.highest)
 
 
 def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
