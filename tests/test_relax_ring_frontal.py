@@ -86,7 +86,7 @@ def test_structure_is_shared_only_by_the_same_lattice(ring_step):
     assert R._BlockStiffness.of(R.lattice_of(st.copy()), st.pos[:m], 5, "metis") is a
     assert R._BlockStiffness.of(lat, st.pos[:m], 3, "metis") is not a
     assert R._BlockStiffness.of(lat, st.pos[:m], 5, "band") is not a
-    other = dataclasses.replace(lat, low=lat.low.copy())
+    other = lat._replace(low=lat.low.copy())
     c = int(np.nonzero(other.low[:, 0] >= 0)[0][-1])
     other.low[c, 0] = -1
     assert R._BlockStiffness.of(other, st.pos[:m], 5, "metis") is not a
