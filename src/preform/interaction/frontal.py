@@ -149,6 +149,26 @@ class SolveReport:
     lagged: bool = False
     newton_residual: np.ndarray | None = None
     newton_energy: np.ndarray | None = None
+    #: iterations of the force-density relaxation in the solve (``relax.solve_zone``; 0 for
+    #: Newton's alone), converged or not
+    relax_iterations: int = 0
+    #: the relaxation did not converge and Newton's solve gave the result (``relax.solve_zone``,
+    #: ``RelaxSettings.newton_fallback``)
+    fallback: bool = False
+
+
+#: what a zone solve is for (``solve_zone_inplace``'s and ``relax.solve_zone``'s ``mode``):
+#: "step", a time step (``FrontalSettings.max_iterations`` frontal iterations, or consistent
+#: bounds); "pass", a snapshot's ring pass (``max_iter`` frontal iterations of the bounds);
+#: "final", a snapshot's final solve (the frontal iteration to ``friction_tol``)
+SOLVE_MODES = ("step", "pass", "final")
+
+
+def check_mode(mode):
+    """``mode`` if it is one of :data:`SOLVE_MODES`; ValueError otherwise."""
+    if mode not in SOLVE_MODES:
+        raise ValueError(f"zone solve mode {mode!r}: expected one of {', '.join(SOLVE_MODES)}")
+    return mode
 
 
 @dataclass
@@ -375,7 +395,7 @@ def _newton_step_inplace(net, E, nnz):
 
 def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = DEFAULT, tol=None,
                        friction_tol=None, max_iter=None, where="", centre=None,
-                       start=None) -> SolveReport:
+                       start=None, mode="step") -> SolveReport:
     """Bring every crossing of ``state`` to balance with its friction law (module docstring),
     updating ``state`` in place: positions, material coordinates, tensions, friction bounds, slip
     states and friction offsets of the crossings. The top tensions of the result are
@@ -391,12 +411,14 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     ``centre`` (m, 2): where each yarn's friction term is centred (default:
     ``friction_centres(state)``). ``tol``, ``friction_tol``, ``max_iter``: the balance
     tolerance, the frontal tolerance and the frontal iterations (default: ``settings``'
-    ``balance_tolerance``, ``friction_tolerance``, ``max_iterations``). ``where`` names the step
-    and time in the error message; :class:`SimulationError` if the residual stays above the
-    tolerances."""
+    ``balance_tolerance``, ``friction_tolerance``, ``max_iterations``). ``mode``: what the
+    solve is for (:data:`SOLVE_MODES`); a time step ("step") with
+    ``FrontalSettings.consistent_bounds`` iterates the bounds to ``consistent_tolerance``.
+    ``where`` names the step and time in the error message; :class:`SimulationError` if the
+    residual stays above the tolerances."""
     fr = settings.frontal
     # a time step with consistent bounds: the frontal iteration to convergence, mixed
-    consistent = fr.consistent_bounds and max_iter is None and friction_tol is None
+    consistent = fr.consistent_bounds and check_mode(mode) == "step"
     tol = settings.newton.balance_tolerance if tol is None else tol
     if consistent:
         friction_tol, max_iter = fr.consistent_tolerance, fr.consistent_iterations

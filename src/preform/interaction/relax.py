@@ -127,14 +127,6 @@ except ImportError:     # pragma: no cover - qdldl is a dependency
     qdldl = None
 
 
-#: steps solved by the Newton fallback since import (``solve_zone``), for benchmarks and tests
-FALLBACKS = [0]
-#: relaxation iterations of every step ``solve_zone`` gave the relaxation since import
-#: (converged or not), for benchmarks: the median a step and, with FALLBACKS, the share of
-#: steps Newton solved
-ITERATIONS: list[int] = []
-
-
 @dataclass(frozen=True)
 class RelaxSettings:
     """Numerical settings of :func:`relax`. The model's constants (tow strain, friction creep,
@@ -149,7 +141,7 @@ class RelaxSettings:
     #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
     max_iter: int = 200
     #: a step the relaxation does not converge on is solved by the Newton reference
-    #: (``solve_zone``; counted in ``FALLBACKS``) instead of stopping the run
+    #: (``solve_zone``; its report says ``fallback``) instead of stopping the run
     newton_fallback: bool = True
     #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
     anderson_depth: int = 10
@@ -997,7 +989,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     if finish:
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
-                                          where=where, centre=centres)
+                                          where=where, centre=centres, mode="final")
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(), lagged=not res.converged)
 
@@ -1061,25 +1053,26 @@ def ring_top_tensions(state, bc):
 
 def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", centre=None,
                tol=None, friction_tol=None, max_iter=None,
-               relax_settings: RelaxSettings | None = None, start=None):
+               relax_settings: RelaxSettings | None = None, start=None, mode="step"):
     """The zone solver with ``frontal.solve_zone_inplace``'s contract (``InteractionZone``'s
     ``solve_zone``; ``[model] solver = "relax"``): brings ``state`` to balance in place
     (positions, material, tensions, friction bounds, slip states, friction offsets) and returns a
     ``frontal.SolveReport`` (iterations: relaxation iterations; ``f_top``: the top tensions).
 
-    A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
-    held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
+    ``mode`` (``frontal.SOLVE_MODES``) says what the solve is for. A time step ("step") is one
+    relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
     into ``state.bound`` for the next step. With ``FrontalSettings.max_iterations`` k > 1 it is up
     to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
     the same friction centres), until the bounds change by less than ``friction_tolerance``, as
-    Newton's frontal iteration. A call that asks for the frontal iteration of the
-    bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
-    to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent
+    Newton's frontal iteration. A snapshot's frontal iteration of the bounds ("pass": its ring
+    passes of ``max_iter`` iterations; "final": its re-balance to ``friction_tol``, which must
+    meet Psi to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent
     bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide ring by
     ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation
     does not converge on (``relax_settings.max_iter`` reached, or the block preconditioner
-    stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``,
-    counted in ``FALLBACKS``). Behind a guide ring the relaxation uses
+    stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``;
+    the report's ``fallback`` is then set). The report's ``relax_iterations``: the
+    relaxation's iterations of a time step, converged or not. Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
     ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
@@ -1088,19 +1081,19 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
-    frontal_iteration = max_iter is not None or friction_tol is not None
+    frontal_iteration = frontal.check_mode(mode) != "step"
     by_relaxation = rs.ring_frontal if bc.has_ring else rs.snapshot_frontal
     if frontal_iteration and by_relaxation and not settings.frontal.consistent_bounds:
         report = _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol,
-                               max_iter, finish=friction_tol is not None, start=start)
+                               max_iter, finish=mode == "final", start=start)
         if report is not None:
             return report
-    if max_iter is not None or friction_tol is not None or settings.frontal.consistent_bounds:
+    if frontal_iteration or settings.frontal.consistent_bounds:
         # consistent bounds: the relaxation does not converge on steps whose crossings stick
         # (docs/decisions.md), Newton's frontal iteration solves them
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
-                                          where=where, centre=centre, start=start)
+                                          where=where, centre=centre, start=start, mode=mode)
     if tol is not None:
         rs = dataclasses.replace(rs, tol=float(tol))
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
@@ -1125,15 +1118,13 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc))
-    ITERATIONS.append(res.iterations)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
                                                 centre=centres, start=start)
-            FALLBACKS[0] += 1
-            return report
+            return dataclasses.replace(report, relax_iterations=res.iterations, fallback=True)
         raise SimulationError(
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
@@ -1141,4 +1132,5 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     _accept(state, res, centres, fr)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
-                               lagged=not (rs.consistent_bounds and res.converged))
+                               lagged=not (rs.consistent_bounds and res.converged),
+                               relax_iterations=res.iterations)
