@@ -24,6 +24,7 @@ import naive_relax as naive
 from simcase import advanced_stepper, capture_step
 from preform._kernels import frontal as FK
 from preform._kernels import relax as RK
+from preform._kernels import stiffness as SK
 from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
@@ -163,7 +164,7 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     active = rng.uniform(size=m) < 0.2
     lap = R._Laplacian(lat)
     diag = np.empty(m)
-    RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active, lap.slot_diag,
+    SK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active, lap.slot_diag,
                         lap.slot_below, lap.nslots, lap.vals, diag)
     lap.A.data[:] = lap.vals
     U = lap.A.toarray()
@@ -255,7 +256,7 @@ def test_block_jacobi_matches_its_definition(captured):
     plane = np.hstack([st.pos[:m], nrm])
     delta = np.empty((m, 3))
     reg = 0.05
-    RK.block_jacobi(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
+    SK.block_jacobi(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
                     KZ.Problem(fell, top, np.zeros(ny), np.zeros((m, 2)), np.zeros((m, 2)),
                                f_top),
                     KZ.Segments(d_below, l_below, d_top, l_top), ten, reg, np.inf, force, plane,
@@ -379,7 +380,7 @@ def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
                                      k_jam, 1e-3, 1e-3, plane, active)
     blk = R._BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))
-    RK.block_values(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
+    SK.block_values(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
                     KZ.Problem(fell, top, np.zeros(ny), np.zeros((m, 2)), np.zeros((m, 2)),
                                f_top),
                     KZ.Segments(d_below, l_below, d_top, l_top), ten, 1e-3, plane, active,

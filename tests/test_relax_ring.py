@@ -1,5 +1,5 @@
 """The relaxation behind a guide ring (issue 14 item 4): the ``"full"`` preconditioner, the
-Hessian of the zone's energy in the positions and the materials (``_kernels.relax.full_values``,
+Hessian of the zone's energy in the positions and the materials (``_kernels.stiffness.full_values``,
 5 x 5 blocks, ``ldl_numeric5`` / ``ldl_solve5``), against a dense NumPy twin; its Schur
 complement on the positions against the finite-difference Jacobian of the relaxation's force
 map (materials swept), which is what makes its position update a Newton step; whole steps of a
@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from preform._kernels import relax as RK
+from preform._kernels import stiffness as SK
 from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
@@ -180,7 +181,7 @@ def test_full_hessian_matches_its_twin_and_its_ldl_solves_it(ring_steps):
     H_ref = _dense_hessian(F, reg, floor, plane, active)
     lat = F.lat
     blk = R._BlockStiffness(lat, st.pos[:m], 5)
-    RK.full_values(lat, KZ.law(F.EA, E.compression, EPS_F, E.kappa0, 0.0, 0.0, 0.0, F.l_jam,
+    SK.full_values(lat, KZ.law(F.EA, E.compression, EPS_F, E.kappa0, 0.0, 0.0, 0.0, F.l_jam,
                                F.k_jam, floor),
                    KZ.problem(np.zeros((ny, 3)), np.zeros((ny, 3)), st.material_fell, s_old, g,
                               f_top),

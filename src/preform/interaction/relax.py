@@ -115,7 +115,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .._kernels import ldl as LDL
 from .._kernels import relax as RK
+from .._kernels import stiffness as SK
 from .._kernels import zone as KZ
 from .._kernels.zone import Lattice
 from ..errors import SimulationError
@@ -373,7 +375,7 @@ def _metis_order(lat: Lattice):
 
 
 class _BlockStiffness:
-    """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
+    """The block preconditioner K (``_kernels.stiffness.block_values``; with ``nb`` 5 the full one,
     ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
     of the band of crossings around the machine axis (``order`` "band", ``band_dissection``
     with ``leaf`` and ``window``, ``RelaxSettings.order_leaf``, ``order_window``: the factor's
@@ -392,7 +394,7 @@ class _BlockStiffness:
             r = np.hypot(pos[:, 0], pos[:, 1])
             u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
             perm = np.empty(m, dtype=np.int64)
-            RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf,
+            LDL.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf,
                                window, perm)
         self.perm = perm
         self.Ap = np.empty(m + 1, dtype=np.int64)
@@ -400,7 +402,7 @@ class _BlockStiffness:
         self.slot_diag = np.empty(m, dtype=np.int64)
         self.slot_below = np.empty((m, 2), dtype=np.int64)
         self.below_first = np.empty((m, 2), dtype=np.bool_)
-        self.nslots = RK.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
+        self.nslots = LDL.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
                                        self.slot_below, self.below_first)
         self.slots = KZ.BlockSlots(self.slot_diag, self.slot_below, self.below_first)
         self.Ai = Ai[:self.nslots]
@@ -408,7 +410,7 @@ class _BlockStiffness:
         self.Dg = np.empty((m, nb, nb))
         self.etree = np.empty(m, dtype=np.int64)
         self.Lnz = np.empty(m, dtype=np.int64)
-        nnz = RK.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
+        nnz = LDL.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
                               self.etree)
         self.Lp = np.empty(m + 1, dtype=np.int64)
         self.Li = np.empty(max(nnz, 1), dtype=np.int64)
@@ -444,7 +446,7 @@ class _BlockStiffness:
 
     def factor(self):
         """Factorise the current ``vals``; False if a pivot is not positive definite."""
-        f = RK.ldl_numeric if self.nb == 3 else RK.ldl_numeric5
+        f = LDL.ldl_numeric if self.nb == 3 else LDL.ldl_numeric5
         return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
                  self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
                  self._y, self._D)
@@ -455,7 +457,7 @@ class _BlockStiffness:
         crossing's shortest segment (``cap_moves``); with 3 x 3 blocks in one kernel call
         (``block_step``)."""
         if self.nb == 3:
-            RK.block_step(self.m, force, plane, active, low, l_below, cap, self.Lp, self.Li,
+            SK.block_step(self.m, force, plane, active, low, l_below, cap, self.Lp, self.Li,
                           self.Lx, self.Dinv, self.perm, rhs, self._x, lmin, delta)
             return
         RK.tangent_part(self.m, force, plane, active, rhs)
@@ -467,11 +469,11 @@ class _BlockStiffness:
         unknowns (nb 5), their right-hand side is 0 (the material equations hold after every
         sweep)."""
         if self.nb == 3:
-            RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
+            LDL.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
                          self._x)
             return
         self._rhs[:, :3] = rhs
-        RK.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,
+        LDL.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,
                        self._out, self._x)
         out[:] = self._out[:, :3]
 
@@ -817,19 +819,19 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                         # a pivot lost (a material whose yarn slides freely on both sides
                         # has only kappa0): the isotropic share of the positions raised, up
                         # to 1e6 times; beyond that the step is not converged (Newton's)
-                        RK.full_values(lat, law, prob, seg, tension, s, reg, plane, active,
+                        SK.full_values(lat, law, prob, seg, tension, s, reg, plane, active,
                                        blk.slots, blk.vals, blk.Dg)
                         if blk.factor() or reg > 1e6 * st.block_reg:
                             break
                         reg *= 10.0
                         continue
-                    RK.block_values(lat, law, prob, seg, tension, reg, plane, active, blk.slots,
+                    SK.block_values(lat, law, prob, seg, tension, reg, plane, active, blk.slots,
                                     blk.vals, blk.Dg)
                     if blk.factor():
                         break
                     reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
             else:
-                RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
+                SK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
                                     lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
                 lap.factor()
             factored_active = active.copy()
@@ -882,7 +884,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
                 predict = True
             RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
                       tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
-            RK.block_jacobi(lat, law, prob, seg, tension, st.smoothing_reg, st.smoothing_cap,
+            SK.block_jacobi(lat, law, prob, seg, tension, st.smoothing_reg, st.smoothing_cap,
                             force, plane, active, H3, lmin, delta)
             new += st.smoothing_weight * delta
         t6 = time.perf_counter()
