@@ -160,7 +160,7 @@ def block_stiffness(st, fell, top, ten, f_top, h, eps2, l_jam, k_jam, floor, reg
 
 
 class Anderson:
-    """Type-II Anderson mixing written out with NumPy (the twin of ``relax._Anderson``):
+    """Type-II Anderson mixing written out with NumPy (the twin of ``preconditioners.Anderson``):
     x+ = G(x) - (dX + dR) gamma, gamma the regularised least-squares fit of r by dR over the
     last ``depth`` differences."""
 

@@ -27,6 +27,7 @@ from preform._kernels import relax as RK
 from preform._kernels import stiffness as SK
 from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
+from preform.interaction import preconditioners as PC
 from preform.interaction.settings import DEFAULT
 
 E = DEFAULT.energy
@@ -162,7 +163,7 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     assert np.abs(grad[:, 3:]).max() < 1e-9 * f_top.max()
     # Laplacian of the fixed pattern against the dense one, with some wall rows
     active = rng.uniform(size=m) < 0.2
-    lap = R._Laplacian(lat)
+    lap = PC.Laplacian(lat)
     diag = np.empty(m)
     SK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active, lap.slot_diag,
                         lap.slot_below, lap.nslots, lap.vals, diag)
@@ -322,7 +323,7 @@ def test_jammed_step_refactorises_and_lands_on_newton(captured):
 
 
 def test_anderson_matches_its_twin():
-    """``relax._Anderson`` (the numba passes over a ring of differences) against the NumPy twin
+    """``preconditioners.Anderson`` (the numba passes over a ring of differences) against the NumPy twin
     on a contracting affine map, past the ring's wrap-around: the same iterates (round-off of
     the Gram matrix's sums), converging to the map's fixed point."""
     rng = np.random.default_rng(7)
@@ -331,7 +332,7 @@ def test_anderson_matches_its_twin():
     A *= 0.9 / np.abs(np.linalg.eigvals(A)).max()
     c = rng.normal(size=n)
     fixed = np.linalg.solve(np.eye(n) - A, c)
-    mine, twin = R._Anderson(depth), naive.Anderson(depth)
+    mine, twin = PC.Anderson(depth), naive.Anderson(depth)
     x = y = np.zeros(n)
     for _ in range(4 * depth):
         x = mine(x, A @ x + c).copy()
@@ -378,7 +379,7 @@ def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
     k_jam = 50.0
     K_ref, P = naive.block_stiffness(st, fell, top, ten, f_top, h, E.length_smoothing, l_jam,
                                      k_jam, 1e-3, 1e-3, plane, active)
-    blk = R._BlockStiffness(lat, st.pos[:m])
+    blk = PC.BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))
     SK.block_values(lat, KZ.law(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, l_jam, k_jam, 1e-3),
                     KZ.Problem(fell, top, np.zeros(ny), np.zeros((m, 2)), np.zeros((m, 2)),
@@ -451,7 +452,7 @@ def test_band_dissection_orders_with_little_fill(captured):
     def fill(perm):
         return naive.block_fill(lat.low, perm)
 
-    blk = R._BlockStiffness(lat, st.pos[:m])
+    blk = PC.BlockStiffness(lat, st.pos[:m])
     assert np.array_equal(np.sort(blk.perm), np.arange(m))
     metis = frontal.dissection_order(lat.low)[::5] // 5
     assert fill(blk.perm) < 1.5 * fill(metis)

@@ -317,6 +317,7 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     ``block_step`` (``tangent_part``, ``ldl_solve``, ``cap_moves``) give what the calls they
     fold together give: bit for bit, the solve (fastmath) to its round-off."""
     from preform.interaction import relax as R
+    from preform.interaction import preconditioners as PC
     from preform.interaction.settings import DEFAULT
 
     st, bc, f_top, s_old = step16
@@ -383,7 +384,7 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     assert ra == rb
     for key in out[0]:
         assert np.array_equal(out[0][key], out[1][key]), key
-    blk = R._BlockStiffness(lat, pos)
+    blk = PC.BlockStiffness(lat, pos)
     SK.block_values(lat, law, prob, seg, a["tension"], 1e-3, plane, active, blk.slots, blk.vals,
                     blk.Dg)
     assert blk.factor()

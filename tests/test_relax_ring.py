@@ -20,6 +20,7 @@ from preform._kernels import relax as RK
 from preform._kernels import stiffness as SK
 from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
+from preform.interaction import preconditioners as PC
 from preform.interaction.settings import DEFAULT
 from simcase import advanced_stepper, capture_step, case_b_like_config
 
@@ -180,7 +181,7 @@ def test_full_hessian_matches_its_twin_and_its_ldl_solves_it(ring_steps):
     reg, floor = 1e-3, 1e-3
     H_ref = _dense_hessian(F, reg, floor, plane, active)
     lat = F.lat
-    blk = R._BlockStiffness(lat, st.pos[:m], 5)
+    blk = PC.BlockStiffness(lat, st.pos[:m], 5)
     SK.full_values(lat, KZ.law(F.EA, E.compression, EPS_F, E.kappa0, 0.0, 0.0, 0.0, F.l_jam,
                                F.k_jam, floor),
                    KZ.problem(np.zeros((ny, 3)), np.zeros((ny, 3)), st.material_fell, s_old, g,

@@ -458,7 +458,7 @@ def cap_moves(m, low, l_below, cap, lmin, delta):
 
 @njit(cache=True)
 def anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b):
-    """One pass of Anderson mixing (``interaction/relax._Anderson``) over x, gx (n,), r = gx - x:
+    """One pass of Anderson mixing (``interaction/preconditioners.Anderson``) over x, gx (n,), r = gx - x:
     with a previous iterate (have_prev) the new differences x - x_prev, r - r_prev into column j
     of DX, DR (n, depth) and row and column j of the Gram matrix G (depth, depth) over the k
     columns held (j among them); b (depth,) receives DR[:, :k]^T r; x_prev, r_prev become x, r."""
@@ -539,7 +539,7 @@ def forces_residual(lat, law, prob, seg, tension, plane, active, release, out):
 
 @njit(cache=True)
 def anderson_step(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b, M, gamma, out):
-    """One Anderson mixing step (``interaction/relax._Anderson``) in one call: the pass of
+    """One Anderson mixing step (``interaction/preconditioners.Anderson``) in one call: the pass of
     ``anderson_gram`` (k: the differences held after this one, j its column), then gamma =
     (G_k + reg I)^-1 b_k with reg = 1e-12 trace(G_k) + 1e-300 by Gaussian elimination with
     partial pivoting (M (depth, depth), gamma (depth,) scratch), then out = gx - (DX + DR)
