@@ -489,3 +489,13 @@ def test_interaction_zone_runs_with_the_relaxation():
     assert np.array_equal(a.state.uid[: a.state.m], b.state.uid[: b.state.m])
     assert np.abs(a.state.pos[: a.state.m] - b.state.pos[: b.state.m]).max() < 1e-5
     assert np.allclose(a.fell, b.fell, atol=1e-5)
+
+
+def test_unknown_preconditioner_and_solve_mode_are_refused():
+    """A preconditioner (``RelaxSettings.preconditioner``) or a zone solve mode
+    (``frontal.SOLVE_MODES``) other than the known ones is a ValueError that names it and the
+    choices, not a silent default."""
+    with pytest.raises(ValueError, match="'diagonal': expected 'block', 'full' or 'scalar'"):
+        PC.make("diagonal", None)
+    with pytest.raises(ValueError, match="'snapshot': expected one of step, pass, final"):
+        frontal.check_mode("snapshot")
