@@ -323,9 +323,9 @@ def test_jammed_step_refactorises_and_lands_on_newton(captured):
 
 
 def test_anderson_matches_its_twin():
-    """``preconditioners.Anderson`` (the numba passes over a ring of differences) against the NumPy twin
-    on a contracting affine map, past the ring's wrap-around: the same iterates (round-off of
-    the Gram matrix's sums), converging to the map's fixed point."""
+    """``preconditioners.Anderson`` (the numba passes over a ring of differences) against the
+    NumPy twin on a contracting affine map, past the ring's wrap-around: the same iterates
+    (round-off of the Gram matrix's sums), converging to the map's fixed point."""
     rng = np.random.default_rng(7)
     n, depth = 40, 5
     A = rng.normal(size=(n, n))

@@ -664,19 +664,20 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     ``frontal.SolveReport`` (iterations: relaxation iterations; ``f_top``: the top tensions).
 
     ``mode`` (``frontal.SOLVE_MODES``) says what the solve is for. A time step ("step") is one
-    relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
-    into ``state.bound`` for the next step. With ``FrontalSettings.max_iterations`` k > 1 it is up
-    to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
-    the same friction centres), until the bounds change by less than ``friction_tolerance``, as
-    Newton's frontal iteration. A snapshot's frontal iteration of the bounds ("pass": its ring
-    passes of ``max_iter`` iterations; "final": its re-balance to ``friction_tol``, which must
-    meet Psi to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent
-    bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide ring by
-    ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation
-    does not converge on (``relax_settings.max_iter`` reached, or the block preconditioner
-    stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``;
-    the report's ``fallback`` is then set). The report's ``relax_iterations``: the
-    relaxation's iterations of a time step, converged or not. Behind a guide ring the relaxation uses
+    relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds
+    of the converged geometry go into ``state.bound`` for the next step. With
+    ``FrontalSettings.max_iterations`` k > 1 it is up to k relaxations, each posed by the last
+    one's converged state (its bounds and top tensions, the same friction centres), until the
+    bounds change by less than ``friction_tolerance``, as Newton's frontal iteration. A
+    snapshot's frontal iteration of the bounds ("pass": its ring passes of ``max_iter``
+    iterations; "final": its re-balance to ``friction_tol``, which must meet Psi to 1e-3) is
+    Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent bounds first,
+    ``_ring_frontal``: its passes and its final solve, behind a guide ring by
+    ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation does
+    not converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
+    the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``; the
+    report's ``fallback`` is then set). The report's ``relax_iterations``: the relaxation's
+    iterations of a time step, converged or not. Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
     ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
