@@ -166,13 +166,9 @@ def assemble(lat, law, prob, pos, material, plane, k_wall, grad, rows, cols, val
     ``_kernels.zone``'s Lattice, Law (``floor``: the geometric floor) and Problem (``s_old``:
     the friction centres, ``g``: the bounds); plane (m, 6) the wall's tangent planes, k_wall
     its penalty (N/m)."""
-    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
-    normal, over = lat.normal, lat.over
-    fell, top, material_fell, centre = prob.fell, prob.top, prob.s_fell, prob.s_old
-    bound, f_top = prob.g, prob.f_top
-    EA, compression, geometric_floor = law.EA, law.compression, law.floor
-    eps_f, kappa0, h, eps2, eps2_top = law.eps_f, law.kappa0, law.h, law.eps2, law.eps2_top
-    l_jam, k_jam = law.l_jam, law.k_jam
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, material_fell, centre, bound, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, geometric_floor = law
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)
@@ -394,13 +390,9 @@ def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
 @njit(cache=True)
 def energy(lat, law, prob, pos, material, plane, k_wall):
     """E as in ``assemble``, without derivatives (inf when a material length is not positive)."""
-    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
-    normal, over = lat.normal, lat.over
-    fell, top, material_fell, centre = prob.fell, prob.top, prob.s_fell, prob.s_old
-    bound, f_top = prob.g, prob.f_top
-    EA, compression, geometric_floor = law.EA, law.compression, law.floor
-    eps_f, kappa0, h, eps2, eps2_top = law.eps_f, law.kappa0, law.h, law.eps2, law.eps2_top
-    l_jam, k_jam = law.l_jam, law.k_jam
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, material_fell, centre, bound, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, geometric_floor = law
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)

@@ -502,13 +502,10 @@ def sweep(lat, law, prob, pos, s, seg, tension, chain, work, stats, l_prev, pred
     lengths go into l_prev for the next sweep's start. Returns the sweep's largest relative
     material residual. ``lat``, ``law``, ``prob``, ``seg``: ``_kernels.zone``'s Lattice, Law,
     Problem and Segments (written)."""
-    m, n_yarns, yarn, low, up = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.up
-    lowest, highest, normal, over = lat.lowest, lat.highest, lat.normal, lat.over
-    fell, top, s_fell, s_old = prob.fell, prob.top, prob.s_fell, prob.s_old
-    g, f_top = prob.g, prob.f_top
-    h, eps2, eps2_top = law.h, law.eps2, law.eps2_top
-    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
-    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, s_fell, s_old, g, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    d_below, l_below, d_top, l_top = seg
     segment_vectors(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, h, eps2,
                     eps2_top, d_below, l_below, d_top, l_top)
     if predict:
@@ -531,10 +528,14 @@ def forces_residual(lat, law, prob, seg, tension, plane, active, release, out):
     """``forces`` then ``wall_residual`` in one call, into ``out`` (``_kernels.zone.Forces``;
     its ``res`` the imbalance per crossing); returns the largest relative imbalance (0 without
     crossings)."""
-    forces(lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest, seg.d_below, seg.l_below,
-           seg.d_top, seg.l_top, tension, prob.f_top, law.l_jam, law.k_jam, law.floor, out.force,
-           out.w_below, out.w_top, out.total, out.W)
-    return wall_residual(lat.m, out.force, out.total, plane, active, out.W, release, out.res)
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    fell, top, s_fell, s_old, g, f_top = prob
+    d_below, l_below, d_top, l_top = seg
+    force, w_below, w_top, total, W, res = out
+    forces(m, n_yarns, yarn, low, highest, d_below, l_below, d_top, l_top, tension, f_top,
+           l_jam, k_jam, floor, force, w_below, w_top, total, W)
+    return wall_residual(m, force, total, plane, active, W, release, res)
 
 
 @njit(cache=True)
@@ -692,11 +693,10 @@ def reduced_energy(lat, law, prob, seg, s, s_ref):
     materials swept for the lengths (``material_sweep``) it is the reduced energy of the
     positions alone, whose negative gradient is ``forces``' net force. inf where a material
     length is not positive. The lengths are ``seg``'s."""
-    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
-    l_below, l_top = seg.l_below, seg.l_top
-    s_fell, s_old, g, f_top = prob.s_fell, prob.s_old, prob.g, prob.f_top
-    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
-    l_jam, k_jam = law.l_jam, law.k_jam
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, s_fell, s_old, g, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    d_below, l_below, d_top, l_top = seg
     n = n_yarns // 2
     E = 0.0
     for c in range(m):

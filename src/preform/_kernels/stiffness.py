@@ -66,9 +66,10 @@ def block_jacobi(lat, law, prob, seg, tension, reg, cap, force, plane, active, H
     the plane's frame). A move longer than cap times the crossing's shortest segment is
     shortened to that (the local model holds for moves small against the segments). H (m, 3, 3)
     and lmin (m,) are scratch; delta (m, 3) receives the moves."""
-    m, n_yarns, low, highest = lat.m, lat.n_yarns, lat.low, lat.highest
-    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
-    f_top, l_jam, k_jam, floor = prob.f_top, law.l_jam, law.k_jam, law.floor
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, s_fell, s_old, g, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    d_below, l_below, d_top, l_top = seg
     for c in range(m):
         lmin[c] = np.inf
         for i in range(3):
@@ -192,10 +193,11 @@ def block_values(lat, law, prob, seg, tension, reg, plane, active, slots, vals, 
     columns are projected, ``P K P + n n^T``. Slots: slot_diag (m,), slot_below (m, 2) the slot of
     the pair (c, low[c, side]) (-1 none), below_first (m, 2) True where that slot holds the
     block (low, c) (low first in the order), else (c, low). Dg (m, 3, 3) is scratch."""
-    m, n_yarns, low, highest = lat.m, lat.n_yarns, lat.low, lat.highest
-    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
-    f_top, l_jam, k_jam, floor = prob.f_top, law.l_jam, law.k_jam, law.floor
-    slot_diag, slot_below, below_first = slots.diag, slots.below, slots.below_first
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, s_fell, s_old, g, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    d_below, l_below, d_top, l_top = seg
+    slot_diag, slot_below, below_first = slots
     n = n_yarns // 2
     B = np.empty((3, 3))
     T = np.empty((3, 3))
@@ -305,12 +307,11 @@ def full_values(lat, law, prob, seg, tension, s, reg, plane, active, slots, vals
     moves in its tangent plane: its position rows and columns projected, ``P H P + n n^T``.
     Dg (m, 5, 5) is scratch. ``lat``, ``law``, ``prob``, ``seg``, ``slots``: ``_kernels.zone``'s
     Lattice, Law, Problem, Segments and BlockSlots."""
-    m, n_yarns, yarn, low, highest = lat.m, lat.n_yarns, lat.yarn, lat.low, lat.highest
-    d_below, l_below, d_top, l_top = seg.d_below, seg.l_below, seg.d_top, seg.l_top
-    s_fell, s_old, g, f_top = prob.s_fell, prob.s_old, prob.g, prob.f_top
-    EA, compression, eps_f, kappa0 = law.EA, law.compression, law.eps_f, law.kappa0
-    l_jam, k_jam, floor = law.l_jam, law.k_jam, law.floor
-    slot_diag, slot_below, below_first = slots.diag, slots.below, slots.below_first
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, s_fell, s_old, g, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, floor = law
+    d_below, l_below, d_top, l_top = seg
+    slot_diag, slot_below, below_first = slots
     A = np.empty((4, 4))
     T = np.empty((4, 4))
     B = np.empty((3, 3))

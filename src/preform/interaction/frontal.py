@@ -232,7 +232,8 @@ class _Network:
         return p
 
     def _args(self):
-        """The kernels' (Lattice, Law, Problem) of the state and the frontal loop's iterate."""
+        """The kernels' (Lattice, Law, Problem) of the state and the frontal loop's iterate, as
+        plain tuples (``_kernels.zone``: the kernels' dispatcher types them in C)."""
         st, bc, e = self.st, self.bc, self.settings.energy
         lat = zone_kernels.Lattice(st.m, st.n_yarns, st.yarn, st.low, st.up, st.over, st.normal,
                                    st.lowest, st.highest)
@@ -242,7 +243,7 @@ class _Network:
                                e.geometric_floor)
         prob = zone_kernels.Problem(bc.fell, bc.top, st.material_fell, self.centre, self.bound,
                                     self.f_top)
-        return lat, law, prob
+        return tuple(lat), tuple(law), tuple(prob)
 
     def assemble(self):
         """(E, nnz): the energy at the state's iterate, its gradient into ``grad`` and its

@@ -128,7 +128,7 @@ class BlockStiffness:
         self.below_first = np.empty((m, 2), dtype=np.bool_)
         self.nslots = LDL.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
                                        self.slot_below, self.below_first)
-        self.slots = KZ.BlockSlots(self.slot_diag, self.slot_below, self.below_first)
+        self.slots = tuple(KZ.BlockSlots(self.slot_diag, self.slot_below, self.below_first))
         self.Ai = Ai[:self.nslots]
         self.vals = np.zeros((self.nslots, nb, nb))
         self.Dg = np.empty((m, nb, nb))
@@ -288,6 +288,10 @@ class Iterate:
         m = self.lat.m
         self.moved = np.empty((m, 3))
         self.lmin = np.empty(m)
+        # the same as plain tuples, as the kernels take them (``_kernels.zone``): numba types
+        # a plain tuple in its dispatcher's C path, a NamedTuple in Python (3 us a call)
+        self.klat, self.klaw, self.kprob, self.kseg, self.kfo = map(
+            tuple, (self.lat, self.law, self.prob, self.seg, self.fo))
 
 
 class Preconditioner(Protocol):
@@ -398,8 +402,8 @@ class BlockPreconditioner:
         reg = x.settings.block_reg
         blk = self.blk
         while True:
-            SK.block_values(x.lat, x.law, x.prob, x.seg, x.tension, reg, x.plane, x.active,
-                            blk.slots, blk.vals, blk.Dg)
+            SK.block_values(x.klat, x.klaw, x.kprob, x.kseg, x.tension, reg, x.plane,
+                            x.active, blk.slots, blk.vals, blk.Dg)
             if blk.factor():
                 return True
             reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
@@ -451,6 +455,7 @@ class FullPreconditioner(BlockPreconditioner):
             self.s_ref = np.array([x.s[lat.highest[k], 0 if k < ny // 2 else 1]
                                    if lat.highest[k] >= 0 else 0.0 for k in range(ny)])
             self.seg_t = KZ.segments(m, ny)
+            self.kseg_t = tuple(self.seg_t)
             self.s_t, self.ten_t = np.empty((m, 2)), np.empty((m, 2))
             self.cand = None
 
@@ -482,7 +487,7 @@ class FullPreconditioner(BlockPreconditioner):
                           prob.s_old, prob.g, prob.f_top, law.EA, law.compression, law.eps_f,
                           law.kappa0, st.material_tol, st.material_newton, self.ten_t, x.chain,
                           x.work, x.stats, x.seg.l_below)
-        return RK.reduced_energy(lat, law, prob, t, self.s_t, self.s_ref)
+        return RK.reduced_energy(x.klat, x.klaw, x.kprob, self.kseg_t, self.s_t, self.s_ref)
 
     def take_sweep(self, x):
         if not self.swept:
@@ -499,7 +504,7 @@ class FullPreconditioner(BlockPreconditioner):
 
     def measure(self, x):
         if self.search:
-            self.E_cur = RK.reduced_energy(x.lat, x.law, x.prob, x.seg, x.s, self.s_ref)
+            self.E_cur = RK.reduced_energy(x.klat, x.klaw, x.kprob, x.kseg, x.s, self.s_ref)
 
     def due(self, x, it, best_f_it, mixer):
         st = x.settings
@@ -521,8 +526,8 @@ class FullPreconditioner(BlockPreconditioner):
             # a pivot lost (a material whose yarn slides freely on both sides has only
             # kappa0): the isotropic share of the positions raised, up to 1e6 times; beyond
             # that the step is not converged (Newton's)
-            SK.full_values(x.lat, x.law, x.prob, x.seg, x.tension, x.s, reg, x.plane, x.active,
-                           blk.slots, blk.vals, blk.Dg)
+            SK.full_values(x.klat, x.klaw, x.kprob, x.kseg, x.tension, x.s, reg, x.plane,
+                           x.active, blk.slots, blk.vals, blk.Dg)
             if blk.factor() or reg > 1e6 * st.block_reg:
                 break
             reg *= 10.0
@@ -635,8 +640,9 @@ class ScalarPreconditioner:
             RK.forces(m, ny, lat.yarn, lat.low, lat.highest, seg.d_below, seg.l_below,
                       seg.d_top, seg.l_top, x.tension, prob.f_top, law.l_jam, law.k_jam,
                       law.floor, fo.force, fo.w_below, fo.w_top, fo.total, fo.W)
-            SK.block_jacobi(lat, law, prob, seg, x.tension, st.smoothing_reg, st.smoothing_cap,
-                            fo.force, x.plane, x.active, self.H3, x.lmin, delta)
+            SK.block_jacobi(x.klat, x.klaw, x.kprob, x.kseg, x.tension, st.smoothing_reg,
+                            st.smoothing_cap, fo.force, x.plane, x.active, self.H3, x.lmin,
+                            delta)
             new += st.smoothing_weight * delta
 
     def mix(self, x, mixer, new):

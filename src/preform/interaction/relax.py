@@ -465,12 +465,13 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     while True:
         t0 = time.perf_counter()
         if not pc.take_sweep(x):
-            RK.sweep(lat, x.law, x.prob, pos, s, x.seg, x.tension, x.chain, x.work, x.stats,
-                     x.l_prev, x.predict, pc.predict, st.material_tol, st.material_newton)
+            RK.sweep(x.klat, x.klaw, x.kprob, pos, s, x.kseg, x.tension, x.chain, x.work,
+                     x.stats, x.l_prev, x.predict, pc.predict, st.material_tol,
+                     st.material_newton)
         x.predict = pc.predict
         t1 = time.perf_counter()
-        residual = RK.forces_residual(lat, x.law, x.prob, x.seg, x.tension, plane, x.active,
-                                      st.wall_release, x.fo)
+        residual = RK.forces_residual(x.klat, x.klaw, x.kprob, x.kseg, x.tension, plane,
+                                      x.active, st.wall_release, x.kfo)
         history.append(residual)
         pc.measure(x)
         t2 = time.perf_counter()
