@@ -116,16 +116,16 @@ def case_b_like_config(folder, ring_friction):
     return dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind="interaction"))
 
 
-def advanced_stepper(cfg, steps):
+def advanced_stepper(cfg, steps, settings=None):
     """(stepper, take-up speed function) of ``cfg`` (its pose lead resolved) after ``steps``
-    steps."""
+    steps; ``settings``: the interaction model's (None: its defaults)."""
     from preform.reference import resolve_pose_lead
     from preform.simulation import load_geometry, make_stepper
     from preform.stepping import take_up_speed
 
     mandrel, cl = load_geometry(cfg)
     cfg = resolve_pose_lead(cfg, mandrel, cl)
-    s = make_stepper(cfg, mandrel, cl)
+    s = make_stepper(cfg, mandrel, cl, settings=settings)
     return advance(s, cfg, steps)
 
 

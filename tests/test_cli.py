@@ -251,8 +251,13 @@ def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status
     config, state = stubbed_run
     state["status"] = status
     assert main(["run", str(config), "--out", str(tmp_path / "out"), "--no-progress"]) == code
-    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == status
-    assert status in capsys.readouterr().err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == status
+    captured = capsys.readouterr()
+    assert status in captured.err
+    # a run that did not finish is never ok (the status printed beside the verdict)
+    assert summary["quality"]["verdict"] == "suspect"
+    assert f"quality: suspect: the run did not finish: status {status}" in captured.out
 
 
 # ---------------------------------------------------------------- preform mandrel info, geometry stubbed

@@ -80,9 +80,19 @@ def test_a_badly_posed_curved_mandrel_is_called_suspect(runs):
 
 
 def test_the_automatic_pose_lead_makes_the_run_sane(runs):
+    """No reason of the pose is left with the automatic pose lead; what the verdict still says
+    is the part's own: on the 70 deg bend 57 % of the laid points have a slip tendency (the
+    models keep the yarn where it was laid), and a yarn on the bend's inside jumps along it
+    now and then (measured: 118 mm in one step, 13 mm of the mean fell front, 15.8x the take-up
+    advance, 11 times)."""
     result = runs["auto"]
     assert 0.15 < result.config.process.pose_lead < 0.25      # H_inf / 2
-    assert assess(result) == {"verdict": "ok", "reasons": []}
+    q = assess(result)
+    text = " ".join(q["reasons"])
+    for pose in ("caught", "bridged", "behind the supply plane", "convergence length down",
+                 "braid angle jumps", "separate", "residual"):
+        assert pose not in text, pose
+    assert "slip tendency" in text and "where it was laid" in text
     flags = np.asarray(result.yarns.flags)
     assert np.count_nonzero(flags & 3) < 0.01 * len(flags)      # bridged or caught (issue 16)
     h = result.history

@@ -60,7 +60,7 @@ def test_a_crossing_out_of_balance_is_reported():
     imbalance, _ = snapshot_checks(snap, 0.25)
     assert np.isclose(imbalance, 0.01, rtol=1e-9)
     (reason,) = snapshot_reasons([snap], 0.25)
-    assert "out of balance by up to 0.01" in reason
+    assert "out of balance, by up to 0.01" in reason
 
 
 def test_kinematic_snapshots_have_no_crossings_to_check():

@@ -134,11 +134,18 @@ def test_point_forces_are_the_rest_of_the_energy_gradient():
 
 def _check_files(snapshots, out_dir, mu):
     """Every written snapshot with crossings read back: (largest imbalance / largest tension,
-    largest Psi / tension, crossings with an external force, imbalance without the external
-    forces) over the files; asserts each file balances to 1e-3 and Psi <= 1e-3."""
+    largest Psi / tension of the re-balanced copies, crossings with an external force,
+    imbalance without the external forces) over the files. The written snapshots are the run's
+    own states: each balances to 1e-3 from its file (the step's balance, with the friction
+    bounds it held); their friction law holds only to the bounds' lag of a step (history.csv's
+    residual), so Psi <= 1e-3 is asserted on the re-balanced copies that check them, written
+    and read back the same way."""
     worst, psi_max, pushed, without = 0.0, -np.inf, 0, 0.0
     files = 0
-    for p in write_convergence(snapshots, out_dir)[1:]:
+    checked = [s.rebalanced for s in snapshots if s.rebalanced is not None]
+    assert len(checked) == len(snapshots)          # every snapshot was checked
+    for p, q in zip(write_convergence(snapshots, out_dir)[1:],
+                    write_convergence(checked, out_dir / "rebalanced")[1:]):
         yarns = read_snapshot(p)
         if not any(np.any(c >= 0) for _, _, c in yarns):
             continue
@@ -146,11 +153,14 @@ def _check_files(snapshots, out_dir, mu):
         err, _, n, npushed = crossing_balance(yarns, read_external_forces(p))
         zero = [np.zeros((len(pts), 3)) for pts, _, _ in yarns]
         err0 = crossing_balance(yarns, zero)[0]
-        _, psi = balance_and_psi(yarns, mu)
+        again = read_snapshot(q)
+        err_again = crossing_balance(again, read_external_forces(q))[0]
+        _, psi = balance_and_psi(again, mu)
         # issue 14: tensions along the written segments plus external_force_N balance every
         # crossing to 1e-3 of the largest tension; issue 4: Psi <= 1e-3 x tension
         assert err < 1e-3, (p.name, err)
-        assert psi < 1e-3, (p.name, psi)
+        assert err_again < 1e-3, (q.name, err_again)
+        assert psi < 1e-3, (q.name, psi)
         worst, psi_max = max(worst, err), max(psi_max, psi)
         pushed, without = pushed + npushed, max(without, err0)
     assert files >= 2
@@ -247,10 +257,12 @@ def test_the_top_segment_writes_the_tension_the_smoothed_energy_applies(tmp_path
                                                                      top_smoothing=0.02))
     machine = Machine.from_config(cfg.machine)
     s = Stepper(cfg, machine, mandrel, cl, InteractionZone(cfg, machine, mandrel, settings=smooth))
-    for _ in range(150):
+    s.snapshot_stride = 0
+    for _ in range(149):
         s.advance(take_up_speed(cfg.process.take_up_speed, s.braided))
-    F_machine = s.pose(s.clock.travel).to_machine(s.F)
-    snap = s.zone.snapshot(s.clock.t, F_machine)
+    s.snapshot_stride = 1            # the record snapshots the state the last step solves
+    s.advance(take_up_speed(cfg.process.take_up_speed, s.braided))
+    snap = s.recording.snapshots[-1]
     top = snap.offsets[1:] - 3                   # fell, crossings..., top (ring) point, spool
     seg = top - np.arange(1, len(top) + 1)       # the top segment's index: points - 1 per yarn
     d = np.linalg.norm(snap.points[top] - snap.points[top - 1], axis=1)

@@ -240,12 +240,6 @@ def _check_time_step(config) -> None:
 def _value_warnings(config) -> list[str]:
     y, ma, mo = config.yarn, config.machine, config.model
     warnings = []
-    if mo.kind == "interaction":
-        warnings.append('[model] kind = "interaction" is slow on large machines: every time step solves '
-                        "for all crossings of the convergence zone at once (case A, 144 carriers: up to "
-                        "seconds per step); if a step does not converge, even with its boundary moved in "
-                        "stages, the run stops and keeps the "
-                        "results up to it")
     if y.thickness > y.width:
         warnings.append(f"[yarn] thickness = {y.thickness:g} is larger than [yarn] width = {y.width:g}: "
                         "swapped?")

@@ -336,6 +336,72 @@ def cmd_design(args) -> int:
     return EXIT_DONE
 
 
+# ---------------------------------------------------------------- preform compare
+
+def cmd_compare(args) -> int:
+    from .compare import compare, off_lines, summary_lines
+
+    comparisons, written = compare(args.results, args.measured, args.out, plot=not args.no_plot)
+    for line in summary_lines(comparisons):
+        print(line)
+    for line in off_lines(comparisons):
+        print(f"warning: {line}", file=sys.stderr)
+    print(f"compare: {', '.join(str(p) for p in written)}")
+    return EXIT_DONE
+
+
+def add_compare_parser(sub) -> None:
+    cmp = sub.add_parser("compare", help="compare a run's results with measurements of the braid")
+    cmp.add_argument("results", metavar="RESULTS", help="results folder of preform run")
+    cmp.add_argument("measured", metavar="MEASURED", nargs="+",
+                     help="CSV files of braid angles (arc_length_m,azimuth_deg,braid_angle_deg[,group]), "
+                          "convergence lengths (braided_length_m,convergence_length_m) or yarn "
+                          "coordinates (x_m,y_m,z_m[,time_s]); see docs/calibration.md")
+    cmp.add_argument("--out", metavar="DIR", help="where compare.csv/.json/.png go (default: RESULTS)")
+    cmp.add_argument("--no-plot", action="store_true", help="no compare.png")
+    cmp.set_defaults(func=cmd_compare)
+
+
+# ---------------------------------------------------------------- preform calibrate
+
+def cmd_calibrate(args) -> int:
+    from .calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
+                            report_lines)
+
+    params = [parse_param(p) for p in args.param]   # bad input fails here, before a cluster starts
+    noise = parse_noise(args.noise)
+    report = calibrate(args.config, args.measured, params, out_dir=args.out, noise=noise,
+                       scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                       progress=not args.no_progress)
+    for line in report_lines(report):
+        print(line)
+    out = Path(report["out"])
+    print(f"calibrate: table {out / CALIBRATE_CSV}; runnable config {out / CALIBRATED_TOML}; "
+          f"misfit plots {out / 'plots'}; the best run against the measurements {out / 'best'}")
+    return EXIT_DONE
+
+
+def add_calibrate_parser(sub) -> None:
+    cal = sub.add_parser("calibrate", help="fit model parameters (friction, initial position, ...) "
+                                           "to measurements of the braid")
+    cal.add_argument("config", metavar="CONFIG", help="case file (TOML), normally of the interaction model")
+    cal.add_argument("measured", metavar="MEASURED", nargs="+",
+                     help="measurement CSV files, as preform compare reads them")
+    cal.add_argument("--param", action="append", required=True, metavar="KEY=LO:HI[:N]",
+                     help="a parameter and its range, e.g. yarn.friction=0:0.5 (N: coarse grid points, "
+                          "default 5); repeat for more")
+    cal.add_argument("--noise", action="append", metavar="KIND=SIGMA",
+                     help="standard deviation of one measurement: angle=DEG, convergence=M, yarn=M "
+                          "(default: per kind the least RMS residual over the runs)")
+    cal.add_argument("--out", metavar="DIR", help="output folder (default: results/<config>_calibration)")
+    where = cal.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N", help="worker processes of the LocalCluster")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:port")
+    cal.add_argument("--resume", action="store_true", help="skip the runs already finished")
+    cal.add_argument("--no-progress", action="store_true", help="no progress lines")
+    cal.set_defaults(func=cmd_calibrate)
+
+
 # ---------------------------------------------------------------- parser and main
 
 def build_parser() -> argparse.ArgumentParser:
@@ -397,6 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="also write the centerline (x,y,z,s,perimeter in the STL's unit, readable "
                            "as [mandrel] centerline) to this file; nothing is written without it")
     info.set_defaults(func=cmd_mandrel_info)
+    add_compare_parser(sub)
+    add_calibrate_parser(sub)
     return parser
 
 
@@ -411,7 +479,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 #: the commands after which the process leaves at once (see :func:`main`): every file they
 #: write is complete (written atomically) before they return; ``sweep`` shuts its cluster down
 #: at exit and so leaves the usual way
-QUICK_EXIT = ("run", "check", "mandrel", "design")
+QUICK_EXIT = ("run", "check", "mandrel", "design", "compare")
 
 
 def main(argv=None) -> int:

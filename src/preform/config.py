@@ -20,6 +20,9 @@ from pathlib import Path
 
 from .errors import ConfigError
 from .machine import PATTERN_M, carrier_count_problem
+from .structural.materials import CONSTANTS as MATERIAL_CONSTANTS
+from .structural.materials import PRESETS as MATERIAL_PRESETS
+from .structural.materials import FibreMatrix, stiffness_problem
 
 
 @dataclass(frozen=True)
@@ -121,6 +124,9 @@ class OutputConfig:
     #: also write the fields on the mandrel's own (STL) triangles, surface_input.vtu
     #: (``fields.fields_on_input``, area-weighted), for a next tool that needs its mesh
     input_mesh_fields: bool = False
+    #: draw the pictures (plots/*.png); false leaves the data files alone, for the many runs of
+    #: a calibration or a large sweep, where the pictures would take most of each run's time
+    pictures: bool = True
 
 
 @dataclass(frozen=True)
@@ -145,6 +151,18 @@ class RtmConfig:
     vf_ref: float | None = None
     #: table: CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 on a full grid
     table: Path | None = None
+
+
+@dataclass(frozen=True)
+class MaterialConfig:
+    """``[material]``: the fibre and matrix of the yarns, for the structural hand-off
+    (``preform.structural``): a named ``preset`` (``structural.materials.PRESETS``), any of whose
+    constants the section's own keys replace, or all seven constants. One material for every
+    yarn of the run, of every layer (yarn types of their own would each carry a table of these
+    keys, laid over this one)."""
+
+    constituents: FibreMatrix
+    preset: str | None = None
 
 
 @dataclass(frozen=True)
@@ -180,6 +198,8 @@ class Config:
     axial_yarn: AxialYarnConfig = field(default_factory=AxialYarnConfig)
     #: ``[[layer]]`` tables, from the mandrel outwards; empty: one layer of the top-level sections
     layers: tuple[LayerConfig, ...] = ()
+    #: ``[material]``, or None: no structural hand-off
+    material: MaterialConfig | None = None
 
     def layer_config(self, k: int) -> "Config":
         """The config that braids layer ``k`` (0-based): the top-level sections with the layer's
@@ -209,9 +229,10 @@ KEYS = {
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
     "model": ("kind", "time_step", "start", "seed", "solver", "frontal_iterations"),
-    "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields"),
+    "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields", "pictures"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
     "axial_yarn": ("width", "thickness", "linear_density_tex"),
+    "material": ("preset", *MATERIAL_CONSTANTS),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
 #: the sections a ``[[layer]]`` table may override, and its own keys
@@ -285,6 +306,7 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         source=None if source is None else Path(source),
         rtm=_rtm(_Section("rtm", data), base_dir),
         axial_yarn=_axial_yarn(_Section("axial_yarn", data)),
+        material=_structural_material(_Section("material", data)) if "material" in data else None,
     )
     if layers_raw is None:
         return config
@@ -569,6 +591,45 @@ def _material(sec: _Section) -> dict:
     return out
 
 
+#: [material] constants: (unit, plausible range, hint for a value in another unit)
+MODULUS_RANGE = (1e8, 2e12)
+STRUCTURAL_UNITS = {name: ("Pa", MODULUS_RANGE, "GPa? multiply by 1e9") for name in MATERIAL_CONSTANTS
+                    if not name.endswith(("nu12", "nu"))}
+
+
+def _structural_material(sec: _Section) -> MaterialConfig:
+    """``[material]``: a preset and/or the seven constants (Pa, Poisson's ratios), validated."""
+    preset = None
+    values = {}
+    if "preset" in sec.table:
+        preset = sec.choice("preset", tuple(MATERIAL_PRESETS))
+        base = MATERIAL_PRESETS[preset][0]
+        values = {name: getattr(base, name) for name in MATERIAL_CONSTANTS}
+    missing = [name for name in MATERIAL_CONSTANTS if name not in sec.table and name not in values]
+    if missing:
+        raise ConfigError(f"[material] {', '.join(missing)} missing: give preset = one of "
+                          f"{', '.join(json.dumps(p) for p in MATERIAL_PRESETS)}, or all of "
+                          f"{', '.join(MATERIAL_CONSTANTS)} (Pa)")
+    for name in MATERIAL_CONSTANTS:
+        if name not in sec.table:
+            continue
+        if name in STRUCTURAL_UNITS:
+            unit, (lo, hi), hint = STRUCTURAL_UNITS[name]
+            value = sec.number(name, unit, positive=True)
+            if not lo <= value <= hi:
+                raise sec.error(name, sec.table[name], f"expected {lo:g} to {hi:g} Pa ({hint})")
+        else:
+            value = sec.number(name, "Poisson's ratio")
+            if not -1.0 < value < 0.5:
+                raise sec.error(name, value, "expected a Poisson's ratio between -1 and 0.5")
+        values[name] = value
+    constituents = FibreMatrix(**values)
+    key, why = stiffness_problem(constituents)
+    if key:
+        raise ConfigError(f"[material] {key} = {_fmt(values[key])}: {why}")
+    return MaterialConfig(constituents=constituents, preset=preset)
+
+
 def _axial_yarn(sec: _Section) -> AxialYarnConfig:
     return AxialYarnConfig(width=sec.number("width", "m", default=None, positive=True),
                            thickness=sec.number("thickness", "m", default=None, positive=True),
@@ -742,6 +803,7 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
         snapshots=sec.integer("snapshots", "a non-negative integer", default=OutputConfig.snapshots,
                               minimum=0),
         input_mesh_fields=_flag(sec, "input_mesh_fields", OutputConfig.input_mesh_fields),
+        pictures=_flag(sec, "pictures", OutputConfig.pictures),
     )
 
 
@@ -781,13 +843,14 @@ def _dump_sections(config: Config) -> dict:
     """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
 
     Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a
-    number when constant, else the table. Absent optional values are None.
+    number when constant, else the table. Absent optional values are None; `"material"` is there
+    only when the config has the section.
     """
     mc, ma, y, p, mo, out = (config.mandrel, config.machine, config.yarn, config.process,
                              config.model, config.output)
     ring = ma.guide_ring
     speeds = [list(row) for row in p.take_up_speed]
-    return {
+    echo = {
         "source": _str_or_none(config.source),
         "mandrel": {"stl": str(mc.stl), "stl_unit": mc.stl_unit, "centerline": str(mc.centerline),
                     "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
@@ -808,7 +871,8 @@ def _dump_sections(config: Config) -> dict:
                   "solver": mo.solver, "frontal_iterations": mo.frontal_iterations},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
                                             "snapshots": out.snapshots,
-                                            "input_mesh_fields": out.input_mesh_fields},
+                                            "input_mesh_fields": out.input_mesh_fields,
+                                            "pictures": out.pictures},
         "axial_yarn": {"width": config.axial_yarn.width, "thickness": config.axial_yarn.thickness,
                        "linear_density_tex": config.axial_yarn.linear_density_tex},
         "rtm": {"cavity_thickness": config.rtm.cavity_thickness, "permeability": config.rtm.permeability,
@@ -816,6 +880,10 @@ def _dump_sections(config: Config) -> dict:
                 "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
                 "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
+    if config.material is not None:   # echoed when given (a run without it hashes as before)
+        echo["material"] = {"preset": config.material.preset,
+                            **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}
+    return echo
 
 
 def _str_or_none(value) -> str | None:

@@ -68,6 +68,11 @@ def checked_geometry(config):
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
+    if config.model.kind == "interaction" and not config.layers:
+        # the model's cost for this run (the work estimate's steps), before it starts; the
+        # estimate's limits are checked where the run is set up (``run_case``)
+        line = estimate(config, mandrel, centerline, force=True).model_line()
+        notes += [f"note: {line}"] if line else []
     return mandrel, centerline, notes
 
 

@@ -188,7 +188,8 @@ class Recording:
             snapshot_slip=cat("slip", np.int8, ()),
             snapshot_external_force=(np.concatenate([s.external_forces() for s in snaps])
                                      if snaps else np.zeros((0, 3))),
-            snapshot_group=np.array([s.group for s in snaps], dtype=np.int8).reshape(-1, self.n_yarns))
+            snapshot_group=np.array([s.group for s in snaps], dtype=np.int8).reshape(-1, self.n_yarns),
+            snapshot_rebalance_shift=np.array([s.rebalance_shift_m for s in snaps], dtype=np.float64))
         return out
 
     @classmethod
@@ -240,6 +241,9 @@ def _snapshots_from_arrays(arrays, ny):
     external = finite("snapshot_external_force",
                       take(arrays, "snapshot_external_force", (total, 3), np.float64))
     group = plain.in_range("snapshot_group", take(arrays, "snapshot_group", (k, ny), np.int8), 0, 2)
+    shift = (finite("snapshot_rebalance_shift", take(arrays, "snapshot_rebalance_shift", (k,),
+                                                     np.float64), allow_nan=True)
+             if "snapshot_rebalance_shift" in arrays else np.full(k, np.nan))
     out, t0 = [], 0
     for i in range(k):
         a, b = bounds[i], bounds[i + 1]
@@ -251,6 +255,7 @@ def _snapshots_from_arrays(arrays, ny):
         out.append(Snapshot(time_s=float(times[i]), points=point[a:b].copy(), offsets=o.copy(),
                             tension_N=tension[t0:t1].copy(), contact_id=cid[a:b].copy(),
                             slip=slip[a:b].copy(), group=group[i].copy(),
-                            external_force_N=external[a:b].copy()))
+                            external_force_N=external[a:b].copy(),
+                            rebalance_shift_m=float(shift[i])))
         t0 = t1
     return out

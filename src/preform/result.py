@@ -90,6 +90,14 @@ class Snapshot:
     slip: np.ndarray
     group: np.ndarray
     external_force_N: np.ndarray | None = None
+    #: m, the largest distance of a crossing of this state from the same crossing after the
+    #: re-balance that checks it (interaction model: ``InteractionZone.snapshot``); nan where
+    #: none was made
+    rebalance_shift_m: float = float("nan")
+    #: why the re-balance found no balanced state ("" where it did or none was made)
+    rebalance_error: str = ""
+    #: the re-balanced copy, for checks (not written, not kept in checkpoints); None: none made
+    rebalanced: "Snapshot | None" = None
 
     def external_forces(self) -> np.ndarray:
         """external_force_N as an (m, 3) array (zeros where it is None)."""

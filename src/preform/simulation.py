@@ -75,22 +75,25 @@ def load_geometry(config, load_mandrel=None):
     return mandrel, centerline
 
 
-def make_zone(config, machine, mandrel):
+def make_zone(config, machine, mandrel, settings=None):
     """A fresh zone of ``[model] kind`` (``ZONES``), the interaction zone with the solver of
     ``[model] solver`` (``SOLVERS``) and ``[model] frontal_iterations`` friction-bound updates a
-    step; ``mandrel`` (mandrel frame) for its contact and deposition tests."""
+    step; ``mandrel`` (mandrel frame) for its contact and deposition tests; ``settings``: the
+    interaction model's numerical settings (``interaction.settings.InteractionSettings``;
+    None: its defaults)."""
     cls = zone_class(config.model.kind)
     if config.model.kind != "interaction":
         return cls(config, machine, mandrel)
     solve = solver_of(config.model.solver)
     iterations = config.model.frontal_iterations
     if iterations == 1:
-        return cls(config, machine, mandrel, solve_zone=solve)
+        return cls(config, machine, mandrel, solve_zone=solve, settings=settings)
     from .interaction import relax
     from .interaction.settings import DEFAULT
 
+    base = DEFAULT if settings is None else settings
     settings = dataclasses.replace(
-        DEFAULT, frontal=dataclasses.replace(DEFAULT.frontal, max_iterations=iterations))
+        base, frontal=dataclasses.replace(base.frontal, max_iterations=iterations))
     if solve is relax.solve_zone:
         # nearly consistent bounds make the top rows stick, where the block preconditioner
         # stalls: the "full" one (stick stiffness along a stuck yarn) before Newton
@@ -99,16 +102,18 @@ def make_zone(config, machine, mandrel):
     return cls(config, machine, mandrel, settings=settings, solve_zone=solve)
 
 
-def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol) -> Stepper:
-    """The stepper of a run at its start (yarns tied, nothing braided yet)."""
+def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol,
+                 settings=None) -> Stepper:
+    """The stepper of a run at its start (yarns tied, nothing braided yet); ``settings``: the
+    interaction model's (``make_zone``)."""
     config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     machine = Machine.from_config(config.machine)
-    return Stepper(config, machine, mandrel, centerline, make_zone(config, machine, mandrel),
-                   tolerances)
+    return Stepper(config, machine, mandrel, centerline,
+                   make_zone(config, machine, mandrel, settings), tolerances)
 
 
 def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
-             tolerances: Tolerances = tol, keep_checkpoint=False) -> Result:
+             tolerances: Tolerances = tol, keep_checkpoint=False, settings=None) -> Result:
     """Run the configured model and return a Result (see module docstring).
 
     config : preform.config.Config
@@ -121,6 +126,8 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
         stopped; a checkpoint of other inputs, another format or damaged is refused
         (CheckpointError, naming what differs)
     tolerances : step control and geometry settings (``preform.tolerances``)
+    settings : the interaction model's numerical settings
+        (``interaction.settings.InteractionSettings``; None: its defaults)
     keep_checkpoint : when the run is done, save its final state instead of removing the
         checkpoint, so that a caller writing results can remove it only once they are complete
         (``--resume`` on a finished checkpoint makes the results without simulating again)
@@ -132,7 +139,7 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
     ckpt = None if checkpoint is None else Checkpoint(checkpoint, config)
-    stepper = make_stepper(config, mandrel, centerline, tolerances)
+    stepper = make_stepper(config, mandrel, centerline, tolerances, settings)
     if resume:
         if ckpt is None:
             raise ConfigError("--resume: no checkpoint file given to resume from; run without --resume")

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import plain
 from .analysis import CenterlineProjector, mandrel_friction
-from .errors import SimulationError
+from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
 from .kinematic import Depositor
 from .recording import Recording
@@ -205,14 +205,31 @@ class Stepper:
         travel_end = self.clock.travel + v * dt
         pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
         pose_end = self.pose(travel_end)
-        zs = self.zone.step(t0, dt, pose_end.to_machine(self.F), pose_end)
-        F, face, deposited = self._deposit(zs.deposits, pose_end)
-        G_mid = pose_mid.to_mandrel(zs.G_mid)
-        G_end = pose_end.to_mandrel(zs.G_end)
-        max_len = max(s.walk_reach_factor * (self.machine.omega * self.mandrel.diagonal + v) * dt,
-                      s.walk_reach_widths * self.config.yarn.width)
-        laid = self.depositor.step(F, face, G_mid, G_end, max_len)
         t1 = t0 + dt
+        model = f"the {self.config.model.kind} model"
+        # the zone keeps the state it solves for the snapshot the record takes after this step
+        self.zone.snapshot_due = bool(self.snapshot_stride) and (
+            self.recording.n_rows % self.snapshot_stride == 0)
+        try:
+            zs = self.zone.step(t0, dt, pose_end.to_machine(self.F), pose_end)
+        except PreformError:
+            raise
+        except Exception as exc:
+            raise self._fault(exc, f"{model}'s convergence zone"
+                              + (f" ({self.zone.stage})" if getattr(self.zone, "stage", "") else ""),
+                              t1) from exc
+        try:
+            F, face, deposited = self._deposit(zs.deposits, pose_end)
+            G_mid = pose_mid.to_mandrel(zs.G_mid)
+            G_end = pose_end.to_mandrel(zs.G_end)
+            max_len = max(s.walk_reach_factor * (self.machine.omega * self.mandrel.diagonal + v) * dt,
+                          s.walk_reach_widths * self.config.yarn.width)
+            laid = self.depositor.step(F, face, G_mid, G_end, max_len)
+        except PreformError:
+            raise
+        except Exception as exc:
+            raise self._fault(exc, f"{model}'s deposit (the fell points' walk over the mandrel "
+                              "to where the free yarns leave it)", t1) from exc
         if not np.all(np.isfinite(laid.final_F)):
             bad = int(np.nonzero(~np.all(np.isfinite(laid.final_F), axis=1))[0][0])
             raise SimulationError(f"non-finite fell point of yarn {bad} at step {self.step + 1}, t = {t1:.6g} s")
@@ -226,6 +243,15 @@ class Stepper:
         self.step += 1
         self._record(pose_end, zs, G_end)
         self.consistent = True
+
+    def _fault(self, exc, part, t1) -> SimulationError:
+        """A fault inside a step (a kernel's division, a singular matrix, a bug) as the error a
+        user reads: the step, the part of the model, the fault; the results up to the last good
+        step are kept (``simulation.simulate``)."""
+        return SimulationError(
+            f"step {self.step + 1} (t = {t1:.6g} s, {self.braided:.4g} m braided) failed in {part}: "
+            f"{type(exc).__name__}: {exc or 'no message'} (an internal fault, not an input error; "
+            "the results up to the last good step are kept: please report it with the config)")
 
     def _deposit(self, deposits, pose):
         """Crossings that reached the mandrel become fell points (interaction model).

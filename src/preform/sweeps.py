@@ -156,8 +156,6 @@ def _text(value) -> str:
 
 def load_sweep(path) -> SweepSpec:
     """Read and check a sweep file; every point's config is validated here, before any run."""
-    from .config import config_from_dict
-
     path = Path(path).expanduser().resolve()
     data = _read_toml(path, "sweep file")
     unknown = sorted(set(data) - set(SWEEP_KEYS))
@@ -187,9 +185,19 @@ def load_sweep(path) -> SweepSpec:
     combos += [dict(p) for p in listed]
     if not combos:
         raise ConfigError(f"{path}: no points: give a [grid] or [[points]]")
-    keys = list(dict.fromkeys(k for c in combos for k in c))
     out = data.get("output", {})
     out_dir = (path.parent / out.get("dir", f"results/{path.stem}")).resolve()
+    return spec_of_points(path, base, base_data, combos, out_dir)
+
+
+def spec_of_points(source: Path, base: Path, base_data: dict, combos: list, out_dir: Path) -> SweepSpec:
+    """The sweep of the points ``combos`` (dotted key -> value each) over the base config's TOML
+    data ``base_data`` (from the file ``base``), results under ``out_dir``; every point's config
+    is validated here, before any run (errors name ``source``)."""
+    from .config import config_from_dict
+
+    keys = list(dict.fromkeys(k for c in combos for k in c))
+    path = source
     spec = SweepSpec(source=path, base=base, base_data=base_data, keys=keys, points=[], out_dir=out_dir)
     for i, values in enumerate(combos):
         point = Point(index=i, values=values, name=_folder_name(i, values))
@@ -304,6 +312,11 @@ def finished(spec: SweepSpec, point: Point) -> dict | None:
 
 # ------------------------------------------------------------------------------ the cluster
 
+def open_client(scheduler=None, workers=None, settings: ClusterSettings = CLUSTER):
+    """(client, local cluster or None) as a sweep makes them; the caller closes both."""
+    return _client(scheduler, workers, settings)
+
+
 def _client(scheduler, workers, settings: ClusterSettings):
     from distributed import Client, LocalCluster
 
@@ -322,15 +335,28 @@ def _client(scheduler, workers, settings: ClusterSettings):
     return Client(cluster), cluster
 
 
-def _report(progress, done, running, failed, total):
+def _report(progress, done, running, failed, total, label="sweep"):
     if progress:
-        print(f"sweep: {done}/{total} done, {running} running, {failed} failed", file=sys.stderr, flush=True)
+        print(f"{label}: {done}/{total} done, {running} running, {failed} failed", file=sys.stderr, flush=True)
 
 
 def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
           cluster: ClusterSettings = CLUSTER) -> list[dict]:
     """Run a sweep file (see module docstring); return the rows of ``sweep.csv``."""
     spec = load_sweep(path)
+    ordered = run_spec(spec, scheduler=scheduler, workers=workers, resume=resume,
+                       progress=progress, cluster=cluster)
+    write_sweep_csv(spec, ordered)
+    plot_sweep(spec, ordered)
+    return ordered
+
+
+def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, progress=True,
+             cluster: ClusterSettings = CLUSTER, label: str = "sweep", client=None) -> list[dict]:
+    """Run the points of ``spec`` on Dask (with ``resume``, only those not finished with the same
+    inputs); return their rows in the points' order. ``label`` starts the progress lines;
+    ``client``: a ``distributed.Client`` to use (and leave open), else one is made for the run
+    (:func:`open_client`) and closed after it."""
     from .io.atomic import safe_folder
 
     from .io.atomic import atomic_write_text
@@ -351,13 +377,14 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
     if todo:
         from distributed import as_completed
 
-        client, local = _client(scheduler, workers, cluster)
+        own = client is None
+        client, local = _client(scheduler, workers, cluster) if own else (client, None)
         try:
             futures = {client.submit(run_point, spec.configs[p.index], str(spec.out_dir / p.name),
                                      p.index, p.values, inputs_hash(spec.configs[p.index]),
                                      pure=False, key=f"preform-point-{p.index}-{time.time_ns()}"): p
                        for p in todo}
-            _report(progress, len(rows), len(futures), 0, total)
+            _report(progress, len(rows), len(futures), 0, total, label)
             for future in as_completed(futures):
                 point = futures[future]
                 try:
@@ -368,15 +395,13 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
                            "message": f"worker lost: {type(err).__name__}: {err}"}
                 rows[point.index] = row
                 failed += row.get("status") != "done"
-                _report(progress, len(rows) - failed, total - len(rows), failed, total)
+                _report(progress, len(rows) - failed, total - len(rows), failed, total, label)
         finally:
-            client.close()
-            if local is not None:
-                local.close()
-    ordered = [rows[p.index] for p in spec.points]
-    write_sweep_csv(spec, ordered)
-    plot_sweep(spec, ordered)
-    return ordered
+            if own:
+                client.close()
+                if local is not None:
+                    local.close()
+    return [rows[p.index] for p in spec.points]
 
 
 def write_sweep_csv(spec: SweepSpec, rows) -> Path:

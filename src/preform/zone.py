@@ -48,6 +48,10 @@ class Zone(Protocol):
     Points are (ny, 3) float64, m, machine frame; ``pose`` / ``pose_end`` are the mandrel's
     ``preform.geometry.Pose`` at that time. ``export_state`` / ``import_state`` carry whatever the
     zone keeps from one step to the next as plain arrays (checkpoints, ``preform.checkpoint``).
+    The stepper sets ``snapshot_due`` (bool) before a step whose state it will snapshot, so that a
+    zone whose step changes its state after solving it (the interaction zone's deposit) can keep
+    the solved one; ``stage`` (str, optional) names the part of a step under way for the message
+    of a fault inside it.
     """
 
     def start(self, t: float, F_machine: np.ndarray, pose) -> None:

@@ -55,13 +55,24 @@ def face_basis(V, T, f):
 
 @njit(**INNER)
 def barycentric_in(q, x, y, z):
-    """Barycentric coordinates of (x, y, z) in the plane of the face with ``q = face_basis(...)``."""
+    """Barycentric coordinates of (x, y, z) in the plane of the face with ``q = face_basis(...)``.
+
+    A face of no area (collinear corners: CAD exports have them) has no plane: the point is
+    placed on its longer edge from the first corner (its projection there), or at the first
+    corner where all three coincide, so the walk passes over the face instead of dividing by
+    zero."""
     p0x, p0y, p0z, ax, ay, az, bx, by, bz, d00, d01, d11, den = q
     cx = x - p0x
     cy = y - p0y
     cz = z - p0z
     d20 = cx * ax + cy * ay + cz * az
     d21 = cx * bx + cy * by + cz * bz
+    if not den > 1e-14 * (d00 * d11):
+        if d00 >= d11 and d00 > 0.0:
+            return 1.0 - d20 / d00, d20 / d00, 0.0
+        if d11 > 0.0:
+            return 1.0 - d21 / d11, 0.0, d21 / d11
+        return 1.0, 0.0, 0.0
     b1 = (d11 * d20 - d01 * d21) / den
     b2 = (d00 * d21 - d01 * d20) / den
     return 1.0 - b1 - b2, b1, b2
@@ -89,11 +100,14 @@ def smooth_normal(V, T, CN, f, x, y, z):
 
 @njit(**INNER)
 def blended_normal(CN, f, b0, b1, b2):
-    """Unit smooth normal of face f at barycentric coordinates (b0, b1, b2)."""
+    """Unit smooth normal of face f at barycentric coordinates (b0, b1, b2); the first corner's
+    where the blend vanishes (corner normals that cancel at a knife edge)."""
     nx = b0 * CN[f, 0, 0] + b1 * CN[f, 1, 0] + b2 * CN[f, 2, 0]
     ny = b0 * CN[f, 0, 1] + b1 * CN[f, 1, 1] + b2 * CN[f, 2, 1]
     nz = b0 * CN[f, 0, 2] + b1 * CN[f, 1, 2] + b2 * CN[f, 2, 2]
     s = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if not s > 0.0:
+        return CN[f, 0, 0], CN[f, 0, 1], CN[f, 0, 2]
     return nx / s, ny / s, nz / s
 
 
@@ -140,6 +154,8 @@ def exit_distance_at(V, T, FN, f, b0, b1, b2, two_area, dx, dy, dz):
     face's double area, when the walk already has them."""
     best = np.inf
     edge = -1
+    # a face of no area is left at once, across the edge the direction leaves by (t = 0)
+    two_area = max(two_area, 1e-300)
     nx = FN[f, 0]
     ny = FN[f, 1]
     nz = FN[f, 2]
@@ -351,12 +367,15 @@ def centerline_tangent(S, CT, s):
         else:
             hi = mid
     i = min(max(lo - 1, 0), n - 2)
-    u = (s - S[i]) / (S[i + 1] - S[i])
+    ds = S[i + 1] - S[i]
+    u = (s - S[i]) / ds if ds > 0.0 else 0.0      # a repeated centerline point: its tangent
     w = min(max(u, 0.0), 1.0)
     tx = (1 - w) * CT[i, 0] + w * CT[i + 1, 0]
     ty = (1 - w) * CT[i, 1] + w * CT[i + 1, 1]
     tz = (1 - w) * CT[i, 2] + w * CT[i + 1, 2]
     tn = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if not tn > 0.0:                                # opposite vertex tangents: the first
+        return CT[i, 0], CT[i, 1], CT[i, 2]
     return tx / tn, ty / tn, tz / tn
 
 

@@ -462,8 +462,10 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
             u = state.up[:m, side]
             f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
                              f_top1[state.yarn[:m, side]])
-            scale[:, side] = net.tension[:, side] + f_ext
-        change = max(float(np.max(np.abs(bound1 - net.bound) / np.maximum(scale, 1e-300))),
+            # a scale that cannot vanish where a yarn goes slack (``change_scale_floor``)
+            scale[:, side] = np.maximum(net.tension[:, side] + f_ext,
+                                        fr.change_scale_floor * f_top1[state.yarn[:m, side]])
+        change = max(float(np.max(np.abs(bound1 - net.bound) / scale)),
                      float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
         history.append(change)
         if change < friction_tol:

@@ -75,7 +75,7 @@ from ..errors import SimulationError
 from .. import plain
 from ..result import Snapshot
 from ..zone import ZoneStep
-from . import frontal
+from . import frontal, step_check
 from .ring import ring_arguments, ring_point
 from .settings import DEFAULT, InteractionSettings
 from .zone_state import ZoneState
@@ -303,6 +303,9 @@ class InteractionZone:
         self.staged = 0               # steps solved in stages (``_staged``)
         self.wall_resolves = 0        # steps solved again with every crossing's plane (``step``)
         self.t = 0.0
+        self.stage = ""               # the part of the step under way (a fault's message names it)
+        self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
+        self._own = None              # the Snapshot of the last such step's solved state
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
@@ -357,6 +360,7 @@ class InteractionZone:
         bc = self.boundary(t1, F_machine)
         st = self.state
         fell_start = st.material_fell.copy()
+        self.stage = "the new crossings (the fell points' anchoring, the carriers' passes)"
         st.material_fell[:] = self.fell_anchor(st, bc, self.fell_ref, pose_end)
         self._create_crossings(t0, t1, bc)
         where = f"at step {self.step_index} (t = {t1:.6g} s)"
@@ -368,6 +372,7 @@ class InteractionZone:
         # again with every crossing's plane or in stages
         posed = {name: getattr(st, name)[: st.m].copy()
                  for name in ("pos", "material", "tension", "bound", "slip", "offset")}
+        self.stage = "the solve of the zone's crossings"
         try:
             wall, clear = self._with_near_wall(bc)
             self.last_report = self.solve_zone(st, wall, settings=self.settings, where=where,
@@ -381,11 +386,16 @@ class InteractionZone:
                 self.last_report = self.solve_zone(st, wall, settings=self.settings,
                                                    where=where, centre=centre)
             bc = wall
-        except SimulationError:
+        except SimulationError as err:
             if self.fell_ref is None or not self.settings.zone.boundary_stages:
-                raise
-            bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
+                raise step_check.with_cause(self, err) from None
+            try:
+                bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
+            except SimulationError as again:
+                raise step_check.with_cause(self, again) from None
+        step_check.check_step(self, where, posed["bound"])
         self.f_top = self.last_report.f_top
+        self.stage = "the guide ring's contact"
         if self.machine.has_ring:
             self.ring_anchor = self.ring_theta
             u = self.ring_material(st, bc)
@@ -395,6 +405,11 @@ class InteractionZone:
             self.ring_u = u
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
             self._ring_flow()
+        if self.snapshot_due:
+            # the state the step solved, before its deposit: what its snapshot writes
+            self._own = _snapshot(st, bc, self.last_report.f_top, t1, self.machine,
+                                  self.settings, wall="reaction")
+        self.stage = "the deposit of crossings on the mandrel"
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
         for k, p in deposits:
@@ -456,10 +471,32 @@ class InteractionZone:
         return bcl
 
     def snapshot(self, t, F_machine) -> Snapshot:
-        """Polyline per yarn: fell point, its crossings upwards, ring point, spool point.
+        """Polyline per yarn: fell point, its crossings upwards, ring point, spool point: the
+        state the last step solved (before its deposit, with the fell points and ring points it
+        was solved with; ``snapshot_due``), or, before the first step, the zone as it is.
 
-        The zone is re-balanced (on a copy) with the fell points given, so the exported crossings
-        are in balance with the exported fell points."""
+        The snapshot is checked by a re-balance (``rebalanced``, on a copy): the zone brought to
+        balance with the fell points given and friction bounds iterated to convergence; the
+        written state stays the run's own, and ``rebalance_shift_m`` says how far its yarns'
+        points at the crossings are from the re-balanced ones (``rebalance_error`` where the
+        re-balance failed)."""
+        snap, self._own = self._own, None
+        if snap is None or snap.time_s != float(t):
+            bc = self._with_wall(self.boundary(t, F_machine))
+            snap = _snapshot(self.state, bc, self.f_top, t, self.machine, self.settings,
+                             wall="reaction")
+        try:
+            checked = self._rebalanced(t, F_machine)
+        except SimulationError as err:
+            return dataclasses.replace(snap, rebalance_error=str(err))
+        return dataclasses.replace(snap, rebalance_shift_m=crossing_shift(snap, checked),
+                                   rebalanced=checked)
+
+    def _rebalanced(self, t, F_machine) -> Snapshot:
+        """The zone re-balanced on a copy with the fell points given: the ring points and the
+        zone solved in turn, the friction bounds to convergence
+        (``FrontalSettings.snapshot_tolerance``), crossings the re-solve lays on the mandrel
+        deposited."""
         st = self.state.copy()
         # each yarn's friction centre at each crossing (``frontal.solve_zone_inplace``)
         anchor = dict(zip(st.uid[: st.m].tolist(), frontal.friction_centres(st)))
@@ -822,18 +859,29 @@ def creation_point(px, gx, po, go, lowest=0.0):
     return out[:3], out[3:]
 
 
-def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT) -> Snapshot:
+def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT,
+              wall="penalty") -> Snapshot:
     """The zone as a :class:`Snapshot`: per yarn its fell point, its crossings' centerline
     points, its ring point (guide ring) and its top point; ``external_force_N`` at a crossing's
     points the jamming and wall forces (``frontal.point_forces``), at a ring point the ring's
     contact force (normal and friction: the point is held by the ring, so it balances the two
     tensions there), zero at the fell and spool points (held ends: their supports, the laid yarn
-    and the carrier, are outside the zone)."""
+    and the carrier, are outside the zone).
+
+    ``wall``: "penalty", the wall force of Newton's penalty (its crossings sit the micrometre
+    behind their planes that carries it); "reaction", for a state either solver left: at a
+    crossing on or behind its tangent plane (``wall_contact``) the wall takes the yarns' pull
+    into the mandrel along the plane's normal, as the relaxation's exact wall does (a
+    non-negative normal force; the pull along the plane stays unbalanced where it is)."""
     n = machine.n_per_group
     ny = machine.n_yarns
     ring = machine.has_ring
     e = settings.energy
-    ext_c = frontal.point_forces(st, bc, settings)
+    if wall == "reaction" and bc.plane is not None and st.m:
+        ext_c = frontal.point_forces(st, dataclasses.replace(bc, plane=None), settings)
+        _add_wall_reaction(st, bc, ext_c, f_top)
+    else:
+        ext_c = frontal.point_forces(st, bc, settings)
     points, offsets, tension, cid, slip, ext = [], [0], [], [], [], []
     for k in range(ny):
         side = 0 if k < n else 1
@@ -870,6 +918,55 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
                     contact_id=np.array(cid, dtype=np.int64),
                     slip=np.array(slip, dtype=np.int8), group=machine.group.copy(),
                     external_force_N=np.array(ext, dtype=float).reshape(-1, 3))
+
+
+#: m, a crossing within this of its tangent plane (or behind it) rests on the wall in a
+#: snapshot's "reaction" forces: the relaxation's wall tolerance (``RelaxSettings.wall_release``)
+#: is 1e-7 m and Newton's penalty holds crossings about 1 um behind their planes
+WALL_CONTACT = 1e-5
+
+
+def _add_wall_reaction(st, bc, ext_c, f_top):
+    """Add to ``ext_c`` (m, 2, 3) the wall's reaction at the crossings resting on their tangent
+    planes (``WALL_CONTACT``): the normal part of the net force of the four segments' tensions
+    and ``ext_c`` pressing into the mandrel, on the inner yarn's point (``point_forces``)."""
+    m = st.m
+    plane = bc.plane[:m]
+    pos = st.pos[:m]
+    sd = np.einsum("ij,ij->i", pos - plane[:, :3], plane[:, 3:])
+    resting = np.nonzero(sd < WALL_CONTACT)[0]
+    if not len(resting):
+        return
+    net = ext_c[:m].sum(axis=1)
+    for c in resting.tolist():
+        for side in range(2):
+            here = st.centerline_point(c, side, bc.h)
+            lo = st.low[c, side]
+            k = int(st.yarn[c, side])
+            below = st.centerline_point(lo, side, bc.h) if lo >= 0 else bc.fell[k]
+            up = st.up[c, side]
+            above = st.centerline_point(up, side, bc.h) if up >= 0 else bc.top[k]
+            f_hi = st.tension[up, side] if up >= 0 else f_top[k]
+            net[c] += st.tension[c, side] * _unit(below - here) + f_hi * _unit(above - here)
+    normal = plane[resting, 3:]
+    push = np.maximum(-np.einsum("ij,ij->i", net[resting], normal), 0.0)
+    inner = np.where(st.over[resting] > 0, 1, 0)
+    ext_c[resting, inner] += push[:, None] * normal
+
+
+def crossing_shift(a: Snapshot, b: Snapshot) -> float:
+    """m: the largest distance between a yarn's point at a crossing in snapshot ``a`` and the
+    same yarn's point at the same crossing (contact id) in ``b``; 0 where they share none."""
+    def keyed(snap):
+        yarn = np.repeat(np.arange(len(snap.offsets) - 1), np.diff(snap.offsets))
+        cid = np.asarray(snap.contact_id)
+        at = np.nonzero(cid >= 0)[0]
+        return cid[at] * (len(snap.offsets) - 1) + yarn[at], np.asarray(snap.points)[at]
+
+    ka, pa = keyed(a)
+    kb, pb = keyed(b)
+    _, ia, ib = np.intersect1d(ka, kb, assume_unique=True, return_indices=True)
+    return float(np.max(np.linalg.norm(pa[ia] - pb[ib], axis=1))) if len(ia) else 0.0
 
 
 def _unit(v):

@@ -338,12 +338,14 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
             # bounds held at the last step's (lagged): how far they are from those of the
             # converged geometry, the change Newton's frontal loop reports after its one
             # iteration (history.csv's residual)
-            res.bound_change = _lag_change(lat, res, bounds, top_tensions, f_top)[0]
+            res.bound_change = _lag_change(lat, res, bounds, top_tensions, f_top,
+                                           model.frontal.change_scale_floor)[0]
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
     change = np.inf
     for _ in range(settings.bound_iterations):
-        change, f_top = _lag_change(lat, res, bounds, top_tensions, f_top) if m else (0.0, f_top)
+        change, f_top = (_lag_change(lat, res, bounds, top_tensions, f_top,
+                                     model.frontal.change_scale_floor) if m else (0.0, f_top))
         if change < settings.friction_tol:
             break
         bounds = res.bounds
@@ -387,26 +389,29 @@ def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *,
     return again
 
 
-def _lag_change(lat, res, held, top_tensions, f_top):
+def _lag_change(lat, res, held, top_tensions, f_top, floor=DEFAULT.frontal.change_scale_floor):
     """(change, top tensions): the relative change from the held bounds ``held`` and top
     tensions ``res.f_top`` to those of the converged geometry of ``res`` (:func:`_bound_change`;
     the top tensions' relative to themselves, behind a guide ring, where ``top_tensions`` gives
     them; else ``f_top`` is returned as it is)."""
-    change = _bound_change(lat, res.bounds, held, res.tension, res.f_top)
+    change = _bound_change(lat, res.bounds, held, res.tension, res.f_top, floor)
     if top_tensions is not None:
         f_top = np.asarray(top_tensions(res.pos), dtype=float)
         change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
     return change, f_top
 
 
-def _bound_change(lat, new, old, tension, f_top):
-    """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn."""
+def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_scale_floor):
+    """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn, at
+    least ``floor`` times the yarn's top tension (``FrontalSettings.change_scale_floor``): a
+    scale that cannot vanish where a yarn goes slack."""
     scale = np.empty_like(tension)
     for side in range(2):
         u = lat.up[:, side]
-        scale[:, side] = tension[:, side] + np.where(
-            u >= 0, tension[np.maximum(u, 0), side], f_top[lat.yarn[:, side]])
-    return float(np.max(np.abs(new - old) / np.maximum(scale, 1e-300)))
+        top = f_top[lat.yarn[:, side]]
+        scale[:, side] = np.maximum(tension[:, side] + np.where(
+            u >= 0, tension[np.maximum(u, 0), side], top), floor * top)
+    return float(np.max(np.abs(new - old) / scale))
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,

@@ -92,6 +92,11 @@ class FrontalSettings:
     #: convergence of the outer iteration: change of the bounds and top tensions between
     #: iterations, relative to the tensions; bounds Psi / (f_int + f_ext) of the result
     friction_tolerance: float = 1e-6
+    #: the change of a crossing's bounds is relative to f_int + f_ext there, but at least to
+    #: this fraction of the yarn's top tension: a slack yarn's tensions vanish, and a change
+    #: relative to them read 1e298 in history.csv; a crossing with tensions above 1 % of the
+    #: top tension is measured as before
+    change_scale_floor: float = 1e-2
     #: outer iterations per time step (Newton and the relaxation): the bounds lag the geometry by
     #: up to a step (an explicit update of a state variable; history.csv's residual says by how
     #: much). Each iteration costs about a solve; on 48-carrier case A runs the lag of 1 moves H
@@ -183,6 +188,16 @@ class ZoneSettings:
     #: hardly any is drawn over the ring). "tension" stays the default until "laid"'s break of
     #: the case-B mirror symmetry (0.37 deg) is understood (docs/decisions.md)
     fell_material: str = "tension"
+    #: a step whose residual (history.csv's: its balance, or the change of the friction bounds
+    #: it held to those of its converged geometry, relative to the tensions) exceeds this stops
+    #: the run as failed: the bounds then differ from the step's own by more than the tensions
+    #: they bound, no lag of an explicit update but a step the model has not solved (the
+    #: verdict calls a run suspect from 0.1 on: ``quality.QualitySettings``)
+    max_step_residual: float = 1.0
+    #: a yarn segment of the zone at or below this fraction of the spool tension is slack, which
+    #: the model does not admit (every free yarn is pulled by its carrier's tensioner): the run
+    #: stops as failed at that step
+    slack_tension: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,9 @@ def _picture_jobs(result, fields, out_dir):
 
     plots = out_dir / PLOTS
     drawn, rendered = [], []
+    output = getattr(result.config, "output", None)
+    if output is not None and not output.pictures:    # [output] pictures = false
+        return drawn, rendered, []
     if fields is not None and result.centerline is not None:
         from .maps import MAP
 
@@ -193,6 +196,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
         rtm = _write_rtm(result, fields, out_dir, written)
+        structural = _write_structural(result, fields, out_dir, written, layer_results)
     except BaseException:
         if pictures is not None:
             pictures.stop()
@@ -211,7 +215,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     files = [_relative(p, out_dir) for p in [*written, summary]]
     from ..quality import surface_reasons
 
-    extra = {"files": files, "rtm": rtm, "quality_reasons": surface_reasons(result, fields),
+    extra = {"files": files, "rtm": rtm, "structural": structural, "quality_reasons": surface_reasons(result, fields),
              "pictures": {"failed": failed}}
     if layers is not None:   # the run is suspect when a layer above the first is
         extra["layers"] = layers
@@ -238,6 +242,16 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
     from .rtm_files import write_rtm
 
     paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness)
+    written += paths
+    return said
+
+
+def _write_structural(result, fields, out_dir, written, layer_results) -> dict:
+    """``fe/`` when the config has a [material] section and the fields fibre content; what the
+    summary says (``preform.structural``)."""
+    from ..structural import write_structural
+
+    paths, said = write_structural(result, fields, out_dir, layer_results)
     written += paths
     return said
 

@@ -122,10 +122,10 @@ def _steady_state(result):
     return steady_state(result.history)
 
 
-def _quality(result, fields_reasons=()):
+def _quality(result, fields_reasons=(), interlacing=False):
     from ..quality import assess, verdict
 
-    q = assess(result)
+    q = assess(result, interlacing=interlacing)
     return verdict([*q["reasons"], *fields_reasons])
 
 
@@ -133,6 +133,37 @@ def flag_counts(yarns) -> dict:
     """Number of deposited points carrying each flag: {"bridge": n, "catch": n, "slip": n}."""
     flags = np.asarray(yarns.flags, dtype=np.int64)
     return {name: int(np.count_nonzero(flags & bit)) for bit, name in FLAG_NAMES.items()}
+
+
+def _snapshot_checks(result):
+    """The written snapshots against the re-balance that checks each (the written state is the
+    run's own): the largest distance of a crossing from its re-balanced place (m), the tolerance
+    the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
+    times of the snapshots beyond it and of those whose re-balance failed; None where no
+    snapshot was checked."""
+    from ..quality import QUALITY
+
+    shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
+    failed = [s.time_s for s in result.snapshots if s.rebalance_error]
+    if not shifts and not failed:
+        return None
+    tolerance = (QUALITY.max_snapshot_shift_widths * float(result.config.yarn.width)
+                 if result.config is not None else None)
+    beyond = [s.time_s for s in result.snapshots if tolerance is not None
+              and np.isfinite(s.rebalance_shift_m) and s.rebalance_shift_m > tolerance]
+    return {"rebalance_shift_max_m": max(shifts) if shifts else None,
+            "rebalance_shift_tolerance_m": tolerance, "beyond_tolerance_at_s": beyond,
+            "rebalance_failed_at_s": failed}
+
+
+def _interlacing(il):
+    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``;
+    ``il``: ``quality.run_interlacing``'s)."""
+    if il is None:
+        return None
+    return {"band_m": [il.s_start, il.s_end], "crossings": il.measured,
+            "pattern_crossings": il.pattern, "ratio": il.ratio,
+            "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
 
 
 def summary_dict(result, extra=None) -> dict:
@@ -143,6 +174,9 @@ def summary_dict(result, extra=None) -> dict:
     model = config.model.kind if config is not None else None
     extra = dict(extra or {})
     steady = _steady_state(result) or {}
+    from ..quality import run_interlacing
+
+    interlaced = run_interlacing(result)
     summary = {
         "preform_version": __version__,
         "model": model,
@@ -164,11 +198,13 @@ def summary_dict(result, extra=None) -> dict:
             "steady": steady["convergence_length_m"] if steady.get("reached") else None,
         },
         "steady_state": steady or None,
-        "quality": _quality(result, (extra or {}).pop("quality_reasons", ())),
+        "quality": _quality(result, (extra or {}).pop("quality_reasons", ()), interlaced),
         "mandrel_repairs": list(result.mandrel.repairs) if result.mandrel is not None else [],
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
+        "snapshot_checks": _snapshot_checks(result),
+        "interlacing": _interlacing(interlaced),
         "inputs": echo_inputs(config),
     }
     if extra:
