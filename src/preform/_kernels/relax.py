@@ -458,8 +458,8 @@ def cap_moves(m, low, l_below, cap, lmin, delta):
 
 @njit(cache=True)
 def anderson_gram(n, x, gx, x_prev, r_prev, DX, DR, G, k, j, have_prev, b):
-    """One pass of Anderson mixing (``interaction/preconditioners.Anderson``) over x, gx (n,), r = gx - x:
-    with a previous iterate (have_prev) the new differences x - x_prev, r - r_prev into column j
+    """One pass of Anderson mixing (``interaction/preconditioners.Anderson``) over x, gx (n,),
+    r = gx - x: with a previous iterate (have_prev) the new differences x - x_prev, r - r_prev into column j
     of DX, DR (n, depth) and row and column j of the Gram matrix G (depth, depth) over the k
     columns held (j among them); b (depth,) receives DR[:, :k]^T r; x_prev, r_prev become x, r."""
     col = np.zeros(max(k, 1))

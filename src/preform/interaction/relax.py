@@ -568,8 +568,8 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     ``max_iter`` solves at most (Newton's frontal iterations), the bounds and ring top tensions
     taken anew from each converged geometry until they change by less than ``friction_tol``
     (``relax`` with consistent bounds). With ``finish`` (a snapshot's final solve, which
-    gives ``friction_tol``) Newton's frontal iteration (``frontal.solve_zone_inplace``) finishes from that
-    state: its wall penalty sets the crossings on the mandrel the micrometre behind their
+    gives ``friction_tol``) Newton's frontal iteration (``frontal.solve_zone_inplace``)
+    finishes from that state: its wall penalty sets the crossings on the mandrel the micrometre behind their
     planes that ``frontal.point_forces`` writes as the wall force, and it takes one iteration
     where the bounds have converged. Otherwise the relaxation's state is the result, the
     newest bounds (of its converged geometry) lagged, as Newton's after ``max_iter``
