@@ -257,13 +257,19 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
     st, bc, s_old = ring_steps(mu, 150)
     m = st.m
     ref = st.copy()
-    frontal.solve_zone_inplace(ref, bc, centre=s_old, tol=TIGHT)
+    # both iterate the top tensions (Capstan) and the new crossings' bounds to those of the
+    # converged geometry (``FrontalSettings.posed_iterations``), here to TIGHT
+    model = dataclasses.replace(DEFAULT, frontal=dataclasses.replace(
+        DEFAULT.frontal, posed_tolerance=TIGHT, posed_iterations=30))
+    frontal.solve_zone_inplace(ref, bc, centre=s_old, tol=TIGHT, settings=model)
     b0, f0 = R.start_bounds(st, bc)
     rs = R.RelaxSettings(tol=TIGHT, max_iter=300, ring_stall=60)
     res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old[:m],
                   bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                   width=bc.width, plane=bc.plane,
-                  settings=dataclasses.replace(rs, preconditioner=rs.ring_preconditioner))
+                  settings=dataclasses.replace(rs, preconditioner=rs.ring_preconditioner),
+                  model=model, top_tensions=R.ring_top_tensions(st, bc),
+                  fresh=R._posed_bounds(st, model))
     assert res.converged and res.residual < TIGHT
     assert np.abs(res.pos - ref.pos[:m]).max() < 1e-6
     assert np.abs(res.tension - ref.tension[:m]).max() < 1e-6 * bc.f_spool

@@ -418,8 +418,13 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     ``where`` names the step and time in the error message; :class:`SimulationError` if the
     residual stays above the tolerances."""
     fr = settings.frontal
+    time_step = check_mode(mode) == "step"
     # a time step with consistent bounds: the frontal iteration to convergence, mixed
-    consistent = fr.consistent_bounds and check_mode(mode) == "step"
+    consistent = fr.consistent_bounds and time_step
+    # behind a guide ring a time step's top tensions (Capstan, eq. 9) and friction bounds
+    # (``posed_all_bounds``; else the new crossings' only) are those of its own converged
+    # geometry (``FrontalSettings.posed_iterations``)
+    posed_left = fr.posed_iterations - 1 if time_step and not consistent and bc.has_ring else 0
     tol = settings.newton.balance_tolerance if tol is None else tol
     if consistent:
         friction_tol, max_iter = fr.consistent_tolerance, fr.consistent_iterations
@@ -438,6 +443,8 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     net.tension[:] = state.tension[:m]
     bound0, _, f_top0 = net.bounds()
     fresh = ~np.isfinite(state.bound[:m]) | consistent
+    # the bounds the posed iteration takes of the converged geometry
+    posed = np.ones((m, 2), dtype=bool) if fr.posed_all_bounds else fresh
     net.bound = np.where(fresh, bound0, state.bound[:m])
     net.f_top = f_top0
     if start is not None:
@@ -454,19 +461,19 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     for it in range(1, max_iter + 1):
         residual, steps = _balance_or_continue(net, tol)
         newton += steps
+        while residual < tol and posed_left > 0:
+            bound1, _, f_top1 = net.bounds()
+            bound1 = np.where(posed, bound1, net.bound)
+            if not _relative_change(state, net, bound1, f_top1) >= fr.posed_tolerance:
+                break
+            posed_left -= 1
+            net.bound, net.f_top = bound1, f_top1
+            residual, steps = _balance_or_continue(net, tol)
+            newton += steps
         if not residual < tol:
             break
         bound1, psi, f_top1 = net.bounds()
-        scale = np.empty((m, 2))
-        for side in range(2):
-            u = state.up[:m, side]
-            f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
-                             f_top1[state.yarn[:m, side]])
-            # a scale that cannot vanish where a yarn goes slack (``change_scale_floor``)
-            scale[:, side] = np.maximum(net.tension[:, side] + f_ext,
-                                        fr.change_scale_floor * f_top1[state.yarn[:m, side]])
-        change = max(float(np.max(np.abs(bound1 - net.bound) / scale)),
-                     float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
+        change = _relative_change(state, net, bound1, f_top1)
         history.append(change)
         if change < friction_tol:
             _accept_inplace(state, net)
@@ -492,6 +499,24 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
         f"the frontal solver of the yarn-interaction model did not converge {where}: relative "
         f"force imbalance (residual) {residual:.3g} after {newton} Newton steps (tolerance "
         f"{tol:.3g}, {m} crossings)")
+
+
+def _relative_change(state, net, bound1, f_top1):
+    """Largest change from the network's bounds and top tensions to ``bound1``, ``f_top1``:
+    a bound's relative to f_int + f_ext of its crossing and yarn (at ``f_top1``), a top
+    tension's relative to itself."""
+    m = state.m
+    scale = np.empty((m, 2))
+    for side in range(2):
+        u = state.up[:m, side]
+        f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
+                         f_top1[state.yarn[:m, side]])
+        # a scale that cannot vanish where a yarn goes slack (``change_scale_floor``)
+        scale[:, side] = np.maximum(net.tension[:, side] + f_ext,
+                                    net.settings.frontal.change_scale_floor
+                                    * f_top1[state.yarn[:m, side]])
+    return max(float(np.max(np.abs(bound1 - net.bound) / scale)),
+               float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
 
 
 class _BoundMixing:

@@ -314,7 +314,7 @@ class RelaxResult:
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
           width, plane=None, settings: RelaxSettings = RelaxSettings(),
-          model: InteractionSettings = DEFAULT, top_tensions=None):
+          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
@@ -323,16 +323,22 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
     the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
-    held. Returns a :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
+    held. fresh: (m, 2) bool, the bounds of crossings created in the step; given, a step with
+    held bounds is solved again with them and the top tensions taken of its converged geometry
+    (``_posed_fixed_point``). Returns a :class:`RelaxResult` (``converged`` False if ``tol``
+    was not reached).
 
     Consistent bounds: an outer fixed point, as Newton's frontal loop (``frontal.solve_zone``):
     the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
     from its converged geometry and tensions, and the step is solved again from there until they
     change by less than ``friction_tol`` relative to the tensions."""
-    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds,
-                              f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                              settings=settings, model=model)
+    kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
+              model=model)
+    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
+    if fresh is not None and not settings.consistent_bounds and res.converged and m:
+        res, bounds = _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh,
+                                         top_tensions, kw)
     if not settings.consistent_bounds or not res.converged:
         if res.converged and m:
             # bounds held at the last step's (lagged): how far they are from those of the
@@ -362,6 +368,39 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res.bound_change = change
     res.converged = res.converged and change < settings.friction_tol
     return res
+
+
+def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_tensions, kw):
+    """The step solved again with what has no state of its own taken of its converged
+    geometry (``FrontalSettings.posed_iterations``): the top tensions behind a guide ring
+    (``top_tensions`` of the result's positions: Capstan, eq. 9) and the friction bounds of the
+    new crossings (``fresh`` (m, 2) bool: theirs of the result), the other bounds held, until
+    these change by less than ``posed_tolerance`` relative to the tensions or after
+    ``posed_iterations`` solves; each solve starts from the last one's result. The iterations,
+    histories and times of all are summed into the returned result (the last converged one)."""
+    fr = kw["model"].frontal
+    iterations, history, times = res.iterations, [res.history], dict(res.times)
+    f_top = res.f_top
+    for _ in range(fr.posed_iterations - 1):
+        change = _bound_change(lat, np.where(fresh, res.bounds, bounds), bounds, res.tension,
+                               res.f_top, fr.change_scale_floor)
+        if top_tensions is not None:
+            f_top = np.asarray(top_tensions(res.pos), dtype=float)
+            change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
+        if not change >= fr.posed_tolerance:
+            break
+        bounds = np.where(fresh, res.bounds, bounds)
+        nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+                                  **kw)
+        iterations += nxt.iterations
+        history.append(nxt.history)
+        for key, v in nxt.times.items():
+            times[key] = times.get(key, 0.0) + v
+        if not nxt.converged:
+            break
+        res = nxt
+    res.iterations, res.history, res.times = iterations, np.concatenate(history), times
+    return res, bounds
 
 
 def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
@@ -643,6 +682,13 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     return np.where(np.isfinite(old), old, g0), f_top
 
 
+def _posed_bounds(state, settings):
+    """(m, 2) bool: the bounds a time step behind a guide ring takes of its converged geometry
+    (``FrontalSettings.posed_all_bounds``: all, else the new crossings')."""
+    fresh = ~np.isfinite(state.bound[:state.m])
+    return np.ones_like(fresh) if settings.frontal.posed_all_bounds else fresh
+
+
 def ring_top_tensions(state, bc):
     """Function of the positions giving the top tensions (guide ring: Capstan, eq. 9), for
     consistent bounds; None without a ring (the spool tension)."""
@@ -671,19 +717,22 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
 
     ``mode`` (``frontal.SOLVE_MODES``) says what the solve is for. A time step ("step") is one
     relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds
-    of the converged geometry go into ``state.bound`` for the next step. With
-    ``FrontalSettings.max_iterations`` k > 1 it is up to k relaxations, each posed by the last
-    one's converged state (its bounds and top tensions, the same friction centres), until the
-    bounds change by less than ``friction_tolerance``, as Newton's frontal iteration. A
-    snapshot's frontal iteration of the bounds ("pass": its ring passes of ``max_iter``
-    iterations; "final": its re-balance to ``friction_tol``, which must meet Psi to 1e-3) is
-    Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent bounds first,
-    ``_ring_frontal``: its passes and its final solve, behind a guide ring by
-    ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation does
-    not converge on (``relax_settings.max_iter`` reached, or the block preconditioner stalled:
-    the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``; the
-    report's ``fallback`` is then set). The report's ``relax_iterations``: the relaxation's
-    iterations of a time step, converged or not. Behind a guide ring the relaxation uses
+    of the converged geometry go into ``state.bound`` for the next step. Behind a guide ring it
+    is solved again with the top tensions and the new crossings' bounds of its converged
+    geometry until they settle (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``),
+    as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up to k
+    relaxations, each posed by the last one's converged state (its bounds and top tensions,
+    the same friction centres), until the bounds change by less than ``friction_tolerance``,
+    as Newton's frontal iteration. A snapshot's frontal iteration of the bounds ("pass": its
+    ring passes of ``max_iter`` iterations; "final": its re-balance to ``friction_tol``, which
+    must meet Psi to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with
+    consistent bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide
+    ring by ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the
+    relaxation does not converge on (``relax_settings.max_iter`` reached, or the block
+    preconditioner stalled: the first rows of a run, friction-0.5 steps with jamming;
+    ``newton_fallback``; the report's ``fallback`` is then set). The report's
+    ``relax_iterations``: the relaxation's iterations of a time step, converged or not.
+    Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
     ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
@@ -728,7 +777,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
-                top_tensions=ring_top_tensions(state, bc))
+                top_tensions=ring_top_tensions(state, bc),
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with

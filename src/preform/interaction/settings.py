@@ -127,6 +127,27 @@ class FrontalSettings:
     #: reported as slipping (it uses more than 99.5 % of its bound)
     slip_report_creeps: float = 10.0
 
+    #: behind a guide ring, solves a time step takes at most to bring the tension below the
+    #: ring (Capstan, eq. 9, of the deflection at the ring point of the step's result) and the
+    #: friction bounds (``posed_all_bounds``; else only those of the crossings created in the
+    #: step, the others lagged as above) to those of its converged geometry. The posed ones come from the posed geometry, whose new crossings (below the
+    #: ring) the solve moves by centimetres (case-B-like, 96 carriers, yarn friction 0: top
+    #: tensions up to 23 % off, residual p99 0.21); the map contracts by a factor ~15 a solve.
+    #: Without a ring the new crossings keep their posed bounds, as case A was validated
+    #: (docs/decisions.md, "The step's problem behind a guide ring")
+    posed_iterations: int = 8
+    #: that iteration takes every crossing's bound of the converged geometry, not only the new
+    #: crossings' (case-B-like, 16 carriers, yarn friction 0.5: residual max 0.085 with the new
+    #: crossings' alone, 0.012 with all, p99 5.5e-3); off: at yarn friction 0.25 some steps
+    #: cycle between stick and slip states and end at the solve limit (top tensions 2.7e-4
+    #: off eq. 9, a cone exceeded by 1.3e-3, the two solvers 2.8 mm apart), docs/decisions.md
+    posed_all_bounds: bool = False
+    #: that iteration stops once they change by less than this, relative to the tensions:
+    #: the snapshots' frontal tolerance (snapshot_tolerance; a step's state then meets Psi to
+    #: the 1e-3 the written crossings must); below 1e-5 the balance tolerance's soft modes
+    #: (micrometres) slow the iteration to a factor ~0.6 a solve on the first rows
+    posed_tolerance: float = 1e-4
+
     #: iterate every time step's bounds and top tensions to those of its own converged geometry
     #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
     #: start (issue 14 item 3); off by default: such steps go to Newton (the relaxation does not
