@@ -1,4 +1,4 @@
-"""Interaction model timing (issue 4, item 7) and frontal residual per iteration.
+"""Interaction model timing and frontal residual per iteration.
 
 ``python benchmarks/bench_interaction.py [--full] [--png residual.png] [--linear-solver splu]``
 ``python benchmarks/bench_interaction.py --breakdown [--case examples/bent_tube.toml]``

@@ -1,4 +1,4 @@
-"""Case A with the kinematic model: 144 carriers, 1 m braided (issue: foundation, item 7).
+"""Case A with the kinematic model: 144 carriers, 1 m braided.
 
 Prints the wall time of each run after a JIT warm-up and the time per fell-point update
 (one yarn, one time step). Run: ``python benchmarks/bench_kinematic.py [--repeat 5]``.
@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def case_a(braid_length=1.0):
     cfg = pf.load_config(ROOT / "examples" / "case_a.toml")
-    # the paper's case A start (0.4 m), as the figures in the README were measured
+    # the paper's case A start (0.4 m), as the benchmarks table measures it
     process = dataclasses.replace(cfg.process, braid_length=braid_length, initial_position=0.4)
     model = dataclasses.replace(cfg.model, kind="kinematic")
     return dataclasses.replace(cfg, process=process, model=model)

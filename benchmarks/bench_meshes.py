@@ -1,4 +1,4 @@
-"""One cylinder, three triangulations, end to end (issue 15): well-shaped (~100 k faces), CAD
+"""One cylinder, three triangulations, end to end: well-shaped (~100 k faces), CAD
 slivers (trimesh's 256 sections: 512 side faces 1.6 m x 1 mm) and fine (~1 M faces).
 
 Each run (in its own process, so peak memory is its own) loads the STL with the automatic

@@ -2,7 +2,8 @@
 
 Two ways:
 
-- ``--command`` (the figure the README quotes): ``preform run`` as a user runs it, ``--repeat``
+- ``--command`` (the figure of ``benchmarks/README.md``'s table): ``preform run`` as a user runs
+  it, ``--repeat``
   times in fresh processes; prints each run's wall time (measured outside the process) and the
   stages of its summary (start, load and check, simulate, map, write, pictures), and the medians.
   ``--fresh`` makes every run a first run in a fresh environment: an empty numba cache

@@ -1,4 +1,4 @@
-"""Force-density relaxation against the Newton reference on captured steps (issue 14).
+"""Force-density relaxation against the Newton reference on captured steps.
 
 ``python benchmarks/bench_relax.py [--carriers 48 96 144] [--mu 0.25] [--steps 3] [--repeat 3]
 [--preconditioner block full scalar] [--warm-solver relax|newton] [--warm N] [--case FILE]``
@@ -210,7 +210,7 @@ def main(argv=None):
             print(f"  {pre}: largest / smallest us per crossing per iteration "
                   f"{max(per_n.values()) / min(per_n.values()):.2f} wall, "
                   f"{max(per_cpu.values()) / min(per_cpu.values()):.2f} CPU "
-                  "(issue 14: within 1.3)")
+                  "(target: within 1.3)")
 
 
 if __name__ == "__main__":

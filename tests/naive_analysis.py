@@ -12,7 +12,7 @@ from preform.tolerances import tol
 
 def braid_angle(direction, tangent, normal):
     """Braid angle (rad, magnitude in [0, pi/2]) between directions and the surface projection of
-    the centerline tangent (DESIGN.md §2). All (m, 3); normal unit."""
+    the centerline tangent (docs/architecture.md §2). All (m, 3); normal unit."""
     d = direction - np.einsum("ij,ij->i", direction, normal)[:, None] * normal
     t = tangent - np.einsum("ij,ij->i", tangent, normal)[:, None] * normal
     dn = np.linalg.norm(d, axis=1)
@@ -30,7 +30,7 @@ def laid_braid_angles(surface, project, centerline, points, face, offsets, mu,
     ``k`` is ``points[offsets[k]:offsets[k + 1]]``; mu : yarn-mandrel friction coefficient.
 
     The laid direction at a point is the chord between its neighbours along the yarn (one-sided at
-    the ends). Slip tendency (DESIGN.md §3.2): ``|kappa_g| > mu |kappa_n| + curvature_tol``, with
+    the ends). Slip tendency (docs/theory.md §3): ``|kappa_g| > mu |kappa_n| + curvature_tol``, with
     the curvature vector from a three-point stencil and the normal curvature from the smooth
     normal field.
     """

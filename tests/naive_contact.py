@@ -1,6 +1,6 @@
 """Slow, obvious NumPy/SciPy reference for the yarn-ring contact kernel (``preform._kernels.ring``).
 
-Written from the equations (paper §2.3, eqs. 9-13; DESIGN.md §3.3) with vectors and a grid search
+Written from the equations (paper §2.3, eqs. 9-13; docs/theory.md §4) with vectors and a grid search
 plus ``brentq`` for the slip root, not from the kernel code.
 """
 

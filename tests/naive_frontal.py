@@ -2,7 +2,7 @@
 
 Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
 arrays in creation order as the kernels do), segments are vectors, the energy is written term by
-term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from DESIGN.md
+term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from docs/theory.md §4
 §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``). The model's constants are
 arguments (``preform.interaction.settings``).
 """

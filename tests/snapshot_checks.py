@@ -1,5 +1,5 @@
 """Force balance and the friction law of written convergence-zone snapshots, read back from their
-.vtp files alone (issues 4 and 14): each crossing's four tension vectors from the file's own
+.vtp files alone: each crossing's four tension vectors from the file's own
 points and ``tension_N``, plus its points' ``external_force_N``; shared by the interaction
 tests. Nothing here calls preform's solver code."""
 
@@ -15,7 +15,7 @@ from preform.io.vtk_yarns import write_convergence
 
 def read_snapshot(path):
     """Per yarn (points, segment tensions, contact ids) from a written .vtp (one line cell per
-    segment, DESIGN.md §1; cells of a yarn in order)."""
+    segment, docs/guide/results.md; cells of a yarn in order)."""
     poly = pv.read(path)
     lines = np.asarray(poly.lines).reshape(-1, 3)[:, 1:]
     ten = np.asarray(poly.cell_data["tension_N"])
@@ -91,9 +91,9 @@ def crossing_balance(yarns, external):
 
 def checked_snapshot_files(snapshots, out_dir, mu, rebalanced=False):
     """Write the snapshots as convergence.pvd + .vtp, read each back and assert force balance
-    (with ``external_force_N``) at every crossing (issue 14); the written snapshots are the run's
+    (with ``external_force_N``) at every crossing; the written snapshots are the run's
     own states, whose friction law holds to the step's lag of the bounds, so the friction law
-    (issue 4) is asserted on the re-balanced copies that check them (``Snapshot.rebalanced``),
+    is asserted on the re-balanced copies that check them (``Snapshot.rebalanced``),
     written and read back the same way, which must balance too. The yarns (``read_snapshot``)
     of every written file that has crossings (``rebalanced``: of the re-balanced copies')."""
     out = []
@@ -106,11 +106,11 @@ def checked_snapshot_files(snapshots, out_dir, mu, rebalanced=False):
         if not any(np.any(c >= 0) for _, _, c in yarns):
             continue
         err, _, _, _ = crossing_balance(yarns, read_external_forces(p))
-        assert err < 1e-3     # issue 14: tensions + external forces balance to 1e-3 x max tension
+        assert err < 1e-3     # required: tensions + external forces balance to 1e-3 x max tension
         re = read_snapshot(q)
         _, psi = balance_and_psi(re, mu)
         err, _, _, _ = crossing_balance(re, read_external_forces(q))
         assert err < 1e-3
-        assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
+        assert psi < 1e-3     # required: Psi <= 1e-3 tension
         out.append(re if rebalanced else yarns)
     return out

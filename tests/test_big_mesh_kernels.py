@@ -1,4 +1,4 @@
-"""Kernels for big STLs (issue 15, item 4) against the slow obvious NumPy forms they replace, bit for
+"""Kernels for big STLs against the slow obvious NumPy forms they replace, bit for
 bit: long-side faces, triangle moments, the undirected edge table, the face across each directed
 edge, first faces of each vertex set, the winding of each body; and the paths that skip work
 (the field mesh's weld of an already welded mandrel, the mandrel's ray scene reused)."""

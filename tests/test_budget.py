@@ -1,4 +1,4 @@
-"""Bounds on work (issue 17 item 7): estimates and refusals with their reasons."""
+"""Bounds on work: estimates and refusals with their reasons."""
 
 from __future__ import annotations
 

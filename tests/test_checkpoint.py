@@ -1,5 +1,5 @@
-"""Checkpoints are plain data, written safely and never trusted (issue 13 item 4, issue 17 items
-1 and 6): ``preform run CFG --resume`` refuses a crafted, damaged or foreign checkpoint with an
+"""Checkpoints are plain data, written safely and never trusted:
+``preform run CFG --resume`` refuses a crafted, damaged or foreign checkpoint with an
 ``error:`` line and exit 2, runs no code from it, and names what differs for other inputs."""
 
 from __future__ import annotations

@@ -195,7 +195,7 @@ def test_value_warnings(changes, word):
 
 @pytest.mark.parametrize("sections", [16, 24, 100, 128])
 def test_cad_cylinder_in_mm_read_as_m_reaches_the_unit_message(tmp_path, sections):
-    # issue 15: trimesh's capped cylinders (long slivers) used to stop in the automatic centerline
+    # trimesh's capped cylinders (long slivers) once stopped in the automatic centerline
     # ("no cross-section near the tip") before the unit check could say what is wrong
     import trimesh
 

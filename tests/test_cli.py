@@ -115,7 +115,7 @@ def test_console_script_entry_point():
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
-#: the paper's Table 1 (and DESIGN.md): carriers, spool radius m, deg/s, guide ring m, take-up m/s
+#: the paper's Table 1: carriers, spool radius m, deg/s, guide ring m, take-up m/s
 TABLE_1 = {
     "case_a": (144, 1.382, 13.232, None, 0.01),
     "case_b": (96, 0.85, 18.0, 0.17, 0.0263),

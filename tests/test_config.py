@@ -1,4 +1,5 @@
-"""TOML config loading and validation (DESIGN.md §1): every error names the key and what is expected."""
+"""TOML config loading and validation (docs/guide/configuration.md): every error names the key
+and what is expected."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from preform.config import dump_config, load_config
 from preform.errors import ConfigError, PreformError
@@ -22,25 +24,8 @@ BASE = {
 }
 
 
-def toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + " }"
-    return repr(v)  # int, float; inf and nan are valid TOML
-
-
 def write_toml(path: Path, doc: dict) -> Path:
-    lines = []
-    for section, table in doc.items():
-        lines.append(f"[{section}]")
-        lines += [f"{k} = {toml_value(v)}" for k, v in table.items()]
-        lines.append("")
-    path.write_text("\n".join(lines))
+    path.write_text(tomli_w.dumps(doc))
     return path
 
 

@@ -1,4 +1,4 @@
-"""The friction function of a yarn at a contact (paper §2.2, eqs. 5-7; DESIGN.md §3.3): its tension
+"""The friction function of a yarn at a contact (paper §2.2, eqs. 5-7; docs/theory.md §4): its tension
 form, its Eulerian-frame form and the stick cone, which the frontal solver's friction bounds use."""
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ def test_psi_tension_form_equals_frame_form():
 
 
 def test_stick_cone_is_the_discrete_capstan():
-    """Psi <= 0 exactly when f_int / f_ext lies within cone_ratio (DESIGN.md friction equivalent)."""
+    """Psi <= 0 exactly when f_int / f_ext lies within cone_ratio (docs/theory.md §4: the
+    friction law as a discrete Capstan)."""
     rng = np.random.default_rng(1)
     for _ in range(300):
         delta, mu = rng.uniform(0.01, 2.5), rng.uniform(0, 0.6)

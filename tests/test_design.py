@@ -1,4 +1,4 @@
-"""Take-up speed design for a target braid angle (issue 18 item 2), kinematic forward model."""
+"""Take-up speed design for a target braid angle, kinematic forward model."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ snapshots = 0
 
 
 def judged_error(design):
-    # issue 18: beyond the first two convergence lengths of braid
+    # required: beyond the first two convergence lengths of braid
     sel = design.length >= DESIGN.judged_after * design.h_inf
     assert np.count_nonzero(sel) >= 5
     return float(np.max(np.abs(design.achieved_deg[sel] - design.target_deg[sel])))
@@ -57,14 +57,14 @@ def cone(tmp_path_factory):
 
 def test_a_constant_angle_on_a_cone(cone):
     design = design_speed(cone, 45.0)
-    assert judged_error(design) < 1.0       # issue 18: within 1 deg of a constant target
+    assert judged_error(design) < 1.0       # required: within 1 deg of a constant target
     # the cone widens: the speed for a constant angle grows with the radius (v ~ omega r)
     assert design.speed[-1] > 1.5 * design.speed[0]
 
 
 def test_a_rising_target_table_on_a_cone(cone):
     design = design_speed(cone, np.array([[0.0, 45.0], [0.6, 55.0]]))
-    assert judged_error(design) < 1.5       # issue 18: within 1.5 deg of a target table
+    assert judged_error(design) < 1.5       # required: within 1.5 deg of a target table
 
 
 def test_a_constant_angle_on_the_case_b_like_mandrel(tmp_path):

@@ -1,4 +1,4 @@
-"""The flagship example reaches steady state (issue 16 item 2): examples/case_a.toml, kinematic,
+"""The flagship example reaches steady state: examples/case_a.toml, kinematic,
 on the shipped 3 m mandrel, braids to a steady state at Ko's angle."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def test_case_a_reaches_steady_state_at_kos_angle(case_a):
     assert steady["reached"], steady
     ko = math.degrees(analytic.ko_braid_angle(config.machine.angular_speed, 0.075, 0.01))
     assert ko == pytest.approx(60.0, abs=0.01)
-    # issue 16: Ko's angle within 0.5 deg
+    # required: Ko's angle within 0.5 deg
     assert steady["braid_angle_deg"]["warp"] == pytest.approx(ko, abs=0.5)
     assert steady["braid_angle_deg"]["weft"] == pytest.approx(ko, abs=0.5)
     # and H at the kinematic H_inf (Du & Popper) within the steady reading's 1 % (plus 1 % for

@@ -1,4 +1,4 @@
-"""Lose nothing, write nowhere else (issue 17), through the CLI: planted symlinks, unusable
+"""Lose nothing, write nowhere else, through the CLI: planted symlinks, unusable
 results folders refused before simulating, SIGTERM then --resume, a failure while writing the
 results then --resume without simulating again, two runs into one folder, bounds on work."""
 

@@ -1,4 +1,4 @@
-"""The fell point's material coordinate (``ZoneSettings.fell_material``, issue 14 item 5): with
+"""The fell point's material coordinate (``ZoneSettings.fell_material``): with
 "laid" the yarn is conserved, so the material booked at every fell point advances by the yarn
 laid on the mandrel (measured independently, from the laid yarn paths), and the yarn the braid
 consumes is drawn over the guide ring; "tension" (the lowest segment keeps its tension) books

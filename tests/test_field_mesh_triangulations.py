@@ -1,4 +1,4 @@
-"""Surface fields do not depend on how the STL is triangulated (issue 15).
+"""Surface fields do not depend on how the STL is triangulated.
 
 Three shapes (a cylinder, a cone, a case-B-like rounded-square prism), each meshed three ways:
 well-shaped (rings spaced like the edges around), CAD slivers (one ring of faces running the whole
@@ -143,7 +143,7 @@ def test_fields_match_the_closed_forms(runs, shape, kind):
     _, fields = runs[shape, kind]
     assert fields.unmapped_length_m < 1e-9
     got, ref, angle_error = band_means(shape, fields)
-    # issue 3 tolerances (test_fields): cover factor 5 %, thickness 10 %; braid angle 0.5 deg on
+    # the required tolerances (test_fields): cover factor 5 %, thickness 10 %; braid angle 0.5 deg on
     # every face of the band
     assert got["cover_factor"] == pytest.approx(ref["cover_factor"], rel=0.05)
     assert got["thickness_m"] == pytest.approx(ref["thickness_m"], rel=0.10)
@@ -154,7 +154,7 @@ def test_fields_match_the_closed_forms(runs, shape, kind):
 def test_the_three_triangulations_agree(runs, shape):
     means = [band_means(shape, runs[shape, kind][1])[0] for kind in KINDS]
     for m in means[1:]:
-        # issue 15: 0.3 deg in braid angle and 2 % in cover factor between triangulations
+        # required: 0.3 deg in braid angle and 2 % in cover factor between triangulations
         assert abs(m["braid_angle_deg"] - means[0]["braid_angle_deg"]) < 0.3
         assert m["cover_factor"] == pytest.approx(means[0]["cover_factor"], rel=0.02)
 

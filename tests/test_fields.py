@@ -1,4 +1,4 @@
-"""Surface fields on a cylinder against closed forms (DESIGN.md §3.4, issue 3).
+"""Surface fields on a cylinder against closed forms (docs/theory.md §5).
 
 The set-up is built here, independent of the simulator: a trimesh cylinder, helical yarns at a
 chosen braid angle, and stand-ins with exactly the Result attributes ``map_to_surface`` reads.
@@ -36,7 +36,7 @@ def test_steady_cylinder_cover_factor_and_thickness(steady):
     k = coverage_closed_form(n, alpha)
     side, areas = side_faces(fields)
     cf = area_mean(fields, "cover_factor", side, areas)
-    # issue 3: cover factor within 5 %, thickness within 10 % of the closed forms
+    # required: cover factor within 5 %, thickness within 10 % of the closed forms
     assert cf == pytest.approx(1 - (1 - k) ** 2, rel=0.05)
     assert area_mean(fields, "thickness_m", side, areas) == pytest.approx(THICKNESS * 2 * k, rel=0.10)
     # a uniform braid gives a uniform field: pooling leaves no flicker away from the braid edges
@@ -50,7 +50,7 @@ def test_steady_cylinder_braid_angle_and_directions(steady):
     alpha, _, _, fields = steady
     side, _ = side_faces(fields)
     cd = fields.cell_data
-    # issue 3: within 0.5 deg of the generating (Ko) angle, on every braided face
+    # required: within 0.5 deg of the generating (Ko) angle, on every braided face
     for name in ("braid_angle_deg", "braid_angle_warp_deg", "braid_angle_weft_deg"):
         assert np.abs(cd[name][side] - np.degrees(alpha)).max() < 0.5, name
     normals, _, _ = face_geometry(fields.vertices, fields.faces)

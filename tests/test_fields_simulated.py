@@ -1,4 +1,4 @@
-"""Surface fields from a real kinematic run on a cylinder in steady state (issue 3, DESIGN.md §3.4)."""
+"""Surface fields from a real kinematic run on a cylinder in steady state (docs/theory.md §5)."""
 
 from __future__ import annotations
 
@@ -42,10 +42,10 @@ def test_mapped_cover_factor_and_thickness_match_closed_forms(mapped):
     cf = np.average(fields.cell_data["cover_factor"][side], weights=area)
     alpha = analytic.ko_braid_angle(OMEGA, 0.075, 0.01)
     expected = analytic.cover_factor(CARRIERS, 4e-3, 0.075, alpha)
-    assert cf == pytest.approx(expected, rel=0.05)          # issue 3: within 5 %
+    assert cf == pytest.approx(expected, rel=0.05)          # required: within 5 %
     k = analytic.yarn_coverage(CARRIERS / 2, 4e-3, 0.075, alpha)
     t = np.average(fields.cell_data["thickness_m"][side], weights=area)
-    assert t == pytest.approx(2.5e-4 * 2 * k, rel=0.10)    # issue 3: within 10 %
+    assert t == pytest.approx(2.5e-4 * 2 * k, rel=0.10)    # required: within 10 %
 
 
 def test_mapped_braid_angle_is_ko_and_directions_are_tangent(mapped):
@@ -53,7 +53,7 @@ def test_mapped_braid_angle_is_ko_and_directions_are_tangent(mapped):
     side = _steady_side(fields)
     ko = np.degrees(analytic.ko_braid_angle(OMEGA, 0.075, 0.01))
     for name in ("braid_angle_warp_deg", "braid_angle_weft_deg", "braid_angle_deg"):
-        assert np.abs(fields.cell_data[name][side] - ko).max() < 0.5      # issue 3: 0.5 deg
+        assert np.abs(fields.cell_data[name][side] - ko).max() < 0.5      # required: 0.5 deg
     p = fields.vertices[fields.faces]
     n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     n /= np.linalg.norm(n, axis=1)[:, None]

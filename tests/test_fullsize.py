@@ -1,4 +1,4 @@
-"""Full-size snapshots a reader can check (issue 14, its first required test): every crossing of
+"""Full-size snapshots a reader can check (the interaction model's first required test): every crossing of
 every snapshot of a full-size case A and case B run with the interaction model balances from the
 files alone (tensions along the written segments plus ``external_force_N``) to 1e-3 of the
 largest tension, and Psi <= 1e-3 of the tension.
@@ -54,8 +54,8 @@ def test_full_size_snapshots_balance_from_the_files(case, tmp_path):
             continue
         err, _, n, _ = crossing_balance(yarns, read_external_forces(p))
         _, psi = balance_and_psi(yarns, mu)
-        assert err < 1e-3, (p.name, err)   # issue 14: balance to 1e-3 of the largest tension
-        assert psi < 1e-3, (p.name, psi)   # issue 4: Psi <= 1e-3 x tension
+        assert err < 1e-3, (p.name, err)   # required: balance to 1e-3 of the largest tension
+        assert psi < 1e-3, (p.name, psi)   # required: Psi <= 1e-3 x tension
         checked += 1
     # the examples write 20 snapshots; all but the first (no crossings yet) are checked
     assert checked >= 10, (checked, len(files))

@@ -1,4 +1,4 @@
-"""The centerline (issue 2, item 2): arc length, rotation-minimising frames, CSV, auto trace, sections.
+"""The centerline: arc length, rotation-minimising frames, CSV, auto trace, sections.
 
 References: hand-computed arc lengths, the helix's closed-form torsion (a rotation-minimising frame
 turns against the Frenet frame at the rate -tau), dense brute-force sampling for ``project``, the

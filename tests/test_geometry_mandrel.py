@@ -1,4 +1,4 @@
-"""The mandrel (issue 2, item 2): intake checks, smooth corner normals, adjacency and queries.
+"""The mandrel: intake checks, smooth corner normals, adjacency and queries.
 
 Small meshes from ``preform.geometry.shapes`` with known geometry: a regular 128-gon prism (its
 vertices sit at angles 2 pi k / n from +x, so every hit and normal has a closed form), an

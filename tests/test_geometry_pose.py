@@ -1,4 +1,4 @@
-"""The mandrel's pose in the machine (issue 2, item 3; DESIGN.md §2).
+"""The mandrel's pose in the machine (docs/architecture.md §2).
 
 ``pose_at(centerline, travel, eccentricity, lead)`` puts the centerline point at arc length
 ``travel - lead`` at machine ``(ex, ey, lead)``, its tangent along ``-z`` and its normal along ``+x``.

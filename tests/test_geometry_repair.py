@@ -1,4 +1,4 @@
-"""repair_mesh on damaged trimesh.creation meshes (issue 5, item 1).
+"""repair_mesh on damaged trimesh.creation meshes.
 
 The repaired meshes are judged by trimesh (``is_watertight``, ``is_winding_consistent``,
 ``volume``), which shares no code with ``preform.geometry.repair``.

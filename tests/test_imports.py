@@ -1,5 +1,4 @@
-"""The import graph of ``src/preform`` has no cycle, and ``import preform`` stays light (issue 13
-items 1 and 9).
+"""The import graph of ``src/preform`` has no cycle, and ``import preform`` stays light.
 
 The graph is read from the source with ``ast`` (not by importing), so it includes imports inside
 functions, which run later but still make a module depend on another: a cycle through one of them

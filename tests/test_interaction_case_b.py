@@ -1,4 +1,4 @@
-"""The interaction model on a case-B-like mandrel (issue 4; paper §3.2, Fig. 11-12).
+"""The interaction model on a case-B-like mandrel (paper §3.2, Fig. 11-12).
 
 A rounded square (90 mm, corners 15 mm) blending into a circle of the same perimeter between
 z = 0.35 and 0.45 m, braided through a guide ring (radius 0.12 m, ring friction 0.17: the ring
@@ -7,7 +7,7 @@ points stick and slip across the ring and lag the carriers), yarn friction
 0.2 m) so the run takes well under a minute; the transient has decayed by z = 0.2 m (the time
 constant is ~8 cm of braid).
 
-What must come out (issue 4): the braid angle differs between the four sides of the square, and
+What must come out: the braid angle differs between the four sides of the square, and
 changes through the square-to-circle transition. Read off the surface fields a user opens in
 ParaView (faces classified by their outward normal), and the written snapshots checked for force
 balance and the friction law from the files.

@@ -1,4 +1,4 @@
-"""The interaction model through ``preform.simulate`` on a cylinder (DESIGN.md §3.3, issue 4).
+"""The interaction model through ``preform.simulate`` on a cylinder (docs/theory.md §4).
 
 Short-tau set-up: 16 carriers on a spool of radius 0.12 m around a 75 mm cylinder, Ko angle 60 deg
 (``omega r / v = tan 60``), so the transient decays with ``tau = sqrt(R^2 - r^2) / (omega r)`` =
@@ -76,7 +76,7 @@ def _mean_H(res):
 def test_frictionless_close_to_kinematic_convergence_length(run):
     kin = run(kind="kinematic")
     inter = run(mu=0.0)
-    # DESIGN.md §3.3: mu_y = 0 stays close to the kinematic model ("a few per cent")
+    # docs/theory.md §4: mu_y = 0 stays close to the kinematic model ("a few per cent")
     assert _mean_H(inter) == pytest.approx(_mean_H(kin), rel=0.03)
     assert inter.history["convergence_length_mean_m"][-1] == pytest.approx(
         kin.history["convergence_length_mean_m"][-1], rel=0.03)
@@ -120,7 +120,7 @@ def test_default_step_within_one_percent_of_a_quarter_step(run):
     # the default step is 3 % off: the bound is tight enough to notice a step control gone coarse)
     assert _mean_H(coarse) == pytest.approx(_mean_H(fine), rel=0.01)
     for group in ("warp", "weft"):
-        # the steady angle to 0.1 deg (measured 0.001 deg; issue 4 asks Ko's within 0.5 deg)
+        # the steady angle to 0.1 deg (measured 0.001 deg; required: Ko's within 0.5 deg)
         assert coarse.history[f"braid_angle_{group}_deg"][-1] == pytest.approx(
             fine.history[f"braid_angle_{group}_deg"][-1], abs=0.1)
 
@@ -135,7 +135,7 @@ def test_steady_braid_angle_is_ko(run, mu):
     res = run(mu=mu)
     ko = np.degrees(ko_braid_angle(0.2309401, R_MANDREL, 0.01))
     for group in ("warp", "weft"):
-        # issue 4: steady braid angle equals Ko's within 0.5 deg
+        # required: steady braid angle equals Ko's within 0.5 deg
         assert res.history[f"braid_angle_{group}_deg"][-1] == pytest.approx(ko, abs=0.5)
 
 
@@ -162,7 +162,7 @@ def test_ring_friction_changes_the_braid_angle_little(run):
     for mu_r in (0.0, 0.6):
         res = run(mu=0.25, ring=mu_r)
         for group in ("warp", "weft"):
-            # the steady angle is Ko's whatever holds the yarns at the ring (issue 4: ring
+            # the steady angle is Ko's whatever holds the yarns at the ring (ring
             # friction 0 to 0.6 changes the braid angle by little)
             angles[mu_r, group] = steady(res, group)
             assert angles[mu_r, group] == pytest.approx(ko, abs=0.5)

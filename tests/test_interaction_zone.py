@@ -1,4 +1,4 @@
-"""Interaction zone (DESIGN.md §3.3): state, frontal kernels vs NumPy twins, balance of snapshots
+"""Interaction zone (docs/theory.md §4): state, frontal kernels vs NumPy twins, balance of snapshots
 read back from the written .vtp files, friction law, convergence of the frontal iteration.
 
 Synthetic set-up (no mandrel walk): 16 carriers, fell points held fixed on a circle of radius
@@ -476,14 +476,14 @@ def test_snapshot_file_crossings_in_balance(mu, tmp_path):
     yarns = read_snapshot(paths[1])
     assert sum(int(np.sum(c >= 0)) for _, _, c in yarns) == 2 * zone.state.m > 0
     err, psi = balance_and_psi(yarns, mu)
-    assert err < 1e-3     # issue 4: relative force-balance error < 1e-3
-    assert psi < 1e-3     # issue 4: Psi <= 1e-3 tension
+    assert err < 1e-3     # required: relative force-balance error < 1e-3
+    assert psi < 1e-3     # required: Psi <= 1e-3 tension
 
 
 def test_frictionless_tension_equals_spool_tension_along_yarns():
     zone, F, t, _ = run_zone(mu=0.0, steps=90)
     snap = zone.snapshot(t, F)
-    # mu = 0: f_int = f_ext at every crossing (DESIGN.md §3.3); to the Newton tolerance (1e-8)
+    # mu = 0: f_int = f_ext at every crossing (docs/theory.md §4); to the Newton tolerance (1e-8)
     # and KAPPA0 x slide (1e-9 N)
     assert np.allclose(snap.tension_N, 4.7, rtol=1e-7)
 
@@ -500,7 +500,7 @@ def _external_tensions(st, tension, f_top):
 def test_friction_makes_tensions_differ_and_keeps_every_crossing_in_the_cone():
     """With mu = 0.3 the tensions differ along the yarns, each crossing's tension jump lies within
     the discrete Capstan cone |f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2) of its geometry
-    (DESIGN.md §3.3; bounds from the NumPy twin), and the tension falls towards the mandrel."""
+    (docs/theory.md §4; bounds from the NumPy twin), and the tension falls towards the mandrel."""
     zone, F, t, _ = run_zone(mu=0.3, steps=90)
     st = zone.state
     bc = zone.boundary(t, F)

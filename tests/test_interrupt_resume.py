@@ -1,5 +1,4 @@
-"""Ctrl-C during a run keeps a marked partial result; --resume reproduces the uninterrupted run
-(issue 5, items 4-5)."""
+"""Ctrl-C during a run keeps a marked partial result; --resume reproduces the uninterrupted run."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The results folder: checked before simulating, one run at a time (issue 17 items 2 and 5)."""
+"""The results folder: checked before simulating, one run at a time."""
 
 from __future__ import annotations
 

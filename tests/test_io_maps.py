@@ -1,4 +1,4 @@
-"""The unrolled surface map (issue 16 item 4): coordinates, colour ranges, the picture."""
+"""The unrolled surface map: coordinates, colour ranges, the picture."""
 
 from __future__ import annotations
 

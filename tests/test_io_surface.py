@@ -115,7 +115,7 @@ def test_rendering_failure_warns_and_writes_data(monkeypatch, tmp_path):
 
 
 def test_every_file_keeps_the_users_umask(tmp_path):
-    # issue 15: the pictures were 0600 (mkstemp's mode) while the data files followed the umask
+    # pyvista's pictures once kept mkstemp's 0600 while the data files followed the umask
     fields = map_to_surface(make_result(cylinder(), helices(np.radians(30.0), 8)), edge_length=0.02)
     old = os.umask(0o022)
     try:

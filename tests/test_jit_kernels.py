@@ -1,5 +1,5 @@
 """The kernels rewritten for a shorter first-run compile against the NumPy / numba forms they
-replace, bit for bit (docs/decisions-jit15.md)."""
+replace, bit for bit (docs/decisions.md, "Kernel code written for compile time, same results")."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Kinematic model: quasi-static cone, time-step and mesh convergence, invariance, eccentricity,
-the bent tube, and the bridge / catch / slip flags (issue: foundation, item 5 and its tests)."""
+the bent tube, and the bridge / catch / slip flags."""
 
 from __future__ import annotations
 

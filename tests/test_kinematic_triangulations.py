@@ -1,9 +1,9 @@
-"""The kinematic run does not depend on how the STL is triangulated (issue 15).
+"""The kinematic run does not depend on how the STL is triangulated.
 
 One cylinder (r 40 mm, 0.6 m) as a well-shaped sweep, as trimesh's CAD-like slivers (one ring of
 0.6 m long faces) and about 10x finer; 16 carriers, automatic centerline. The smooth normals, the
 surface walk, the ray tests and the automatic centerline all see the same surface, so the laid
-braid angle, the convergence length and the mapped cover factor agree; Ko's angle (DESIGN.md §3.2)
+braid angle, the convergence length and the mapped cover factor agree; Ko's angle (docs/theory.md §2)
 holds on each.
 """
 
@@ -80,9 +80,9 @@ def test_the_three_triangulations_agree(runs):
     for kind in ("sliver", "fine"):
         _, result, fields = runs[kind]
         for column in ("braid_angle_warp_deg", "braid_angle_weft_deg"):
-            # issue 15: within 0.3 deg of each other
+            # required: within 0.3 deg of each other
             assert abs(steady(result, column) - steady(ref, column)) < 0.3, (kind, column)
         assert steady(result, "convergence_length_mean_m") == pytest.approx(
             steady(ref, "convergence_length_mean_m"), rel=0.02), kind
-        # issue 15: cover factor within 2 %
+        # required: cover factor within 2 %
         assert cover_factor_band(fields, z0, z1) == pytest.approx(cf_ref, rel=0.02), kind

@@ -1,4 +1,4 @@
-"""Kinematic model against closed forms (DESIGN.md §3.2) and invariants.
+"""Kinematic model against closed forms (docs/theory.md §2) and invariants.
 
 Cylinder: Ko's braid angle, the steady convergence length and the Du & Popper transient. Cone:
 the quasi-static braid angle. Convergence in the time step and the mesh; frame and unit
@@ -36,7 +36,7 @@ def cylinder_run(tmp_path_factory):
 def test_cylinder_steady_braid_angle_is_ko(cylinder_run):
     h = cylinder_run.history
     ko = np.degrees(analytic.ko_braid_angle(OMEGA, 0.075, V))
-    # issue requirement: within 0.25 deg of Ko in steady state (5 time constants after wrapping)
+    # required: within 0.25 deg of Ko in steady state (5 time constants after wrapping)
     assert h["braid_angle_warp_deg"][-1] == pytest.approx(ko, abs=0.25)
     assert h["braid_angle_weft_deg"][-1] == pytest.approx(ko, abs=0.25)
     # the laid yarn too, over the last 10 cm of braid
@@ -49,7 +49,7 @@ def test_cylinder_steady_braid_angle_is_ko(cylinder_run):
 def test_cylinder_steady_convergence_length(cylinder_run):
     h = cylinder_run.history
     H_inf = analytic.steady_convergence_length(OMEGA, 0.075, V, 0.3)
-    # issue requirement: within 1 %; the transient left after ~5.4 time constants is ~0.3 %
+    # required: within 1 %; the transient left after ~5.4 time constants is ~0.3 %
     assert h["convergence_length_mean_m"][-1] == pytest.approx(H_inf, rel=0.01)
     # a centred cylinder: every yarn alike
     assert h["convergence_length_max_m"][-1] - h["convergence_length_min_m"][-1] < 1e-4

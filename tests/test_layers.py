@@ -1,4 +1,4 @@
-"""Several braided layers (issue 19 item 4): ``[[layer]]`` tables, each layer braided on the mandrel
+"""Several braided layers: ``[[layer]]`` tables, each layer braided on the mandrel
 offset by the thickness of the layers below (``preform.geometry.offset``), per-layer fields and
 the stacked totals in the result files.
 
@@ -139,8 +139,8 @@ def test_the_run_writes_every_layer(two_layers):
 def test_second_layer_radius_grows_by_the_first_layers_thickness(two_layers):
     out = two_layers["out"]
     t1 = _band_mean(two_layers, "layer1_thickness_m")
-    # the first layer's thickness is its closed form, t_n 2 k (yarns leaving gaps, DESIGN.md
-    # §3.4), within issue 3's 10 % for the thickness
+    # the first layer's thickness is its closed form, t_n 2 k (yarns leaving gaps, docs/theory.md
+    # §5), within the required 10 % for the thickness
     k = analytic.yarn_coverage(CARRIERS / 2, WIDTH, R, analytic.ko_braid_angle(OMEGA, R, V_TAKE_UP))
     assert t1 == pytest.approx(THICK * 2 * k, rel=0.10)
     grown = _yarn_radius(out / "layer2" / "yarns.vtp") - _yarn_radius(out / "yarns.vtp")
@@ -157,7 +157,7 @@ def test_second_layer_braid_angle_is_ko_at_the_larger_radius(two_layers):
     assert ko2 - ko1 > 1.5           # the case tells the radii apart (3 tolerances)
     band, cd = two_layers["band"], two_layers["cd"]
     for name in ("braid_angle_warp_deg", "braid_angle_weft_deg", "braid_angle_deg"):
-        # issue 3's 0.5 deg for the mapped braid angle (as tests/test_fields_simulated.py)
+        # the required 0.5 deg for the mapped braid angle (as tests/test_fields_simulated.py)
         assert np.abs(cd[f"layer1_{name}"][band] - ko1).max() < 0.5
         assert np.abs(cd[f"layer2_{name}"][band] - ko2).max() < 0.5
     # the second layer ends on the steady part of the first: its last angle is Ko's there too
@@ -177,7 +177,7 @@ def test_stacked_totals_add_up(two_layers):
     np.testing.assert_allclose(cd["cover_factor"],
                                1 - (1 - cd["layer1_cover_factor"]) * (1 - cd["layer2_cover_factor"]),
                                rtol=1e-14)
-    # each layer's areal weight is issue 19's closed form N T 1e-6 / (2 pi r cos alpha) at its own
+    # each layer's areal weight is the closed form N T 1e-6 / (2 pi r cos alpha) at its own
     # radius and Ko angle, within 3 % (the pooling's flicker, as tests/test_rtm_fields.py)
     r2 = R + _band_mean(two_layers, "layer1_thickness_m")
     for aw, r in ((aw1, R), (aw2, r2)):
@@ -449,7 +449,7 @@ def test_a_backward_layer_is_braided_from_the_far_end_at_kos_angle_there(tmp_pat
     band = (c[:, 2] > 0.105) & (c[:, 2] < 0.15) & (np.hypot(c[:, 0], c[:, 1]) > 0.9 * R)
     t1 = float(np.mean(cd["layer1_thickness_m"][band]))
     ko2 = math.degrees(analytic.ko_braid_angle(OMEGA, R + t1, V_TAKE_UP))
-    # issue 3's 0.5 deg for the mapped braid angle, as for the forward layer
+    # the required 0.5 deg for the mapped braid angle, as for the forward layer
     assert np.abs(cd["layer2_braid_angle_deg"][band] - ko2).max() < 0.5
     assert ko2 - math.degrees(analytic.ko_braid_angle(OMEGA, R, V_TAKE_UP)) > 1.5
     z2 = np.asarray(pv.read(out / "layer2" / "yarns.vtp").points)[:, 2]

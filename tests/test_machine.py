@@ -1,4 +1,4 @@
-"""Machine kinematics and horn-gear pattern (DESIGN.md §3.1), against brute force scans."""
+"""Machine kinematics and horn-gear pattern (docs/theory.md §1), against brute force scans."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Mesh intake of damaged CAD STLs (issue 5, item 1): repaired and said, or refused clearly."""
+"""Mesh intake of damaged CAD STLs: repaired and said, or refused clearly."""
 
 from __future__ import annotations
 

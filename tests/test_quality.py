@@ -1,4 +1,4 @@
-"""The run verdict (issue 16 item 1) and honest steady values (item 2), on constructed histories."""
+"""The run verdict and honest steady values (item 2), on constructed histories."""
 
 from __future__ import annotations
 

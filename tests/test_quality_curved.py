@@ -1,4 +1,4 @@
-"""A held-out-style curved mandrel (issue 16 item 1): an elliptic section swept along a 70 deg arc,
+"""A held-out-style curved mandrel: an elliptic section swept along a 70 deg arc,
 in millimetres, rotated into an arbitrary frame. With the pose lead at the convergence length
 (the advice the README used to give) the run is nonsense and the verdict says so; with the
 automatic pose lead the run is sane."""
@@ -94,7 +94,7 @@ def test_the_automatic_pose_lead_makes_the_run_sane(runs):
         assert pose not in text, pose
     assert "slip tendency" in text and "where it was laid" in text
     flags = np.asarray(result.yarns.flags)
-    assert np.count_nonzero(flags & 3) < 0.01 * len(flags)      # bridged or caught (issue 16)
+    assert np.count_nonzero(flags & 3) < 0.01 * len(flags)      # bridged or caught
     h = result.history
     settled = h["braided_length_m"] > 0.1 * h["braided_length_m"][-1]
     assert np.min(h["convergence_length_min_m"][settled]) > 0.5 * np.median(h["convergence_length_mean_m"][settled])

@@ -1,4 +1,4 @@
-"""Quasi-static references (Ko, H_inf, settling length) of a set-up (issue 16 item 2)."""
+"""Quasi-static references (Ko, H_inf, settling length) of a set-up."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The block preconditioner's fixed cost per iteration and its order (issue 14 item 4: the
+"""The block preconditioner's fixed cost per iteration and its order (the
 cost per crossing per iteration flat in the zone's size): the nested dissection
 (``_kernels.ldl.band_dissection``) against a slow Python form of the same rule and against
 METIS's fill, and the kernels that fold the block driver's array work into single calls

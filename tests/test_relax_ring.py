@@ -1,4 +1,4 @@
-"""The relaxation behind a guide ring (issue 14 item 4): the ``"full"`` preconditioner, the
+"""The relaxation behind a guide ring: the ``"full"`` preconditioner, the
 Hessian of the zone's energy in the positions and the materials (``_kernels.stiffness.full_values``,
 5 x 5 blocks, ``ldl_numeric5`` / ``ldl_solve5``), against a dense NumPy twin; its Schur
 complement on the positions against the finite-difference Jacobian of the relaxation's force

@@ -1,6 +1,6 @@
-"""The frontal iteration of the bounds behind a guide ring by the relaxation (issue 14 item 4;
-``RelaxSettings.ring_frontal``, ``relax._ring_frontal``): what a snapshot asks ``solve_zone``
-for (its ring passes and its final solve) lands on the fixed point of Newton's frontal iteration
+"""The frontal iteration of the bounds behind a guide ring by the relaxation
+(``RelaxSettings.ring_frontal``, ``relax._ring_frontal``): what a snapshot asks ``solve_zone`` for
+(its ring passes and its final solve) lands on the fixed point of Newton's frontal iteration
 (``frontal.solve_zone_inplace``), and the structure the snapshot's 60 solves of one lattice
 share (``preconditioners.BlockStiffness.of``) is the one a new solve builds.
 

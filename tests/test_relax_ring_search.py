@@ -1,4 +1,4 @@
-"""The line search of the relaxation behind a guide ring (issue 14 item 4): the reduced energy
+"""The line search of the relaxation behind a guide ring: the reduced energy
 it judges steps by (``_kernels.relax.reduced_energy``) against a NumPy twin and against the Newton
 reference's own energy (``_kernels.frontal.energy``), its gradient against the force map the
 relaxation balances, and steps of case-B-like runs that the iteration without the line search

@@ -1,4 +1,4 @@
-"""Whole runs with ``[model] solver = "relax"`` against the Newton reference (issue 14): the case A
+"""Whole runs with ``[model] solver = "relax"`` against the Newton reference: the case A
 cylinder with 16 and 48 carriers (0.4 m) and a case-B-like run through a guide ring: the
 convergence length within 1 % and the braid angles within 0.3 deg at every step, and every
 crossing of the relaxation run's snapshot files in balance (with ``external_force_N``) and inside
@@ -6,7 +6,7 @@ the friction cone, read back from the files.
 
 Friction 0.5 is not claimed: on the 16-carrier case A the two runs part at a step where a crossing
 takes another equilibrium (H up to 2.1 % apart, the angle being laid up to 3.9 deg at one step;
-``docs/decisions.md``), the start-sensitivity of issue 14 item 3."""
+``docs/decisions.md``): a run's sensitivity to each step's last digits."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def test_case_a_runs_agree_with_newton(carriers, mu, tmp_path):
         output=dataclasses.replace(cfg.output, snapshots=3))
     newton, relax = _both(cfg)
     dH, dA = _compare(newton, relax)
-    assert dH < 0.01 and dA < 0.3          # issue 14: 1 % and 0.3 deg over the whole run
+    assert dH < 0.01 and dA < 0.3          # required: 1 % and 0.3 deg over the whole run
     checked_snapshot_files(relax.snapshots, tmp_path, mu)
 
 

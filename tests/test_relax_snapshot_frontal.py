@@ -66,7 +66,7 @@ def test_snapshot_solve_without_a_ring_lands_on_newtons(step):
 def test_snapshots_of_a_run_balance_from_their_arrays():
     """A short 48-carrier run's snapshots, re-balanced by the relaxation: every crossing in
     balance and inside its friction cone from the snapshot's own arrays (the files' contents)
-    to 1e-3 of the largest tension (issue 14's requirement; measured at most 1.2e-8 and 1.6e-4)."""
+    to 1e-3 of the largest tension (the requirement; measured at most 1.2e-8 and 1.6e-4)."""
     result = pf.simulate(_case_a48(), progress=False)
     assert len(result.snapshots) >= 2
     for snap in result.snapshots[1:]:          # the first: t = 0, no crossing yet

@@ -1,7 +1,6 @@
-"""The guide ring's Capstan by the direction the yarn slides (issue 14 item 5;
-``RingSettings.capstan``): on a short case-B-like run (rounded square, case B's ring and spool
-radii, 16 carriers) every yarn's top tension lies in its Capstan cone and on the bound its slide
-names; the ring state survives a checkpoint round trip, and the step after it is the same."""
+"""The guide ring's Capstan by the direction the yarn slides (``RingSettings.capstan``): on a
+short case-B-like run (rounded square, case B's ring and spool radii, 16 carriers) every yarn's
+top tension lies in its Capstan cone and on the bound its slide names; the ring state survives a checkpoint round trip, and the step after it is the same."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Fibre content and permeability (issue 19): closed forms, tensor invariants, binning."""
+"""Fibre content and permeability: closed forms, tensor invariants, binning."""
 
 from __future__ import annotations
 

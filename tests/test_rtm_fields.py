@@ -1,4 +1,4 @@
-"""RTM fields on a steady braided cylinder (issue 19): areal weight, Vf and porosity against the
+"""RTM fields on a steady braided cylinder: areal weight, Vf and porosity against the
 closed forms, permeability against Gebart at the face's Vf along the right directions; and the
 files written into rtm/ when the config has tow data."""
 
@@ -32,7 +32,7 @@ def test_areal_weight_vf_and_porosity_match_the_closed_forms(braided):
     alpha, fields, out = braided
     inner, _ = side_faces(fields, margin=2 * fields.pool_radius_m)
     N = 2 * N_GROUP
-    aw = N * TEX * 1e-6 / (2 * math.pi * R * math.cos(alpha))     # issue 19's closed form
+    aw = N * TEX * 1e-6 / (2 * math.pi * R * math.cos(alpha))     # the closed form
     # 3 %: the pooling's flicker over discrete yarns, as for the cover factor
     assert np.allclose(out["areal_weight_kg_m2"][inner], aw, rtol=0.03)
     assert np.allclose(out["fibre_volume_fraction"][inner], aw / (RHO * CAVITY), rtol=0.03)

@@ -1,4 +1,4 @@
-"""Small meshes' intake (issue 15): below ``IntakeSettings.kernel_faces`` the repair, the mandrel's
+"""Small meshes' intake: below ``IntakeSettings.kernel_faces`` the repair, the mandrel's
 arrays, the section index and the centerline-inside check take the NumPy forms of the numba kernels (``geometry.small_mesh``).
 Both paths give the same arrays, bit for bit, the same report or the same refusal, on clean,
 damaged and refused meshes; and a first load and check of a shipped mandrel compiles none of

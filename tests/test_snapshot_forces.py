@@ -1,4 +1,4 @@
-"""Snapshots a reader can check (issue 14 item 6): ``external_force_N`` in ``convergence/*.vtp``.
+"""Snapshots a reader can check: ``external_force_N`` in ``convergence/*.vtp``.
 
 ``frontal.point_forces`` against the step energy's gradient (``_kernels/frontal.assemble``) on a
 perturbed state with jamming and wall active; then whole runs written and read back with the
@@ -156,8 +156,8 @@ def _check_files(snapshots, out_dir, mu):
         again = read_snapshot(q)
         err_again = crossing_balance(again, read_external_forces(q))[0]
         _, psi = balance_and_psi(again, mu)
-        # issue 14: tensions along the written segments plus external_force_N balance every
-        # crossing to 1e-3 of the largest tension; issue 4: Psi <= 1e-3 x tension
+        # required: tensions along the written segments plus external_force_N balance every
+        # crossing to 1e-3 of the largest tension; required: Psi <= 1e-3 x tension
         assert err < 1e-3, (p.name, err)
         assert err_again < 1e-3, (q.name, err_again)
         assert psi < 1e-3, (q.name, psi)

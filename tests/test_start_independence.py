@@ -1,4 +1,4 @@
-"""A time step's result does not depend on where its solve starts (issue 14 item 3).
+"""A time step's result does not depend on where its solve starts.
 
 A step's problem is defined by its *posed* state, the one ``InteractionZone.step`` hands its
 solver: the last step's converged state plus the crossings created from it (fell points
@@ -244,7 +244,7 @@ def test_default_step_from_any_start_lands_on_one_state(name, runs, captured):
     starts = _starts(st, bc, runs(name)[3])
     ref, rep = _solve(st, bc, centre, DEFAULT)
     rel = _relaxed(st, bc, centre)
-    # 1e-6 m: issue 14's test ("positions within 1e-6 m"); material in the same metres
+    # 1e-6 m: the required test ("positions within 1e-6 m"); material in the same metres
     for label, start in starts.items():
         x, rep_x = _solve(st, bc, centre, LONG, start=start)
         assert np.abs(x.pos[:m] - ref.pos[:m]).max() < 1e-6, label
@@ -291,7 +291,7 @@ def test_frontal_iterations_from_any_start_land_on_one_state(name, captured):
     ref, rep = _solve(st, bc, centre, PASSES)
     assert rep.iterations == 3 or not rep.lagged
     rel = _relaxed(st, bc, centre, PASSES)
-    # 1e-6 m: issue 14's test (positions within 1e-6 m), here also between the two solvers
+    # 1e-6 m: the required test (positions within 1e-6 m), here also between the two solvers
     assert np.abs(rel.pos[:m] - ref.pos[:m]).max() < 1e-6
     for k, amp in enumerate(SHAKES):
         start = (_shaken(st, amp, k + 1).pos[:m], st.material[:m])

@@ -1,4 +1,4 @@
-"""Parameter sweeps on Dask (issue 18 item 1): a LocalCluster and a separate scheduler, failures
+"""Parameter sweeps on Dask: a LocalCluster and a separate scheduler, failures
 recorded, resume, and rows equal to separate ``preform run``s."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""preform: biaxial overbraiding on CAD mandrels (DESIGN.md).
+"""preform: biaxial overbraiding on CAD mandrels (docs/architecture.md).
 
 ``import preform`` is light: reading and checking a config needs only the standard library and
 NumPy. The names that need numba, SciPy, trimesh or pyvista (``simulate``, ``map_to_surface``,

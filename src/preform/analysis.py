@@ -1,5 +1,6 @@
 """The laid yarn's braid angle, curvature and slip tendency, and arc length along the centerline
-(DESIGN.md §2, §3.2): post-processing of deposited yarn for the history and the yarn paths.
+(docs/architecture.md §2, docs/theory.md §3): post-processing of deposited yarn for the history
+and the yarn paths.
 
 ``braid_angle`` is the angle between a yarn direction and the surface projection of the centerline
 tangent; ``laid_braid_angles`` evaluates it along every deposited yarn and flags the points where
@@ -45,7 +46,7 @@ def mandrel_friction(config) -> float:
 
 def braid_angle(direction, tangent, normal):
     """Braid angle (rad, magnitude in [0, pi/2]) between directions and the surface projection of
-    the centerline tangent (DESIGN.md §2). All (m, 3); normal unit."""
+    the centerline tangent (docs/architecture.md §2). All (m, 3); normal unit."""
     d = direction - np.einsum("ij,ij->i", direction, normal)[:, None] * normal
     t = tangent - np.einsum("ij,ij->i", tangent, normal)[:, None] * normal
     dn = np.linalg.norm(d, axis=1)
@@ -79,7 +80,7 @@ def laid_braid_angles(surface, project, centerline, points, face, offsets, mu,
     s : the points' arc lengths when already known (else ``project(points)``).
 
     The laid direction at a point is the chord between its neighbours along the yarn (one-sided at
-    the ends). Slip tendency (DESIGN.md §3.2): ``|kappa_g| > mu |kappa_n| + curvature_tol``, with
+    the ends). Slip tendency (docs/theory.md §3): ``|kappa_g| > mu |kappa_n| + curvature_tol``, with
     the curvature vector from a three-point stencil and the normal curvature from the smooth
     normal field (kernel ``_kernels.kinematic.laid_yarn_angles``).
     """

@@ -1,4 +1,4 @@
-"""Closed forms for overbraiding on axisymmetric mandrels (DESIGN.md §3.2, §3.4).
+"""Closed forms for overbraiding on axisymmetric mandrels (docs/theory.md §2).
 
 Used by the validation tests and by the examples; SI units, angles in radians unless the name says
 ``_deg``. ``omega`` is the carrier angular speed (rad/s), ``v`` the take-up speed (m/s), ``r`` the

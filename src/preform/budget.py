@@ -1,4 +1,4 @@
-"""How much work a run will be, and the limits beyond which it is refused (issue 17 item 7).
+"""How much work a run will be, and the limits beyond which it is refused.
 
 A value can be valid on its own and still ask for unbounded work on a given mandrel:
 ``[output] field_edge_length = 1e-9`` m asks for ~1e17 field faces, ``[model] time_step = 1e-300`` s

@@ -498,9 +498,11 @@ def _key(values: dict) -> tuple:
 
 def _write_outputs(out, config_path, base, params, evaluations, chis, n_points, report, estimates,
                    measurements, delta, c_min):
+    import tomli_w
+
     from .compare import compare
     from .io.atomic import atomic_write_text, safe_folder
-    from .sweeps import _set, toml_text
+    from .sweeps import _set
 
     kinds = list(report["noise"])
     buf = io.StringIO()
@@ -532,7 +534,7 @@ def _write_outputs(out, config_path, base, params, evaluations, chis, n_points, 
         else:
             lines.append(f"# {p.key}: not determined by the measurements; the config's value kept")
     _set(data, "output.dir", str(out / "calibrated"), "calibrated.toml")
-    atomic_write_text(out / CALIBRATED_TOML, "\n".join(lines) + "\n\n" + toml_text(data))
+    atomic_write_text(out / CALIBRATED_TOML, "\n".join(lines) + "\n\n" + tomli_w.dumps(data))
     plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_min)
     best = report["best_run"]
     compare(best, measurements, safe_folder(out, "best"))

@@ -1,4 +1,4 @@
-"""Pre-flight checks of a whole set-up, once the mandrel and centerline are loaded (DESIGN.md §1).
+"""Pre-flight checks of a whole set-up, once the mandrel and centerline are loaded (docs/guide/commands.md).
 
 :func:`load_config` checks every value on its own; :func:`preflight` checks them against the
 geometry: impossible set-ups raise (before any simulation starts), doubtful ones come back as

@@ -1,4 +1,4 @@
-"""The ``preform`` command (DESIGN.md §1): thin argparse subcommands over the Python API.
+"""The ``preform`` command (docs/guide/commands.md): thin argparse subcommands over the Python API.
 
 ``main(argv=None) -> int`` so tests call it in-process (meshio style). Exit codes: 0 done,
 1 failed (simulation or writing), 2 bad input, 130 interrupted. A :class:`PreformError` prints

@@ -1,4 +1,4 @@
-"""TOML configuration -> frozen dataclasses (DESIGN.md §1).
+"""TOML configuration -> frozen dataclasses (docs/guide/configuration.md).
 
 SI units inside; angles in the file are degrees and are converted here (``angular_speed`` is
 stored in rad/s). Paths are resolved against the config file's folder.
@@ -94,7 +94,7 @@ class ProcessConfig:
     braid_length: float             # m of centerline to braid
     eccentricity: tuple[float, float] = (0.0, 0.0)   # m, machine x, y
     #: axial distance (m) ahead of the supply plane where the pose puts the centerline on the axis
-    #: (DESIGN.md §2; see geometry/pose.py). None: "auto", chosen from the machine and the mandrel
+    #: (docs/architecture.md §2; see geometry/pose.py). None: "auto", chosen from the machine and the mandrel
     #: when the run is composed (``preform.reference.resolve_pose_lead``).
     pose_lead: float | None = None
 
@@ -167,7 +167,7 @@ class MaterialConfig:
 
 @dataclass(frozen=True)
 class LayerConfig:
-    """One braided layer of ``[[layer]]`` (DESIGN.md §1): its direction of travel and its own
+    """One braided layer of ``[[layer]]`` (docs/guide/configuration.md): its direction of travel and its own
     values, laid over the run's top-level sections when the layer is braided
     (:meth:`Config.layer_config`), so that a change of a top-level section (``--model``, a
     sweep) reaches every layer that does not set that key itself. Validated at load against
@@ -221,7 +221,7 @@ class Config:
 # Loading and validation
 # --------------------------------------------------------------------------------------------
 
-#: known keys per section, in the order of DESIGN.md §1
+#: known keys per section, in the order of docs/guide/configuration.md
 KEYS = {
     "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring", "axial_yarns"),
@@ -260,7 +260,7 @@ _MISSING = object()
 
 
 def load_config(path) -> Config:
-    """Read and validate a TOML config (DESIGN.md §1); raises ConfigError naming the bad key.
+    """Read and validate a TOML config (docs/guide/configuration.md); raises ConfigError naming the bad key.
 
     Relative paths in the file (STL, centerline CSV, output dir) resolve against the file's folder
     and are stored absolute. ``[output] dir`` defaults to ``results/<config stem>`` there.

@@ -1,9 +1,9 @@
-"""Take-up speed design for a target braid angle (issue 18 item 2; ``preform design``).
+"""Take-up speed design for a target braid angle (``preform design``).
 
 Given a config and a target braid angle (constant, or a table against centerline arc length),
 find the take-up speed table ``[[L, v], ...]`` (braided length -> speed) that lays it:
 
-1. **Quasi-static start** (DESIGN.md §3.2): on a slowly varying section of perimeter-equivalent
+1. **Quasi-static start** (docs/theory.md §2): on a slowly varying section of perimeter-equivalent
    radius ``r = P / 2 pi``, ``tan(alpha) = omega r / (v sqrt(1 + r'^2))``, so
    ``v0(L) = omega r(L) / (tan(alpha_target(L)) sqrt(1 + r'(L)^2))``.
 2. **Iterate the forward model** (kinematic or interaction): the angle laid at braided length
@@ -206,8 +206,9 @@ def write_design_config(config, design: Design, out) -> Path:
 
     Paths become absolute, so the file runs from wherever it is written."""
     from .config import dump_config
+    import tomli_w
+
     from .io.atomic import atomic_write_text
-    from .sweeps import toml_text
 
     data = dump_config(config)
     data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
@@ -219,7 +220,7 @@ def write_design_config(config, design: Design, out) -> Path:
               f"({design.passes} forward runs, {config.model.kind} model); achieved within "
               f"{design.max_error_deg():.2f} deg beyond {DESIGN.judged_after:g} convergence lengths "
               f"({DESIGN.judged_after * design.h_inf:.2f} m)\n")
-    return atomic_write_text(out, header + toml_text(data))
+    return atomic_write_text(out, header + tomli_w.dumps(data))
 
 
 def plot_design(design: Design, path, title: str) -> Path:

@@ -1,4 +1,4 @@
-"""Deposited yarns -> per-face fields on the mandrel surface (DESIGN.md §3.4).
+"""Deposited yarns -> per-face fields on the mandrel surface (docs/theory.md §5).
 
 :func:`map_to_surface` clips every deposited yarn to the faces of a *field mesh*, sums per face and
 group (warp 0, weft 1) the yarn length ``L`` and the direction moment ``sum l d d^T``, pools those
@@ -27,7 +27,7 @@ from .geometry.remesh import RemeshSettings, isotropic_remesh, locate_faces, sub
 from .geometry.small_mesh import INTAKE
 from .tolerances import tol
 
-#: default field-mesh edge length, in yarn widths (issue 3: "a few yarn widths")
+#: default field-mesh edge length, in yarn widths ("a few yarn widths")
 DEFAULT_EDGE_WIDTHS = 3.0
 #: default pooling radius, in field-mesh edge lengths (6 yarn widths with the default mesh): wide
 #: enough to hold a few yarns of a group at usual cover factors, so coverage stops flickering
@@ -55,7 +55,7 @@ GROUPS = ("warp", "weft")
 
 @dataclass(frozen=True)
 class SurfaceFields:
-    """Per-face fields on the field mesh (mandrel frame, SI; DESIGN.md §1 ``surface.vtu``).
+    """Per-face fields on the field mesh (mandrel frame, SI; docs/guide/results.md, ``surface.vtu``).
 
     vertices : (nv, 3) float64, m, mandrel frame
     faces : (nf, 3) int64, outward wound like the mandrel
@@ -322,7 +322,7 @@ def centroid_normals(vertices, faces, normals):
     ``h / (2 r)`` (on a prism the tilt can be about any axis, as the corners sit at different
     heights), so the centerline tangent projected onto the facet is not its projection onto the
     surface; the smooth normal is the surface's to second order in ``h``. The braid angle is
-    measured in the frame of this normal (DESIGN.md §2: the angle to the projection of the
+    measured in the frame of this normal (docs/architecture.md §2: the angle to the projection of the
     tangent onto the surface's tangent plane).
     """
     from .geometry.mandrel import _corner_normals
@@ -391,7 +391,7 @@ def principal_direction_2d(aa, ab, bb):
 
 def map_to_surface(result, edge_length=None, pool_radius_m=None,
                    remesh: RemeshSettings = RemeshSettings(), mesh=None) -> SurfaceFields:
-    """Map the deposited yarns of ``result`` onto the mandrel surface (DESIGN.md §3.4).
+    """Map the deposited yarns of ``result`` onto the mandrel surface (docs/theory.md §5).
 
     result : preform.result.Result (uses yarns, mandrel, centerline, config.yarn, config.output)
     edge_length : float, m, target edge of the isotropic field mesh (edges between 4/5 and 4/3

@@ -1,4 +1,4 @@
-"""Kinematic deposition: fell points wrap, bridge and catch (DESIGN.md §3.2).
+"""Kinematic deposition: fell points wrap, bridge and catch (docs/theory.md §3).
 
 The free yarn is straight from its supply point ``G`` to its fell point ``F`` on the mandrel;
 deposited yarn sticks. Each time step (mandrel frame, where laid yarn is at rest):
@@ -6,7 +6,7 @@ deposited yarn sticks. Each time step (mandrel frame, where laid yarn is at rest
 1. ``F`` walks over the surface along the projected free-yarn direction until the free yarn is
    tangent, ``g = (G - F) . n(F) = 0`` (kernel ``walk_to_tangency``). Time integration is the
    midpoint rule: the walk direction uses the supply point at the middle of the step, tangency the
-   one at its end. DESIGN.md names Heun's predictor-corrector as the second-order reference; the
+   one at its end. Heun's predictor-corrector is the usual second-order reference; the
    midpoint rule is second order too (the test suite fits the rate) and needs one walk per step
    instead of two.
 2. If the free yarn from ``F`` (lifted by half the yarn thickness, the yarn's own centerline) to
@@ -175,7 +175,7 @@ class Depositor:
 
 class KinematicZone:
     """The kinematic model's zone (``preform.zone.Zone``): free yarns straight from fell point to
-    supply point (spool, or guide-ring point), DESIGN.md §3.2. It has no state of its own."""
+    supply point (spool, or guide-ring point), docs/theory.md §3. It has no state of its own."""
 
     def __init__(self, config, machine, mandrel=None):
         self.config = config

@@ -1,6 +1,6 @@
-"""The braiding machine: carriers, horn-gear pattern, supply points, guide ring (DESIGN.md §3.1).
+"""The braiding machine: carriers, horn-gear pattern, supply points, guide ring (docs/theory.md §1).
 
-Machine frame (DESIGN.md §2): ``z`` is the machine axis, the spool plane is ``z = 0``. A group has
+Machine frame (docs/architecture.md §2): ``z`` is the machine axis, the spool plane is ``z = 0``. A group has
 ``n = carriers / 2`` carriers. Yarns ``0 .. n-1`` are warp (group 0), turning clockwise seen from
 ``+z`` (azimuth decreasing); yarns ``n .. 2n-1`` are weft (group 1), counter-clockwise. Warp ``k``
 starts at azimuth ``2 pi k / n``, weft ``j`` half a pitch further, at ``2 pi (j + 1/2) / n``, so no
@@ -117,7 +117,7 @@ class Machine:
 
     @property
     def supply_radius(self) -> float:
-        """Radius (m) of the kinematic supply point: guide ring if any, else spool (DESIGN.md §3.2)."""
+        """Radius (m) of the kinematic supply point: guide ring if any, else spool (docs/theory.md §3)."""
         return self.ring_radius if self.has_ring else self.spool_radius
 
     @property

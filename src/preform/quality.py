@@ -1,4 +1,4 @@
-"""A verdict on every run: the plausibility checks a process engineer makes (issue 16 item 1).
+"""A verdict on every run: the plausibility checks a process engineer makes.
 
 A run can finish ``done`` and still be nonsense: a pose that leaves the braiding zone misaligned
 makes the yarns bridge and catch at every step, the convergence length collapse to almost
@@ -38,10 +38,10 @@ class QualitySettings:
     #: uncovered faces inside the braided region above this share of its faces
     max_hole_share: float = 0.005
     #: a snapshot's crossing out of balance by more than this fraction of the snapshot's largest
-    #: tension (its tensions along the written segments plus ``external_force_N``; issue 14)
+    #: tension (its tensions along the written segments plus ``external_force_N``)
     max_snapshot_imbalance: float = 1e-3
     #: a snapshot's crossing outside the friction cone by more than this fraction of its larger
-    #: tension (Psi, issue 4): its friction bounds did not settle
+    #: tension (Psi): its friction bounds did not settle
     max_snapshot_psi: float = 1e-3
     #: history.csv's residual (a step's balance, or the lag of its friction bounds relative to
     #: the tensions): above ``residual_high`` on more than ``residual_high_share`` of the steps,
@@ -255,7 +255,7 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     At a crossing point i of a yarn (``contact_id >= 0``, not the yarn's first or last point) the
     segments below and above pull with tensions f_lo, f_hi along the unit vectors u_lo, u_hi to
     the neighbouring points; the crossing's two points (one per yarn, the same contact id) and
-    their ``external_force_N`` must sum to zero. The friction law (issue 4): with cos(beta) =
+    their ``external_force_N`` must sum to zero. The friction law: with cos(beta) =
     u_lo . u_hi, ``Psi = |f_lo - f_hi| sqrt((1 - cos beta) / 2) - mu (f_lo + f_hi) sqrt((1 + cos
     beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone)."""
     P = np.asarray(snap.points, dtype=float)

@@ -1,5 +1,5 @@
 """What a run keeps of every step, and how it becomes the Result's history and yarn paths
-(DESIGN.md §1 ``history.csv``, ``yarns.vtp``, ``convergence.pvd``).
+(docs/guide/results.md, ``history.csv``, ``yarns.vtp``, ``convergence.pvd``).
 
 :class:`Recording` holds plain arrays that grow by rows: per recorded step (the start, then one
 per time step) the history row, the fell points, their faces, laying directions and convergence

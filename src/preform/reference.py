@@ -1,12 +1,12 @@
-"""Quasi-static reference values of a set-up, before or beside a run (issue 16 item 2).
+"""Quasi-static reference values of a set-up, before or beside a run.
 
 Along the mandrel, with the cross-section's perimeter ``P(s)`` read as the perimeter-equivalent
 radius ``r = P / (2 pi)``:
 
 * Ko's steady braid angle ``tan(alpha) = omega r / v`` (paper eq. 2), with the take-up speed at
   that braided length;
-* the kinematic steady convergence length ``H_inf = v sqrt(R^2 - r^2) / (omega r)`` (DESIGN.md
-  §3.2), with ``R`` the supply radius (guide ring, else spool);
+* the kinematic steady convergence length ``H_inf = v sqrt(R^2 - r^2) / (omega r)`` (docs/theory.md
+  §2), with ``R`` the supply radius (guide ring, else spool);
 * the braided length needed to settle: by Du & Popper the start-up transient decays as
   ``exp(-L / H_inf)`` in braided length ``L`` (``omega r t / sqrt(R^2 - r^2)`` with ``L = v t``),
   so from ``H_0`` (the initial position) it is within a fraction ``q`` of ``H_inf`` after

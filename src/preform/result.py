@@ -1,4 +1,4 @@
-"""What a simulation returns: plain arrays in frozen dataclasses (DESIGN.md §1, §2).
+"""What a simulation returns: plain arrays in frozen dataclasses (docs/architecture.md §1, §2).
 
 Everything the writers (``preform.io``) and the surface mapping (``preform.fields``) need is here,
 so they never reach into the solver.
@@ -64,7 +64,7 @@ class YarnPaths:
 
 @dataclass(frozen=True)
 class Snapshot:
-    """The convergence zone at one time, machine frame (DESIGN.md §1 ``convergence.pvd``).
+    """The convergence zone at one time, machine frame (docs/guide/results.md, ``convergence.pvd``).
 
     Yarn ``k`` is the polyline ``points[offsets[k]:offsets[k + 1]]``, fell point first, supply
     point last (kinematic: 2 points; interaction: fell, crossings..., ring, supply).

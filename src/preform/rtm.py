@@ -1,4 +1,4 @@
-"""From braid to resin flow: fibre content and permeability per face (issue 19; DESIGN.md §1 ``rtm/``).
+"""From braid to resin flow: fibre content and permeability per face (docs/guide/results.md, ``rtm/``).
 
 Per face, from the yarn length the fields put on it (``L_g / A``, metres of yarn of group ``g``
 per square metre), the yarn's linear density ``tex`` (g/km) and the fibre density ``rho_f``:

@@ -1,5 +1,5 @@
 """A braiding run composed: geometry, machine, the zone of ``[model] kind``, the stepper, Ctrl-C
-and checkpoints (DESIGN.md §1, §4).
+and checkpoints (docs/architecture.md §4).
 
 ``simulate(config)`` loads the mandrel and centerline, ties every yarn to the mandrel's tip and
 steps the process (``preform.stepping``) until ``braid_length`` of centerline is braided. It

@@ -1,4 +1,5 @@
-"""Time stepping of a braiding run: pose, step control, deposition, the time loop (DESIGN.md §2, §3).
+"""Time stepping of a braiding run: pose, step control, deposition, the time loop
+(docs/architecture.md §2, §4).
 
 A :class:`Stepper` ties every yarn to the mandrel's tip and advances the process step by step:
 each step the mandrel moves on by the take-up speed, the zone (``preform.zone.Zone``) says where
@@ -76,7 +77,7 @@ def default_time_step(config, machine, mandrel, centerline, tolerances: Toleranc
 
 def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tolerances = tol):
     """Initial fell points (ny, 3) mandrel frame and faces (ny,): on the section near the tip, at
-    each carrier's azimuth (DESIGN.md §3.3); ``[model] start = "random"`` spreads them."""
+    each carrier's azimuth (docs/theory.md §4); ``[model] start = "random"`` spreads them."""
     s_tie = tolerances.tie_offset_widths * config.yarn.width
     phi = machine.azimuths(0.0)
     if config.model.start == "random":

@@ -1,4 +1,4 @@
-"""Parameter sweeps on Dask (issue 18; DESIGN.md §1 ``preform sweep``).
+"""Parameter sweeps on Dask (docs/guide/studies.md).
 
 A sweep file names a base config and the values to vary, as a full grid and/or a list of points::
 
@@ -15,7 +15,7 @@ A sweep file names a base config and the values to vary, as a full grid and/or a
 
 Every point is an ordinary run (:func:`preform.pipeline.run_case`, the same path as
 ``preform run``) with its own results folder under the sweep's, executed on a Dask cluster: a
-``distributed.LocalCluster`` on this machine by default (one single-threaded worker process per
+``distributed.LocalCluster`` on the local machine by default (one single-threaded worker process per
 run, since each run is numba-bound), or an existing scheduler (``scheduler="tcp://host:port"``;
 ``dask-jobqueue`` starts one on SLURM or PBS). A failed point does not stop the sweep: its error
 is recorded. A finished point (complete ``summary.json`` with status done, and the same inputs
@@ -37,6 +37,8 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import tomli_w
 
 from .errors import ConfigError, PreformError
 
@@ -229,28 +231,6 @@ def point_config_data(spec: SweepSpec, point: Point) -> dict:
     return data
 
 
-def toml_text(data: dict) -> str:
-    """TOML of config data: top-level tables of scalars, lists and inline sub-tables."""
-    def value(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, (int, float)):
-            return repr(v)
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, dict):
-            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
-        raise TypeError(f"cannot write {v!r} as TOML")
-
-    lines = [f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    for section, table in data.items():
-        if isinstance(table, dict):
-            lines += ["", f"[{section}]", *(f"{k} = {value(v)}" for k, v in table.items())]
-    return "\n".join(lines).lstrip() + "\n"
-
-
 def inputs_hash(config) -> str:
     """The checkpoint's inputs hash: the config (less [output]) and the contents of its STL and
     centerline (``preform.checkpoint.input_record``)."""
@@ -365,7 +345,7 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
     rows, todo = {}, []
     for point in spec.points:   # each point runnable on its own: preform run <point>/config.toml
         atomic_write_text(safe_folder(spec.out_dir, point.name) / "config.toml",
-                          toml_text(spec.data[point.index]))
+                          tomli_w.dumps(spec.data[point.index]))
     for point in spec.points:
         row = finished(spec, point) if resume else None
         if row is not None:

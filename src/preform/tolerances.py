@@ -56,7 +56,7 @@ class Tolerances:
     #: sample spacing (m) of the centerline for the arc length of points (``analysis.
     #: CenterlineProjector``), refined to the exact projection on the nearest segments
     projector_spacing: float = 5e-4
-    #: slip tendency (DESIGN.md §3.2): |kappa_g| exceeds mu |kappa_n| by more than this (1/m), so
+    #: slip tendency (docs/theory.md §3): |kappa_g| exceeds mu |kappa_n| by more than this (1/m), so
     #: that round-off on a geodesic (kappa_g = 0 exactly) never flags
     slip_curvature: float = 1e-9
 

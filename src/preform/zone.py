@@ -4,8 +4,8 @@ The stepper (``preform.stepping``) asks its zone, each time step, for the point 
 free segment runs to (``G_mid`` at the middle of the step, ``G_end`` at its end, machine frame) and
 for the crossings that reached the mandrel (``deposits``). Two models implement :class:`Zone`: the
 kinematic one (``preform.kinematic.KinematicZone``: the free yarn runs straight to the supply point,
-DESIGN.md §3.2) and the interaction one (``preform.interaction.model.InteractionZone``: its yarns
-run to their lowest crossing, DESIGN.md §3.3). The run picks one by ``[model] kind``
+docs/theory.md §3) and the interaction one (``preform.interaction.model.InteractionZone``: its yarns
+run to their lowest crossing, docs/theory.md §4). The run picks one by ``[model] kind``
 (``preform.simulation.ZONES``). This module is a leaf: it imports nothing of ours but ``result``.
 """
 

@@ -1,4 +1,4 @@
-"""Numba kernels on the edges of a triangle mesh, for the intake of big STLs (issue 15): the
+"""Numba kernels on the edges of a triangle mesh, for the intake of big STLs: the
 undirected edge table in the order of ``np.unique`` on the edge keys, the face across every
 directed edge, duplicate faces, and the consistent winding of each body. Each one replaces a
 NumPy sort of the ``3 m`` half-edges (or a graph-components call) with O(m) passes and gives

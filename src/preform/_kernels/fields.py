@@ -1,4 +1,4 @@
-"""Numba kernel clipping deposited yarn polylines to the faces of a mesh (DESIGN.md §3.4).
+"""Numba kernel clipping deposited yarn polylines to the faces of a mesh (docs/theory.md §5).
 
 Arrays and scalars only; the wrapper is :func:`preform.fields.map_to_surface`, the slow NumPy
 reference lives in ``tests/test_fields_kernels.py``.

@@ -1,4 +1,4 @@
-"""Numba kernels of the frontal solver of the interaction model (paper §2.4; DESIGN.md §3.3).
+"""Numba kernels of the frontal solver of the interaction model (paper §2.4; docs/theory.md §4).
 
 Arrays and scalars only; the layout of the crossing arrays is documented in
 ``preform/interaction/zone_state.py`` (creation order, ``low``/``up`` links, ``over``, ``normal``,
@@ -445,7 +445,7 @@ def tensions(m, yarn, pos, normal, over, low, fell, material, material_fell, EA,
 def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, bound,
                     psi):
     """Per crossing and yarn the friction bound mu (f_int + f_ext) tan(delta/2) (N) of the
-    current geometry and tensions into bound (m, 2) (DESIGN.md §3.3), and Psi / (f_int + f_ext),
+    current geometry and tensions into bound (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
     Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2)."""
     p = np.empty(3)
     a = np.empty(3)

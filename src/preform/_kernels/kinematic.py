@@ -1,4 +1,4 @@
-"""Numba kernels of the kinematic fell-point walk (DESIGN.md §3.2). Arrays and scalars only.
+"""Numba kernels of the kinematic fell-point walk (docs/theory.md §3). Arrays and scalars only.
 
 Mesh arrays (mandrel frame, m):
   V  (nv, 3) float64 vertices;  T (nf, 3) int64 faces (outward winding);
@@ -233,7 +233,7 @@ def tangency_root(V, T, CN, f, x, y, z, dx, dy, dz, h, g_lo, g_hi, gex, gey, gez
 
 @njit(cache=True)
 def walk_to_tangency(V, T, FN, CN, NB, x, y, z, f, gmx, gmy, gmz, gex, gey, gez, h_max, max_len):
-    """Walk the fell point over the surface until the free yarn is tangent (DESIGN.md §3.2).
+    """Walk the fell point over the surface until the free yarn is tangent (docs/theory.md §3).
 
     The walking direction is the surface projection of the free yarn towards ``G_mid`` (the supply
     point at the middle of the time step: midpoint rule, second order in time); tangency is tested

@@ -1,5 +1,5 @@
 """Numba kernels of the force-density relaxation of a convergence-zone step
-(``preform/interaction/relax.py`` says what is solved and why; DESIGN.md §3.3).
+(``preform/interaction/relax.py`` says what is solved and why; docs/theory.md §4).
 
 Plain arrays only. Layout as in ``preform/interaction/zone_state.py``: crossings ``c < m`` with
 ``yarn (m, 2)`` (warp, weft index), ``low``/``up (m, 2)`` (neighbour crossing below / above on each
@@ -384,7 +384,7 @@ def wall_distance(m, pos, plane, out):
 @njit(cache=True)
 def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_top, mu, g, psi):
     """Friction bound g = mu (f_int + f_ext) tan(delta/2) (N) of every crossing and yarn for the
-    current geometry and tensions into g (m, 2) (DESIGN.md §3.3), and Psi / (f_int + f_ext),
+    current geometry and tensions into g (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
     Psi = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2), into psi (m, 2).
     ``delta`` from the yarn points (the top segment to the unsmoothed top point); a segment
     without length counts as straight."""

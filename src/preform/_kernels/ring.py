@@ -1,4 +1,4 @@
-"""Numba kernel of the yarn-ring contact (paper §2.3, eqs. 9-13, Fig. A.17; DESIGN.md §3.3).
+"""Numba kernel of the yarn-ring contact (paper §2.3, eqs. 9-13, Fig. A.17; docs/theory.md §4).
 
 Scalars in, one float64 output row out, an integer status back (callable from another ``@njit``
 kernel). Public wrapper: ``preform.interaction.ring``; slow reference: ``tests/naive_contact.py``.

@@ -2,8 +2,8 @@
 
 A plane cuts a mesh into segments whose end points, once welded, are graph nodes; the closed loops
 are walked from node to node. The walk is the one of the Python reference in
-``tests/naive_sections.py``, step for step (node order, neighbour order, which coordinates a node
-keeps), so the loops are the same.
+``preform.geometry.small_mesh.chain_loops``, step for step (node order, neighbour order, which
+coordinates a node keeps), so the loops are the same.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Mandrel geometry: STL intake, smooth normals, centerline and frames, pose in the machine.
 
-Frames (DESIGN.md §2): the mandrel frame is the STL's own frame in metres; ``Pose`` maps it into
+Frames (docs/architecture.md §2): the mandrel frame is the STL's own frame in metres; ``Pose`` maps it into
 the machine frame. Shape generators for tests and ``mandrels/`` are in ``preform.geometry.shapes``.
 """
 

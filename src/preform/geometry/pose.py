@@ -1,4 +1,4 @@
-"""Where the mandrel is in the machine at a given feed (DESIGN.md §2).
+"""Where the mandrel is in the machine at a given feed (docs/architecture.md §2).
 
 Machine frame: ``z`` is the machine axis, the supply plane is ``z = 0``, the mandrel moves towards
 ``+z`` tip first. ``pose_at`` puts the centerline point at arc length ``s_a = travel - lead`` at

@@ -1,4 +1,4 @@
-"""An isotropic field mesh of the mandrel surface, whatever the input triangulation (issue 15).
+"""An isotropic field mesh of the mandrel surface, whatever the input triangulation.
 
 CAD tools export cylinders, cones and extrusions as long slivers (a 1.6 m cylinder side of 1 mm
 wide triangles) and fine exports as millions of tiny triangles. Fields averaged per face need

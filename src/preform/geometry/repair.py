@@ -1,4 +1,4 @@
-"""Mesh intake for real-world CAD STLs (issue 5, item 1): repair what can be repaired, refuse the rest.
+"""Mesh intake for real-world CAD STLs: repair what can be repaired, refuse the rest.
 
 ``repair_mesh`` works on plain arrays and, in this order:
 

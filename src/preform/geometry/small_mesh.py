@@ -1,4 +1,4 @@
-"""NumPy forms of the mesh intake and check kernels, for small meshes (issue 15).
+"""NumPy forms of the mesh intake and check kernels, for small meshes.
 
 The numba kernels of ``_kernels.mesh``, ``edges`` and ``sections`` exist for STLs of 1-2 M faces;
 on a first run each costs 0.15-0.8 s to compile, while on a mandrel of some 10 k faces its NumPy

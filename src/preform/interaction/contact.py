@@ -1,5 +1,5 @@
 """The friction law of a yarn at a contact, and argument checks of the contact solvers (paper §2.2;
-DESIGN.md §3.3).
+docs/theory.md §4).
 
 A yarn at a crossing has two segments, the internal one (towards the mandrel, tension ``f_int``,
 unit vector ``u_int`` from the contact along it) and the external one (towards the supply,

@@ -1,4 +1,4 @@
-"""The frontal solver of the interaction model over a :class:`ZoneState` (paper §2.4; DESIGN.md §3.3).
+"""The frontal solver of the interaction model over a :class:`ZoneState` (paper §2.4; docs/theory.md §4).
 
 Stick and slip as a material constraint
 ---------------------------------------
@@ -26,8 +26,8 @@ of slack segments, see there). The constants below are fields of
   eta)`` times it behind the guide ring, paper eq. 9);
 * friction at every crossing and yarn is ``bound |u - centre|``, the work of the friction force
   against the sliding, with the bound ``mu (f_int + f_ext) tan(delta/2)`` held fixed: its
-  stationarity ``f_int - f_ext in bound d|u - centre|`` *is* the discrete Capstan law of DESIGN.md
-  §3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
+  stationarity ``f_int - f_ext in bound d|u - centre|`` *is* the discrete Capstan law of
+  docs/theory.md §4 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
   side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps`` (``eps =
   friction_creep``): a sticking yarn gives ``eps r / sqrt(1 - r^2)`` to build up its friction
   force, ``r`` the used fraction of its bound, and its ``Psi`` stays strictly negative: a

@@ -1,4 +1,4 @@
-"""The yarn-interaction convergence zone (paper §2; DESIGN.md §3.3) behind ``[model] kind =
+"""The yarn-interaction convergence zone (paper §2; docs/theory.md §4) behind ``[model] kind =
 "interaction"``: a :class:`preform.zone.Zone`, like the kinematic model's.
 
 Each step (``step``):

@@ -1,4 +1,4 @@
-"""Force-density relaxation of one time step of the convergence zone (DESIGN.md §3.3; issue 14).
+"""Force-density relaxation of one time step of the convergence zone (docs/theory.md §4).
 
 What is solved
 --------------
@@ -94,7 +94,7 @@ sum of the four tensions; at a wall crossing its tangential part and any pull aw
 wall) below ``tol``; the material equations hold to ``material_tol`` at every iterate. With
 ``"block"`` and ``"scalar"`` the iteration is not monotone in any merit; with ``"full"`` and
 its line search it is monotone in the reduced energy ``E_r`` (up to its round-off, and except
-where ``ring_halvings`` halvings found no decrease), the merit issue 14 allows. A step that
+where ``ring_halvings`` halvings found no decrease), the merit the iteration is judged by. A step that
 does not reach ``tol`` in ``max_iter`` (some steps where crossings must slide far stall) is
 solved by the Newton reference (``solve_zone``, ``newton_fallback``) or raises
 :class:`SimulationError`.
@@ -165,8 +165,8 @@ class RelaxSettings:
     #: relative change of the bounds between outer iterations below which consistent bounds
     #: have converged (Newton's FRICTION_TOLERANCE)
     friction_tol: float = 1e-6
-    #: iterate the friction bounds and ring top tensions to the converged geometry (issue 14
-    #: item 3: a step's result independent of its start) instead of holding the given ones
+    #: iterate the friction bounds and ring top tensions to the converged geometry (a step's
+    #: result independent of its start) instead of holding the given ones
     consistent_bounds: bool = False
     #: outer (bound) iterations at most with consistent bounds; Newton's frontal loop needs
     #: 16 on a 48-carrier case A step with friction 0.25
@@ -205,7 +205,8 @@ class RelaxSettings:
     block_reg: float = 1e-3
     #: sets of crossings up to this size keep their order in the nested dissection of the
     #: block preconditioners (``band_dissection``); 4: 2908 crossings, 11.8 blocks of L a
-    #: column against 12.8 with 8 (docs/decisions-flat14.md)
+    #: column against 12.8 with 8 (docs/decisions.md, "The block order: a band dissection
+    #: within 15 % of the middle")
     order_leaf: int = 4
     #: the dissection cuts a set at the smallest separator within this fraction of its size
     #: from the middle; 0.15: 19 % less fill than the median cut (0), 4 % less than METIS
@@ -235,9 +236,9 @@ class RelaxSettings:
     #: the segments)
     block_cap: float = 2.0
     #: the preconditioner of a zone behind a guide ring (``solve_zone``): "full", the Hessian
-    #: in the positions and the materials (``docs/decisions-ring14.md``: the block one leaves
-    #: out the axial stiffness of yarns that stick at the new crossings below the ring, and
-    #: stalls on 80-98 % of case B's steps)
+    #: in the positions and the materials (``docs/decisions.md``, "Why the block preconditioner
+    #: fails behind a ring": the block one leaves out the axial stiffness of yarns that stick
+    #: at the new crossings below the ring, and stalls on 80-98 % of case B's steps)
     ring_preconditioner: str = "full"
     #: ``block_stall`` of the full preconditioner: a step it converges on takes a median 8
     #: iterations (case B); one without a new lowest residual in 10 goes to Newton sooner

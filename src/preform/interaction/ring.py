@@ -1,4 +1,4 @@
-"""The yarn on the guide ring: Capstan along the yarn, Amontons across it (paper §2.3; DESIGN.md §3.3).
+"""The yarn on the guide ring: Capstan along the yarn, Amontons across it (paper §2.3; docs/theory.md §4).
 
 Machine frame: the ring has radius ``r_ring`` about the z axis in the plane ``z = z_ring``; its point
 ``R(theta_r) = (r cos theta_r, r sin theta_r, z_ring)``. The yarn runs straight from the fixed point

@@ -1,4 +1,4 @@
-"""Numerical settings of the yarn-interaction model (DESIGN.md §3.3), in one place.
+"""Numerical settings of the yarn-interaction model (docs/theory.md §4), in one place.
 
 Every tolerance, iteration limit, regularisation constant and staging fraction of the interaction
 model is a field below, with the reason for its value. ``InteractionZone(config, machine, mandrel,
@@ -150,7 +150,7 @@ class FrontalSettings:
 
     #: iterate every time step's bounds and top tensions to those of its own converged geometry
     #: and tensions (to consistent_tolerance), so that a step's result does not depend on its
-    #: start (issue 14 item 3); off by default: such steps go to Newton (the relaxation does not
+    #: start; off by default: such steps go to Newton (the relaxation does not
     #: converge where crossings stick), 110x the default's time a step at 144 carriers, and in
     #: whole runs a quarter of the steps do not reach the tolerance (docs/decisions.md)
     consistent_bounds: bool = False

@@ -1,4 +1,4 @@
-"""State of the convergence zone of the interaction model (DESIGN.md §3.3): crossings and chains.
+"""State of the convergence zone of the interaction model (docs/theory.md §4): crossings and chains.
 
 A *crossing* is where warp yarn ``X`` (yarn index ``0 .. n-1``) and weft yarn ``O`` (yarn index
 ``n .. 2n-1``) touch. Crossings are stored in flat arrays **in creation order** (oldest first), so

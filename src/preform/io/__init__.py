@@ -1,4 +1,4 @@
-"""Result files of a run (DESIGN.md §1): tables, VTK/PVD, plots, and the surface fields.
+"""Result files of a run (docs/guide/results.md): tables, VTK/PVD, plots, and the surface fields.
 
 :func:`write_results` writes everything into one folder; ``summary.json`` comes last, so its
 presence marks a complete set of results. Every file is written atomically (``io.atomic``).

@@ -1,4 +1,4 @@
-"""Atomic, contained file writes (DESIGN.md §1).
+"""Atomic, contained file writes (docs/architecture.md §1).
 
 Two promises, for every file a run writes:
 

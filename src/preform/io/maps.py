@@ -1,4 +1,4 @@
-"""``plots/surface_map.png``: the surface fields unrolled (issue 16 item 4).
+"""``plots/surface_map.png``: the surface fields unrolled.
 
 Each field face is drawn at its centerline arc length ``s`` (m, from the tip; horizontal) and its
 circumferential position ``phi`` (deg, vertical): the angle about the centerline, measured in the

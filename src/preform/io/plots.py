@@ -1,4 +1,4 @@
-"""PNG plots of a run (DESIGN.md §1 ``plots/*.png``).
+"""PNG plots of a run (docs/guide/results.md, ``plots/*.png``).
 
 Drawn on :class:`matplotlib.figure.Figure` objects with the Agg canvas, never through pyplot, so
 they work headless whatever ``MPLBACKEND`` says and leave no global figure state behind.

@@ -1,4 +1,4 @@
-"""Solver-ready RTM files (issue 19 item 3): ``rtm/lcmsim.h5`` and ``rtm/rtmsim.bdf``.
+"""Solver-ready RTM files: ``rtm/lcmsim.h5`` and ``rtm/rtmsim.bdf``.
 
 * ``lcmsim.h5`` (LCMsim v2 style): ``/mesh/vertices`` (nv, 3) float64 m, ``/mesh/cells`` (nf, 3)
   int64 (0-based), and per cell ``/properties/thickness`` (m), ``porosity`` (-),

@@ -1,5 +1,5 @@
 """Surface fields to files: ``surface.vtu``, ``surface.xdmf`` + ``surface.h5``, and two pictures
-(DESIGN.md §1; issue 3).
+(docs/guide/results.md).
 
 Writes are atomic: everything is first written into a temporary folder inside ``out_dir`` and
 then moved into place with :func:`os.replace`, the ``.h5`` before the ``.xdmf`` that references it

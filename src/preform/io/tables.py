@@ -1,4 +1,4 @@
-"""``summary.json`` and ``history.csv`` (DESIGN.md §1, result files).
+"""``summary.json`` and ``history.csv`` (docs/guide/results.md, result files).
 
 ``history.csv`` has exactly :data:`preform.result.HISTORY_COLUMNS` as header, one row per step,
 floats written with :func:`repr` (shortest text that reads back to the same float64). Non-finite

@@ -1,4 +1,4 @@
-"""``yarns.vtp`` and ``convergence.pvd`` + ``convergence/*.vtp`` (DESIGN.md §1, result files).
+"""``yarns.vtp`` and ``convergence.pvd`` + ``convergence/*.vtp`` (docs/guide/results.md, result files).
 
 - ``yarns.vtp``: deposited yarn centerlines, mandrel frame, one polyline cell per yarn.
 - ``convergence/step_NNNN.vtp``: the convergence zone at one time, machine frame, one line cell per
