@@ -48,15 +48,17 @@ The numerical settings (deposit height, creation, staging, the snapshot's ring a
 everything the solver uses) are an :class:`~preform.interaction.settings.InteractionSettings`,
 passed to the constructor.
 
-Distances to the mandrel use the nearest face centroid's plane (KD-tree), good to the facet size.
-Only the bottom rows come near the mandrel, so the faces are looked up only for the crossings a
-bound does not prove far from it (``MandrelDistance.near``: the bounding box, then a KD-tree of
+Distances to the mandrel are to the face under a crossing (``MandrelDistance._closest``: the
+nearest centroid's face where the crossing lies over it, else the closest point over the faces
+round the nearest vertex and that face's corners, so that the long thin faces of a CAD export
+are found), the wall's
+tangent planes those faces' planes. Only the bottom rows come near the mandrel, so the faces are
+looked up only for the crossings a bound does not prove far from it (``MandrelDistance.near``: the bounding box, then a KD-tree of
 face samples with a per-crossing cache of its distances, 1-Lipschitz): the tangent planes for the
 crossings that may lie within ``NearSettings.wall_clearance`` of the surface at the step's start
 (the others have no wall; if the solve moves one of them as far as it was from the mandrel, the
 step is solved again with every crossing's plane), the deposit test for those that may lie within
-the deposit height (a crossing proven further from the surface is not deposited even where the
-nearest face's plane passes close to it, at an edge). Where no iterate of the solve reaches the
+the deposit height. Where no iterate of the solve reaches the
 plane of a crossing that has none, the states are those with every crossing's plane (measured:
 case A, bent tube and bulge histories bit-identical, ``docs/decisions.md``).
 """
@@ -110,8 +112,13 @@ NEAR = NearSettings()
 
 
 class MandrelDistance:
-    """Signed distance (m, positive outside) of points to a mandrel, mandrel frame: the distance
-    to the plane of the face with the nearest centroid (KD-tree), good to the facet size.
+    """Signed distance (m, positive outside) of points to a mandrel, mandrel frame: to the plane
+    of the face with the nearest centroid where the point's projection falls inside it, else to
+    the closest point over the faces round the nearest vertex and that face's corners, signed
+    by its face's outward normal (``_closest``); the tangent planes of the wall are those faces'
+    planes. (The face with the nearest centroid is not the closest face where faces are long
+    and thin, as CAD exports make them: on a sliver triangulation its plane can lie millimetres
+    off the surface under a crossing, which moved the deposit and the wall, docs/decisions.md.)
 
     ``near`` bounds the true distance to the surface from below by a second KD-tree of face
     samples, so that the faces are looked up only where a crossing may be close (``settings``:
@@ -125,13 +132,25 @@ class MandrelDistance:
         self.centroids = self._triangles.mean(axis=1)
         self.normals = np.asarray(mandrel.face_normals, dtype=float)
         self.tree = cKDTree(self.centroids)
+        self._V = np.ascontiguousarray(v)
+        self._F = np.ascontiguousarray(faces, dtype=np.int64)
+        used = np.unique(self._F)
+        self.vertex_tree = cKDTree(self._V[used])
+        self._vertex_id = used
+        # the faces round every vertex (CSR: ``_ring_faces[_ring_ptr[v]:_ring_ptr[v + 1]]``)
+        order = np.argsort(self._F.ravel(), kind="stable")
+        self._ring_faces = (order // 3).astype(np.int64)
+        self._ring_ptr = np.searchsorted(self._F.ravel()[order], np.arange(len(v) + 1)).astype(np.int64)
         self._box = v[np.unique(faces)].min(axis=0), v[np.unique(faces)].max(axis=0)
         self._samples = None
 
     def __call__(self, points):
         points = np.atleast_2d(points)
-        _, f = self.tree.query(points)
-        return np.einsum("ij,ij->i", points - self.centroids[f], self.normals[f])
+        c, f, inside = self._closest(points)
+        d = points - c
+        side = np.einsum("ij,ij->i", d, self.normals[f])
+        # over the face: the distance to its plane; else to the closest point, signed by its face
+        return np.where(inside, side, np.where(side < 0.0, -1.0, 1.0) * np.linalg.norm(d, axis=1))
 
     def _sample_tree(self):
         """(KD-tree of face samples, spacing m): each face on a barycentric grid whose cells'
@@ -155,6 +174,56 @@ class MandrelDistance:
                 parts.append(np.einsum("sj,fjk->fsk", w, tri[k == kk]).reshape(-1, 3))
             self._samples = cKDTree(np.vstack(parts)), spacing
         return self._samples
+
+    def _closest(self, points):
+        """(plane points (k, 3), faces (k,), inside (k,) bool) of points (k, 3), mandrel frame:
+        the face under each point and a point of its plane. Where the point's projection on the
+        plane of the face with the nearest centroid falls inside that face (``inside``; nearly
+        every point near a well-shaped mesh), that face, with its centroid as the plane's point
+        (the distance is that to the plane); elsewhere (a point over an edge, or beside a long
+        thin face whose centroid lies far off) the closest point over the faces round the
+        nearest vertex and round the corners of that face, and its face."""
+        from .._kernels.mesh import closest_on_candidates
+
+        points = np.ascontiguousarray(np.atleast_2d(points), dtype=float)
+        m = len(points)
+        _, f = self.tree.query(points)
+        f = np.asarray(f, dtype=np.int64).reshape(m)
+        out = self.centroids[f]
+        n = self.normals[f]
+        q = points - np.einsum("ij,ij->i", points - out, n)[:, None] * n
+        tri = self._triangles[f]
+        e1, e2, w = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], q - tri[:, 0]
+        d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
+        w1, w2 = np.einsum("ij,ij->i", w, e1), np.einsum("ij,ij->i", w, e2)
+        den = d11 * d22 - d12 * d12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b1 = (d22 * w1 - d12 * w2) / den
+            b2 = (d11 * w2 - d12 * w1) / den
+        tol = -1e-9
+        inside = (den > 0.0) & (b1 >= tol) & (b2 >= tol) & (1.0 - b1 - b2 >= tol)
+        rest = np.nonzero(~inside)[0]
+        if len(rest):
+            # candidates: the faces round the nearest vertex and round the corners of the
+            # nearest centroid's face (a long thin face under the point has a corner nearer
+            # than its centroid)
+            _, v = self.vertex_tree.query(points[rest])
+            v = self._vertex_id[np.asarray(v, dtype=np.int64).reshape(-1)]
+            ring = self._ring_ptr, self._ring_faces
+            corners = np.concatenate([v.reshape(-1, 1), self._F[f[rest]]], axis=1)
+            counts = ring[0][corners + 1] - ring[0][corners]
+            ptr = np.concatenate([[0], np.cumsum(counts.sum(axis=1))]).astype(np.int64)
+            starts = np.repeat(ring[0][corners].ravel(), counts.ravel())
+            offs = np.arange(int(counts.sum())) - np.repeat(
+                np.cumsum(counts.ravel()) - counts.ravel(), counts.ravel())
+            cand = np.ascontiguousarray(ring[1][starts + offs])
+            r = len(rest)
+            c_out, c_face, d2 = np.empty((r, 3)), np.empty(r, dtype=np.int64), np.empty(r)
+            closest_on_candidates(np.ascontiguousarray(points[rest]), self._V, self._F, ptr, cand,
+                                  c_out, c_face, d2)
+            out = out.copy()
+            out[rest], f[rest] = c_out, c_face
+        return out, f, inside
 
     def near(self, points, clearance, cache=None):
         """(near (k,) bool, lower (k,) m) for points (k, 3), mandrel frame: ``lower`` bounds the
@@ -219,13 +288,14 @@ class MandrelDistance:
         return out
 
     def planes(self, points, pose):
-        """(n, 6): point and outward unit normal of the nearest face's plane, machine frame, for
+        """(n, 6): point and outward unit normal of the closest face's plane, machine frame, for
         points given in the machine frame (pose: the mandrel's)."""
-        _, f = self.tree.query(np.atleast_2d(pose.to_mandrel(points)))
-        return self._planes_of(f, pose)
+        c, f, _ = self._closest(np.atleast_2d(pose.to_mandrel(points)))
+        return self._planes_of(c, f, pose)
 
-    def _planes_of(self, f, pose):
-        c = self.centroids[f]
+    def _planes_of(self, c, f, pose):
+        """(n, 6): the planes through the points c (n, 3) of the planes of faces f (n,),
+        mandrel frame, with those faces' outward normals, in the machine frame."""
         p0 = np.asarray(pose.to_machine(c), dtype=float)
         n = np.asarray(pose.to_machine(c + self.normals[f]), dtype=float) - p0
         n /= np.linalg.norm(n, axis=1)[:, None]
@@ -241,16 +311,14 @@ class MandrelDistance:
         out = np.tile(NO_PLANE, (len(points), 1))
         idx = np.nonzero(near)[0]
         if len(idx):
-            _, f = self.tree.query(pose.to_mandrel(points[idx]))
-            out[idx] = self._planes_of(f, pose)
+            c, f, _ = self._closest(pose.to_mandrel(points[idx]))
+            out[idx] = self._planes_of(c, f, pose)
         return out, np.where(near, np.inf, lower)
 
     def below(self, points, height, cache=None):
         """(k,) bool for points (k, 3), mandrel frame: signed distance (``__call__``) below
         ``height``, looked up only for the points ``near`` does not prove further than
-        ``height`` from the surface (those are not below it: the nearest face's plane of a
-        point far from the surface may pass close to it at an edge, but the point is not close
-        to the mandrel)."""
+        ``height`` from the surface (those are not below it)."""
         points = np.atleast_2d(points)
         near, _ = self.near(points, height, cache)
         out = np.zeros(len(points), dtype=bool)
