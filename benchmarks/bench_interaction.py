@@ -236,16 +236,21 @@ def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
     solver = relax.solve_zone
     newton = frontal.solve_zone_inplace
 
+    iterations = []
+
     def solve(state, bc, **k):
-        before = relax.FALLBACKS[0]
+        report = None
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            return solver(state, bc, **k)
+            report = solver(state, bc, **k)
+            return report
         finally:
             dt, dc = time.perf_counter() - t0, time.process_time() - c0
+            if report is not None and T.inside != "snapshot" and k.get("mode", "step") == "step":
+                iterations.append(report.relax_iterations)
             if T.inside == "snapshot":
                 pass                                    # counted by the snapshot's timers
-            elif relax.FALLBACKS[0] > before:
+            elif report is not None and report.fallback:
                 T.s["fallback"] += dt
                 T.cpu["fallback"] += dc
                 T.n["fallback"] += 1
@@ -272,7 +277,7 @@ def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
     relax.solve_zone = solve
     frontal.solve_zone_inplace = newton_timed
     try:
-        t0, c_start, i_start = time.perf_counter(), time.process_time(), len(relax.ITERATIONS)
+        t0, c_start = time.perf_counter(), time.process_time()
         outcome = run_case(cfg, out_dir)
         wall = time.perf_counter() - t0
     finally:
@@ -292,7 +297,7 @@ def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
           f"{cfg.process.braid_length} m, relax: {outcome.result.status}, wall {wall:.1f} s, "
           f"process time {time.process_time() - c_start:.1f} s, {n['step']} steps, max "
           f"{int(np.max(h['contacts']))} crossings, median "
-          f"{np.median(relax.ITERATIONS[i_start:]) if len(relax.ITERATIONS) > i_start else 0:.0f}"
+          f"{np.median(iterations) if iterations else 0:.0f}"
           " relaxation iterations a step")
     rows = [
         ("zone step outside the solver", outside, outside / steps * 1e3),

@@ -6,7 +6,7 @@
 ``python benchmarks/bench_relax.py --run examples/case_b.toml [--out DIR]``: one run end to end
 through ``preform run`` with the interaction model (fields and files included), then its wall
 time, the share of steps the relaxation gave to the Newton fallback and the median relaxation
-iterations a step (``relax.FALLBACKS``, ``relax.ITERATIONS``).
+iterations a step (the time steps' ``SolveReport.fallback`` and ``relax_iterations``).
 
 ``--case FILE``: capture the steps from that example (its own carriers unless ``--carriers``
 is given; behind a guide ring ``solve_zone`` uses ``RelaxSettings.ring_preconditioner``,
@@ -81,13 +81,25 @@ def run_end_to_end(config, out):
     from preform import cli
     from preform.interaction import relax as R
 
-    f0, i0 = R.FALLBACKS[0], len(R.ITERATIONS)
-    t0 = time.perf_counter()
-    code = cli.main(["run", str(config), "--model", "interaction", "--out", str(out),
-                     "--no-progress"])
-    wall = time.perf_counter() - t0
-    its = R.ITERATIONS[i0:]
-    fallbacks = R.FALLBACKS[0] - f0
+    reports = []
+    solver = R.solve_zone
+
+    def recorded(*a, **k):
+        report = solver(*a, **k)
+        if k.get("mode", "step") == "step":
+            reports.append(report)
+        return report
+    # the zone takes its solver from ``relax.solve_zone`` when it is built (``make_zone``)
+    R.solve_zone = recorded
+    try:
+        t0 = time.perf_counter()
+        code = cli.main(["run", str(config), "--model", "interaction", "--out", str(out),
+                         "--no-progress"])
+        wall = time.perf_counter() - t0
+    finally:
+        R.solve_zone = solver
+    its = [r.relax_iterations for r in reports]
+    fallbacks = sum(r.fallback for r in reports)
     print(f"{config}: exit {code}, {wall:.1f} s end to end; {len(its)} steps given to the "
           f"relaxation, {fallbacks} ({fallbacks / max(len(its), 1):.1%}) solved by the Newton "
           f"fallback; median {np.median(its) if its else float('nan'):.0f} relaxation "

@@ -39,7 +39,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 def stepped(cfg, steps):
     """Step ``cfg`` ``steps`` steps; per step (crossings, solve s, step s, iterations,
     residual) and the Newton fallbacks."""
-    from preform.interaction import relax as R
     from preform.interaction.model import InteractionZone
     from preform.machine import Machine
     from preform.reference import resolve_pose_lead
@@ -51,17 +50,19 @@ def stepped(cfg, steps):
     machine = Machine.from_config(cfg.machine)
     inner = solver_of(cfg.model.solver)
     solve_time = [0.0]
+    fallbacks = [0]
 
     def solve(st, bc, **kw):
         t = time.perf_counter()
         try:
-            return inner(st, bc, **kw)
+            report = inner(st, bc, **kw)
+            fallbacks[0] += report.fallback
+            return report
         finally:
             solve_time[0] += time.perf_counter() - t
 
     zone = InteractionZone(cfg, machine, mandrel, solve_zone=solve)
     s = Stepper(cfg, machine, mandrel, cl, zone)
-    fallbacks = R.FALLBACKS[0]
     rows = []
     for _ in range(steps):
         solve_time[0] = 0.0
@@ -71,7 +72,7 @@ def stepped(cfg, steps):
         rep = zone.last_report
         rows.append((zone.state.m, solve_time[0], dt, rep.iterations if rep else 0,
                      rep.residual if rep else 0.0))
-    return np.array(rows, dtype=float), R.FALLBACKS[0] - fallbacks
+    return np.array(rows, dtype=float), fallbacks[0]
 
 
 def variant(folder, carriers, mu, mu_r, ring):

@@ -160,7 +160,7 @@ def block_stiffness(st, fell, top, ten, f_top, h, eps2, l_jam, k_jam, floor, reg
 
 
 class Anderson:
-    """Type-II Anderson mixing written out with NumPy (the twin of ``relax._Anderson``):
+    """Type-II Anderson mixing written out with NumPy (the twin of ``preconditioners.Anderson``):
     x+ = G(x) - (dX + dR) gamma, gamma the regularised least-squares fit of r by dR over the
     last ``depth`` differences."""
 
@@ -201,12 +201,12 @@ def pattern_keys(low, perm):
 def block_fill(low, perm):
     """Blocks of the factor L below the diagonal of a matrix with the lattice's pattern in the
     order perm (``ldl_symbolic`` on the unique keys of ``pattern_keys``)."""
-    from preform._kernels import relax as RK
+    from preform._kernels import ldl as LDL
 
     m = low.shape[0]
     uniq = np.unique(pattern_keys(low, perm)[0])
     Ap = np.zeros(m + 1, dtype=np.int64)
     np.add.at(Ap, uniq // m + 1, 1)
     Lnz, etree = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-    return RK.ldl_symbolic(m, np.cumsum(Ap), (uniq % m).astype(np.int64),
+    return LDL.ldl_symbolic(m, np.cumsum(Ap), (uniq % m).astype(np.int64),
                            np.empty(m, dtype=np.int64), Lnz, etree)

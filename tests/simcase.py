@@ -173,6 +173,7 @@ def snapshot_solves(st, bc, centre, newton_only):
     for settings in (None, newton_only):
         x = st.copy()
         report = R.solve_zone(x, bc, centre=centre, max_iter=fr.snapshot_iterations,
-                              friction_tol=fr.snapshot_tolerance, relax_settings=settings)
+                              friction_tol=fr.snapshot_tolerance, relax_settings=settings,
+                              mode="final")
         out.append((x, report))
     return out

@@ -506,7 +506,8 @@ def test_friction_makes_tensions_differ_and_keeps_every_crossing_in_the_cone():
     bc = zone.boundary(t, F)
     # the step's bounds lag the geometry by a frontal iteration (settings.frontal.max_iterations);
     # solved with the bounds to convergence, the cone holds to the frontal tolerance
-    rep = frontal.solve_zone_inplace(st, bc, max_iter=DEFAULT.frontal.snapshot_iterations)
+    rep = frontal.solve_zone_inplace(st, bc, max_iter=DEFAULT.frontal.snapshot_iterations,
+                                     mode="pass")
     assert not rep.lagged
     ten = st.tension[: st.m]
     f_ext = _external_tensions(st, ten, rep.f_top)

@@ -1,6 +1,6 @@
 """The block preconditioner's fixed cost per iteration and its order (the
 cost per crossing per iteration flat in the zone's size): the nested dissection
-(``_kernels.relax.band_dissection``) against a slow Python form of the same rule and against
+(``_kernels.ldl.band_dissection``) against a slow Python form of the same rule and against
 METIS's fill, and the kernels that fold the block driver's array work into single calls
 (``anderson_step``, ``block_wall``, ``wall_project``, ``jam_changed``, ``same_flags``) against
 the NumPy operations they replace."""
@@ -14,7 +14,10 @@ import pymetis
 import pytest
 
 from naive_relax import block_fill, pattern_keys
+from preform._kernels import ldl as LDL
 from preform._kernels import relax as RK
+from preform._kernels import stiffness as SK
+from preform._kernels import zone as KZ
 
 
 def band_lattice(width, rows, seed=0):
@@ -85,7 +88,7 @@ def test_band_dissection_is_the_documented_rule(width, rows, leaf, window):
     low, up, u, v = band_lattice(width, rows)
     m = low.shape[0]
     perm = np.empty(m, dtype=np.int64)
-    RK.band_dissection(m, low, up, u, v, leaf, window, perm)
+    LDL.band_dissection(m, low, up, u, v, leaf, window, perm)
     assert np.array_equal(perm, slow_dissection(low, up, u, v, leaf, window))
 
 
@@ -97,10 +100,10 @@ def test_band_dissection_fill_at_most_metis():
     low, up, u, v = band_lattice(72, 40)
     m = low.shape[0]
     perm = np.empty(m, dtype=np.int64)
-    RK.band_dissection(m, low, up, u, v, 4, 0.15, perm)
+    LDL.band_dissection(m, low, up, u, v, 4, 0.15, perm)
     assert np.array_equal(np.sort(perm), np.arange(m))
     ours = block_fill(low, perm)
-    RK.band_dissection(m, low, up, u, v, 8, 0.0, perm)
+    LDL.band_dissection(m, low, up, u, v, 8, 0.0, perm)
     median_cut = block_fill(low, perm)
     both = np.concatenate([low, up], axis=1)
     xadj = np.zeros(m + 1, dtype=np.int32)
@@ -288,7 +291,7 @@ def test_block_pattern_matches_unique(seed):
     Ap, Ai = np.empty(m + 1, dtype=np.int64), np.empty(3 * m, dtype=np.int64)
     sd, sb = np.empty(m, dtype=np.int64), np.empty((m, 2), dtype=np.int64)
     bf = np.empty((m, 2), dtype=np.bool_)
-    n = RK.block_pattern(m, low, perm, Ap, Ai, sd, sb, bf)
+    n = LDL.block_pattern(m, low, perm, Ap, Ai, sd, sb, bf)
     want = _pattern_by_unique(low, perm)
     assert n == want[1].size and sb[20, 0] == sb[20, 1]
     for got, ref in zip((Ap, Ai[:n], sd, sb, bf), want):
@@ -314,6 +317,7 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     ``block_step`` (``tangent_part``, ``ldl_solve``, ``cap_moves``) give what the calls they
     fold together give: bit for bit, the solve (fastmath) to its round-off."""
     from preform.interaction import relax as R
+    from preform.interaction import preconditioners as PC
     from preform.interaction.settings import DEFAULT
 
     st, bc, f_top, s_old = step16
@@ -351,12 +355,12 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
                                fr.friction_creep, e.kappa0, 1e-10, 60, a["tension"], a["chain"],
                                a["work"], a["stats"], a["l_prev"] if predict else None)
         a["l_prev"][:] = a["l_below"]
-        wb = RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
-                      lat.highest, fell, top, bc.h, e.length_smoothing, e.top_smoothing2, b["s"],
-                      st.material_fell, s_old[:m], g, f_top, EA, e.compression,
-                      fr.friction_creep, e.kappa0, 1e-10, 60, b["d_below"], b["l_below"],
-                      b["d_top"], b["l_top"], b["tension"], b["chain"], b["work"], b["stats"],
-                      b["l_prev"], predict, True)
+        wb = RK.sweep(lat, KZ.law(EA, e.compression, fr.friction_creep, e.kappa0, bc.h,
+                                  e.length_smoothing, e.top_smoothing2, 0.0, 0.0, 1e-3),
+                      KZ.problem(fell, top, st.material_fell, s_old[:m], g, f_top), pos, b["s"],
+                      KZ.Segments(b["d_below"], b["l_below"], b["d_top"], b["l_top"]),
+                      b["tension"], b["chain"], b["work"], b["stats"], b["l_prev"], predict,
+                      True, 1e-10, 60)
         assert wa == wb
         for key in a:
             assert np.array_equal(a[key], b[key]), key
@@ -370,15 +374,19 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     RK.forces(*common, o["force"], o["w_below"], o["w_top"], o["total"], o["W"])
     ra = RK.wall_residual(m, o["force"], o["total"], plane, active, o["W"], 1e-7, o["res"])
     o = out[1]
-    rb = RK.forces_residual(*common, plane, active, 1e-7, o["force"], o["w_below"], o["w_top"],
-                            o["total"], o["W"], o["res"])
+    law = KZ.law(EA, e.compression, fr.friction_creep, e.kappa0, bc.h, e.length_smoothing,
+                 e.top_smoothing2, l_jam, k_jam, 1e-3)
+    prob = KZ.problem(fell, top, st.material_fell, s_old[:m], g, f_top)
+    seg = KZ.Segments(a["d_below"], a["l_below"], a["d_top"], a["l_top"])
+    rb = RK.forces_residual(lat, law, prob, seg, a["tension"], plane, active, 1e-7,
+                            KZ.Forces(o["force"], o["w_below"], o["w_top"], o["total"], o["W"],
+                                      o["res"]))
     assert ra == rb
     for key in out[0]:
         assert np.array_equal(out[0][key], out[1][key]), key
-    blk = R._BlockStiffness(lat, pos)
-    RK.block_values(m, ny, lat.low, lat.highest, a["d_below"], a["l_below"], a["d_top"],
-                    a["l_top"], a["tension"], f_top, l_jam, k_jam, 1e-3, 1e-3, plane, active,
-                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals, blk.Dg)
+    blk = PC.BlockStiffness(lat, pos)
+    SK.block_values(lat, law, prob, seg, a["tension"], 1e-3, plane, active, blk.slots, blk.vals,
+                    blk.Dg)
     assert blk.factor()
     force = out[0]["force"]
     for cap in (1e9, 1e-3):         # no scaling, and a cap that scales the update down
@@ -387,7 +395,7 @@ def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
         blk.solve(rhs, want)
         sa = RK.cap_moves(m, lat.low, a["l_below"], cap, np.empty(m), want)
         got = np.empty((m, 3))
-        sb = RK.block_step(m, force, plane, active, lat.low, a["l_below"], cap, blk.Lp, blk.Li,
+        sb = SK.block_step(m, force, plane, active, lat.low, a["l_below"], cap, blk.Lp, blk.Li,
                            blk.Lx, blk.Dinv, blk.perm, np.empty((m, 3)), np.empty((m, 3)),
                            np.empty(m), got)
         # the solve is compiled with fastmath: its loops may be vectorised differently, and

@@ -1,5 +1,5 @@
 """The relaxation behind a guide ring: the ``"full"`` preconditioner, the
-Hessian of the zone's energy in the positions and the materials (``_kernels.relax.full_values``,
+Hessian of the zone's energy in the positions and the materials (``_kernels.stiffness.full_values``,
 5 x 5 blocks, ``ldl_numeric5`` / ``ldl_solve5``), against a dense NumPy twin; its Schur
 complement on the positions against the finite-difference Jacobian of the relaxation's force
 map (materials swept), which is what makes its position update a Newton step; whole steps of a
@@ -17,7 +17,10 @@ import numpy as np
 import pytest
 
 from preform._kernels import relax as RK
+from preform._kernels import stiffness as SK
+from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
+from preform.interaction import preconditioners as PC
 from preform.interaction.settings import DEFAULT
 from simcase import advanced_stepper, capture_step, case_b_like_config
 
@@ -178,11 +181,13 @@ def test_full_hessian_matches_its_twin_and_its_ldl_solves_it(ring_steps):
     reg, floor = 1e-3, 1e-3
     H_ref = _dense_hessian(F, reg, floor, plane, active)
     lat = F.lat
-    blk = R._BlockStiffness(lat, st.pos[:m], 5)
-    RK.full_values(m, ny, lat.yarn, lat.low, lat.highest, F.d_below, F.l_below, F.d_top,
-                   F.l_top, F.tension, f_top, F.s, st.material_fell, s_old, g, F.EA,
-                   E.compression, EPS_F, E.kappa0, F.l_jam, F.k_jam, floor, reg, plane, active,
-                   blk.slot_diag, blk.slot_below, blk.below_first, blk.vals, blk.Dg)
+    blk = PC.BlockStiffness(lat, st.pos[:m], 5)
+    SK.full_values(lat, KZ.law(F.EA, E.compression, EPS_F, E.kappa0, 0.0, 0.0, 0.0, F.l_jam,
+                               F.k_jam, floor),
+                   KZ.problem(np.zeros((ny, 3)), np.zeros((ny, 3)), st.material_fell, s_old, g,
+                              f_top),
+                   KZ.Segments(F.d_below, F.l_below, F.d_top, F.l_top), F.tension, F.s, reg,
+                   plane, active, blk.slots, blk.vals, blk.Dg)
     H = _from_pattern(blk, m)
     # sums of a few products of entries up to EA / q ~ 1e6: round-off
     assert np.abs(H - H_ref).max() < 1e-12 * np.abs(H_ref).max()

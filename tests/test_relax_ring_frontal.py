@@ -2,7 +2,7 @@
 (``RelaxSettings.ring_frontal``, ``relax._ring_frontal``): what a snapshot asks ``solve_zone`` for
 (its ring passes and its final solve) lands on the fixed point of Newton's frontal iteration
 (``frontal.solve_zone_inplace``), and the structure the snapshot's 60 solves of one lattice
-share (``_BlockStiffness.of``) is the one a new solve builds.
+share (``preconditioners.BlockStiffness.of``) is the one a new solve builds.
 
 A captured step is the problem ``InteractionZone.step`` poses its solver (``tests/test_relax.py``
 says how), here of the case-B-like mandrel (``simcase.case_b_like_config``, 16 carriers).
@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from preform.interaction import frontal, relax as R
+from preform.interaction import preconditioners as PC
 from preform.interaction.settings import DEFAULT
 from simcase import advanced_stepper, capture_step, case_b_like_config, snapshot_solves
 
@@ -54,7 +55,7 @@ def test_frontal_iteration_by_the_relaxation_lands_on_newtons_fixed_point(mu, ri
     m = st.m
     newton = st.copy()
     frontal.solve_zone_inplace(newton, bc, centre=s_old, max_iter=400, friction_tol=1e-9,
-                               tol=TIGHT)
+                               tol=TIGHT, mode="final")
     relaxed = st.copy()
     rs = R.RelaxSettings(tol=TIGHT, max_iter=300, ring_stall=60)
     rep = R._ring_frontal(relaxed, bc, DEFAULT, rs, "", s_old, TIGHT, 1e-9, 400, finish=False)
@@ -76,27 +77,27 @@ def test_snapshot_solve_behind_a_ring_is_finished_by_newton(ring_step):
 
 
 def test_structure_is_shared_only_by_the_same_lattice(ring_step):
-    """``_BlockStiffness.of`` gives the last structure again for the same lattice and order
+    """``BlockStiffness.of`` gives the last structure again for the same lattice and order
     (METIS's), a new one for another lattice or the band order; a step solved twice, the
     second time through the shared structure, gives the same result bit for bit."""
     st, bc, s_old = ring_step(0.25)
     m = st.m
     lat = R.lattice_of(st)
-    a = R._BlockStiffness.of(lat, st.pos[:m], 5, "metis")
-    assert R._BlockStiffness.of(R.lattice_of(st.copy()), st.pos[:m], 5, "metis") is a
-    assert R._BlockStiffness.of(lat, st.pos[:m], 3, "metis") is not a
-    assert R._BlockStiffness.of(lat, st.pos[:m], 5, "band") is not a
-    other = dataclasses.replace(lat, low=lat.low.copy())
+    a = PC.BlockStiffness.of(lat, st.pos[:m], 5, "metis")
+    assert PC.BlockStiffness.of(R.lattice_of(st.copy()), st.pos[:m], 5, "metis") is a
+    assert PC.BlockStiffness.of(lat, st.pos[:m], 3, "metis") is not a
+    assert PC.BlockStiffness.of(lat, st.pos[:m], 5, "band") is not a
+    other = lat._replace(low=lat.low.copy())
     c = int(np.nonzero(other.low[:, 0] >= 0)[0][-1])
     other.low[c, 0] = -1
-    assert R._BlockStiffness.of(other, st.pos[:m], 5, "metis") is not a
+    assert PC.BlockStiffness.of(other, st.pos[:m], 5, "metis") is not a
     b0, f0 = R.start_bounds(st, bc)
     full = R.RelaxSettings(preconditioner="full")
     args = (lat, st.pos[:m], st.material[:m], st.material_fell, s_old, bc.fell, bc.top, f0, b0)
     kw = dict(f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width, plane=bc.plane)
-    R._BlockStiffness._last = None
+    PC.BlockStiffness._last = None
     first = R.relax(*args, settings=full, **kw)
-    assert R._BlockStiffness._last is not None
+    assert PC.BlockStiffness._last is not None
     again = R.relax(*args, settings=full, **kw)
     assert first.converged and np.array_equal(first.pos, again.pos)
     assert np.array_equal(first.tension, again.tension)

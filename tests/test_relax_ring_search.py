@@ -17,6 +17,7 @@ import pytest
 
 from preform._kernels import frontal as FK
 from preform._kernels import relax as RK
+from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
 from preform.interaction.settings import DEFAULT
 from simcase import advanced_stepper, capture_step, case_b_like_config
@@ -90,10 +91,17 @@ class _Swept:
         RK.forces(m, ny, lat.yarn, lat.low, lat.highest, self.d_below, self.l_below,
                   self.d_top, self.l_top, self.tension, self.f_top, self.l_jam, self.k_jam,
                   1e-3, self.force, np.empty((m, 2)), np.empty(ny), np.empty(m), np.empty(m))
-        return RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, self.l_below,
-                                 self.l_top, self.s, self.st.material_fell, self.s_old, self.g,
-                                 self.f_top, self.EA, E.compression, EPS_F, E.kappa0,
-                                 self.l_jam, self.k_jam, self.s_ref)
+        return RK.reduced_energy(lat, self.law(), self.problem(),
+                                 KZ.Segments(self.d_below, self.l_below, self.d_top, self.l_top),
+                                 self.s, self.s_ref)
+
+    def law(self):
+        return KZ.law(self.EA, E.compression, EPS_F, E.kappa0, self.bc.h, E.length_smoothing,
+                      E.top_smoothing2, self.l_jam, self.k_jam, E.geometric_floor)
+
+    def problem(self):
+        return KZ.problem(self.bc.fell, self.bc.top, self.st.material_fell, self.s_old, self.g,
+                          self.f_top)
 
 
 def _energy_twin(S):
@@ -152,20 +160,16 @@ def test_reduced_energy_matches_its_twin_and_newtons_energy(ring_steps):
     n = S.ny // 2
     payout = sum((S.f_top[k] + S.f_top[k] ** 2 / (2 * S.EA)) * S.s_ref[k]
                  for k in range(S.ny) if lat.highest[k] >= 0)
-    newton = FK.energy(m, S.ny, lat.yarn, S.pos, lat.normal, lat.over, lat.low, lat.highest,
-                       np.ascontiguousarray(bc.fell), np.ascontiguousarray(bc.top), S.s,
-                       st.material_fell, S.s_old, S.f_top, S.g, S.EA, E.compression,
-                       E.geometric_floor, EPS_F, E.kappa0, bc.h, E.length_smoothing,
-                       E.top_smoothing2, bc.plane[:m], 0.0, S.l_jam, S.k_jam)
+    newton = FK.energy(lat, S.law(), S.problem(), S.pos, S.s, bc.plane[:m], 0.0)
     assert n > 0
     assert abs((newton - payout) - value) < 1e-12 * (abs(newton) + abs(payout))
     # a material length that is not positive: inf, as Newton's E
     s = S.s.copy()
     c = int(np.nonzero(lat.low[:, 0] >= 0)[0][0])
     s[c, 0] = s[lat.low[c, 0], 0]
-    assert RK.reduced_energy(m, S.ny, lat.yarn, lat.low, lat.highest, S.l_below, S.l_top, s,
-                             st.material_fell, S.s_old, S.g, S.f_top, S.EA, E.compression,
-                             EPS_F, E.kappa0, S.l_jam, S.k_jam, S.s_ref) == np.inf
+    assert RK.reduced_energy(lat, S.law(), S.problem(),
+                             KZ.Segments(S.d_below, S.l_below, S.d_top, S.l_top), s,
+                             S.s_ref) == np.inf
 
 
 def test_reduced_energy_gradient_is_the_force_map(ring_steps):

@@ -20,6 +20,7 @@ import pytest
 import preform as pf
 from preform import simulate
 from preform._kernels import frontal as FK
+from preform._kernels import zone as KZ
 from preform.geometry import shapes
 from preform.interaction import frontal
 from preform.interaction.settings import DEFAULT
@@ -102,11 +103,14 @@ def test_point_forces_are_the_rest_of_the_energy_gradient():
     f_top = np.full(ny, bc.f_spool)
     grad = np.zeros((m, 5))
     cap = FK.triplet_capacity(m, ny)
-    FK.assemble(m, ny, st.yarn, st.pos, st.normal, st.over, st.low, st.highest, bc.fell, bc.top,
-                st.material, st.material_fell, st.material[:m].copy(), f_top, np.zeros((m, 2)),
-                EA, e.compression, e.geometric_floor, DEFAULT.frontal.friction_creep, e.kappa0,
-                bc.h, e.length_smoothing, e.top_smoothing2, plane, e.wall_stiffness, bc.width,
-                e.jam_force * bc.f_spool / bc.width, grad, np.empty(cap, np.int64),
+    FK.assemble(KZ.Lattice(m, ny, st.yarn, st.low, st.up, st.over, st.normal, st.lowest,
+                           st.highest),
+                KZ.law(EA, e.compression, DEFAULT.frontal.friction_creep, e.kappa0, bc.h,
+                       e.length_smoothing, e.top_smoothing2, bc.width,
+                       e.jam_force * bc.f_spool / bc.width, e.geometric_floor),
+                KZ.problem(bc.fell, bc.top, st.material_fell, st.material[:m].copy(),
+                           np.zeros((m, 2)), f_top),
+                st.pos, st.material, plane, e.wall_stiffness, grad, np.empty(cap, np.int64),
                 np.empty(cap, np.int64), np.empty(cap))
     ext = frontal.point_forces(st, bc)
     pull = _tension_forces(st, bc, tension, f_top)

@@ -158,12 +158,17 @@ def _put(rows, cols, vals, nnz, r, c, v):
 
 
 @njit(cache=True)
-def assemble(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, material,
-             material_fell, centre, f_top, bound, EA, compression, geometric_floor, eps_f, kappa0,
-             h, eps2, eps2_top, plane, k_wall, l_jam, k_jam, grad, rows, cols, vals):
+def assemble(lat, law, prob, pos, material, plane, k_wall, grad, rows, cols, vals):
     """E (N m), gradient grad (m, 5) and Hessian triplets of the step's energy (module
-    docstring). Returns (E, nnz); E = inf when a segment's material length is not positive (the
-    line search then backs off). rows, cols, vals need ``triplet_capacity(m, n_yarns)``."""
+    docstring) at the crossings' positions ``pos`` and materials ``material``. Returns (E, nnz);
+    E = inf when a segment's material length is not positive (the line search then backs off).
+    rows, cols, vals need ``triplet_capacity(m, n_yarns)``. ``lat``, ``law``, ``prob``:
+    ``_kernels.zone``'s Lattice, Law (``floor``: the geometric floor) and Problem (``s_old``:
+    the friction centres, ``g``: the bounds); plane (m, 6) the wall's tangent planes, k_wall
+    its penalty (N/m)."""
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, material_fell, centre, bound, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, geometric_floor = law
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)
@@ -383,10 +388,11 @@ def _geometric(rows, cols, vals, nnz, a, b, w, dx, dy, dz):
 
 
 @njit(cache=True)
-def energy(m, n_yarns, yarn, pos, normal, over, low, highest, fell, top, material, material_fell,
-           centre, f_top, bound, EA, compression, geometric_floor, eps_f, kappa0, h, eps2,
-           eps2_top, plane, k_wall, l_jam, k_jam):
+def energy(lat, law, prob, pos, material, plane, k_wall):
     """E as in ``assemble``, without derivatives (inf when a material length is not positive)."""
+    m, n_yarns, yarn, low, up, over, normal, lowest, highest = lat
+    fell, top, material_fell, centre, bound, f_top = prob
+    EA, compression, eps_f, kappa0, h, eps2, eps2_top, l_jam, k_jam, geometric_floor = law
     n = n_yarns // 2
     pa = np.empty(3)
     pb = np.empty(3)

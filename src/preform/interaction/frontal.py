@@ -88,6 +88,7 @@ import pymetis
 import scipy.sparse as sp
 
 from .._kernels import frontal as frontal_kernels
+from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
@@ -148,6 +149,26 @@ class SolveReport:
     lagged: bool = False
     newton_residual: np.ndarray | None = None
     newton_energy: np.ndarray | None = None
+    #: iterations of the force-density relaxation in the solve (``relax.solve_zone``; 0 for
+    #: Newton's alone), converged or not
+    relax_iterations: int = 0
+    #: the relaxation did not converge and Newton's solve gave the result (``relax.solve_zone``,
+    #: ``RelaxSettings.newton_fallback``)
+    fallback: bool = False
+
+
+#: what a zone solve is for (``solve_zone_inplace``'s and ``relax.solve_zone``'s ``mode``):
+#: "step", a time step (``FrontalSettings.max_iterations`` frontal iterations, or consistent
+#: bounds); "pass", a snapshot's ring pass (``max_iter`` frontal iterations of the bounds);
+#: "final", a snapshot's final solve (the frontal iteration to ``friction_tol``)
+SOLVE_MODES = ("step", "pass", "final")
+
+
+def check_mode(mode):
+    """``mode`` if it is one of :data:`SOLVE_MODES`; ValueError otherwise."""
+    if mode not in SOLVE_MODES:
+        raise ValueError(f"zone solve mode {mode!r}: expected one of {', '.join(SOLVE_MODES)}")
+    return mode
 
 
 @dataclass
@@ -210,24 +231,32 @@ class _Network:
                                      factoriser=factoriser)
         return p
 
-    def _args(self, pos, material):
+    def _args(self):
+        """The kernels' (Lattice, Law, Problem) of the state and the frontal loop's iterate, as
+        plain tuples (``_kernels.zone``: the kernels' dispatcher types them in C)."""
         st, bc, e = self.st, self.bc, self.settings.energy
-        return (st.m, st.n_yarns, st.yarn, pos, st.normal, st.over, st.low, st.highest, bc.fell,
-                bc.top, material, st.material_fell, self.centre, self.f_top, self.bound, self.EA,
-                e.compression, e.geometric_floor, self.settings.frontal.friction_creep, e.kappa0,
-                bc.h, e.length_smoothing, e.top_smoothing2, self.plane, e.wall_stiffness,
-                bc.width, e.jam_force * bc.f_spool / max(bc.width, 1e-300))
+        lat = zone_kernels.Lattice(st.m, st.n_yarns, st.yarn, st.low, st.up, st.over, st.normal,
+                                   st.lowest, st.highest)
+        law = zone_kernels.law(self.EA, e.compression, self.settings.frontal.friction_creep,
+                               e.kappa0, bc.h, e.length_smoothing, e.top_smoothing2, bc.width,
+                               e.jam_force * bc.f_spool / max(bc.width, 1e-300),
+                               e.geometric_floor)
+        prob = zone_kernels.Problem(bc.fell, bc.top, st.material_fell, self.centre, self.bound,
+                                    self.f_top)
+        return tuple(lat), tuple(law), tuple(prob)
 
     def assemble(self):
         """(E, nnz): the energy at the state's iterate, its gradient into ``grad`` and its
         Hessian's triplets into ``rows``, ``cols``, ``vals``."""
         st = self.st
-        return frontal_kernels.assemble(*self._args(st.pos, st.material), self.grad, self.rows,
-                                        self.cols, self.vals)
+        return frontal_kernels.assemble(*self._args(), st.pos, st.material, self.plane,
+                                        self.settings.energy.wall_stiffness, self.grad,
+                                        self.rows, self.cols, self.vals)
 
     def energy(self, pos, material):
         """E at crossing positions ``pos`` (m, 3) and material coordinates ``material`` (m, 2)."""
-        return frontal_kernels.energy(*self._args(pos, material))
+        return frontal_kernels.energy(*self._args(), pos, material, self.plane,
+                                      self.settings.energy.wall_stiffness)
 
     def update_tensions(self):
         """The segment tensions of the state's iterate into ``tension`` (m, 2)."""
@@ -367,7 +396,7 @@ def _newton_step_inplace(net, E, nnz):
 
 def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = DEFAULT, tol=None,
                        friction_tol=None, max_iter=None, where="", centre=None,
-                       start=None) -> SolveReport:
+                       start=None, mode="step") -> SolveReport:
     """Bring every crossing of ``state`` to balance with its friction law (module docstring),
     updating ``state`` in place: positions, material coordinates, tensions, friction bounds, slip
     states and friction offsets of the crossings. The top tensions of the result are
@@ -383,11 +412,13 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     ``centre`` (m, 2): where each yarn's friction term is centred (default:
     ``friction_centres(state)``). ``tol``, ``friction_tol``, ``max_iter``: the balance
     tolerance, the frontal tolerance and the frontal iterations (default: ``settings``'
-    ``balance_tolerance``, ``friction_tolerance``, ``max_iterations``). ``where`` names the step
-    and time in the error message; :class:`SimulationError` if the residual stays above the
-    tolerances."""
+    ``balance_tolerance``, ``friction_tolerance``, ``max_iterations``). ``mode``: what the
+    solve is for (:data:`SOLVE_MODES`); a time step ("step") with
+    ``FrontalSettings.consistent_bounds`` iterates the bounds to ``consistent_tolerance``.
+    ``where`` names the step and time in the error message; :class:`SimulationError` if the
+    residual stays above the tolerances."""
     fr = settings.frontal
-    time_step = max_iter is None and friction_tol is None
+    time_step = check_mode(mode) == "step"
     # a time step with consistent bounds: the frontal iteration to convergence, mixed
     consistent = fr.consistent_bounds and time_step
     # behind a guide ring a time step's top tensions (Capstan, eq. 9) and friction bounds

@@ -583,7 +583,7 @@ class InteractionZone:
             st.material_fell[:] = self.fell_anchor(st, bc, ref, self.pose_end)
             centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
             self.solve_zone(st, bc, settings=self.settings, max_iter=zs.ring_pass_iterations,
-                            where=where, centre=centre)
+                            where=where, centre=centre, mode="pass")
             # a crossing the re-solve laid on the mandrel is deposited there, as a step would
             deposits = self._deposit(self.pose_end, st)
             for k, p in deposits:
@@ -603,7 +603,8 @@ class InteractionZone:
         centre = np.array([anchor[u] for u in st.uid[: st.m].tolist()]).reshape(-1, 2)
         fr = self.settings.frontal
         report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
-                                 where=where, centre=centre, friction_tol=fr.snapshot_tolerance)
+                                 where=where, centre=centre, friction_tol=fr.snapshot_tolerance,
+                                 mode="final")
         return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def slide_rings(self, st, bc, theta):

@@ -104,6 +104,14 @@ snapshot asks for (its ring passes and its final solve) to the relaxation with c
 bounds (``ring_frontal``), and without a ring a snapshot's final solve (``snapshot_frontal``);
 the final one is finished by Newton's frontal iteration from that result, whose wall penalty
 puts the wall force into the written files (``frontal.point_forces``).
+
+Code: this module holds the settings, the outer loops (``relax``: consistent bounds and the
+retries; ``solve_zone`` and ``_ring_frontal``: the zone solver's modes) and the iteration
+(``_relax_held``); each preconditioner is a class of ``preconditioners.py`` behind its
+``Preconditioner`` protocol, with the matrices' structures and Anderson's mixer; the kernels
+are ``_kernels/relax.py`` (sweep, forces, wall), ``_kernels/stiffness.py`` (the matrices'
+values) and ``_kernels/ldl.py`` (their block LDL^T and orders), taking the arrays packed in
+``_kernels/zone.py``'s NamedTuples.
 """
 
 from __future__ import annotations
@@ -113,24 +121,13 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
 from .._kernels import relax as RK
+from .._kernels import zone as KZ
+from .._kernels.zone import Lattice
 from ..errors import SimulationError
+from . import preconditioners as PC
 from .settings import DEFAULT, InteractionSettings
-
-try:    # permissive sparse LDL^T (Apache-2.0); SciPy's SuperLU otherwise
-    import qdldl
-except ImportError:     # pragma: no cover - qdldl is a dependency
-    qdldl = None
-
-
-#: steps solved by the Newton fallback since import (``solve_zone``), for benchmarks and tests
-FALLBACKS = [0]
-#: relaxation iterations of every step ``solve_zone`` gave the relaxation since import
-#: (converged or not), for benchmarks: the median a step and, with FALLBACKS, the share of
-#: steps Newton solved
-ITERATIONS: list[int] = []
 
 
 @dataclass(frozen=True)
@@ -147,7 +144,7 @@ class RelaxSettings:
     #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
     max_iter: int = 200
     #: a step the relaxation does not converge on is solved by the Newton reference
-    #: (``solve_zone``; counted in ``FALLBACKS``) instead of stopping the run
+    #: (``solve_zone``; its report says ``fallback``) instead of stopping the run
     newton_fallback: bool = True
     #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
     anderson_depth: int = 10
@@ -282,28 +279,6 @@ class RelaxSettings:
 
 
 @dataclass
-class Lattice:
-    """Connectivity of the crossings (``zone_state.py``'s layout): yarn, low, up (m, 2) int64;
-    over (m,) float64; normal (m, 3) contact normals; lowest, highest (2n,) int64."""
-
-    yarn: np.ndarray
-    low: np.ndarray
-    up: np.ndarray
-    over: np.ndarray
-    normal: np.ndarray
-    lowest: np.ndarray
-    highest: np.ndarray
-
-    @property
-    def m(self):
-        return self.yarn.shape[0]
-
-    @property
-    def n_yarns(self):
-        return self.lowest.shape[0]
-
-
-@dataclass
 class RelaxResult:
     """pos (m, 3), s (m, 2), tension (m, 2) N, bounds (m, 2) N (the newest: of the converged
     geometry), psi (m, 2) Psi / (f_int + f_ext), f_top (2n,) N, wall_force (m,) N (>= 0),
@@ -336,220 +311,6 @@ class RelaxResult:
     fallback_scalar: bool = False
     #: factorisations of the preconditioner
     factorisations: int = 0
-
-
-class _Laplacian:
-    """The scalar Laplacian's fixed pattern (upper triangle, CSC) for a lattice, its slots and a
-    factorisation whose symbolic analysis is kept."""
-
-    def __init__(self, lat: Lattice):
-        m = lat.m
-        c = np.repeat(np.arange(m), 2)
-        lo = lat.low.ravel()
-        link = lo >= 0
-        r0 = np.concatenate([np.arange(m), np.minimum(c[link], lo[link])])
-        c0 = np.concatenate([np.arange(m), np.maximum(c[link], lo[link])])
-        key = c0 * m + r0
-        uniq, inv = np.unique(key, return_inverse=True)
-        self.nslots = uniq.size
-        self.slot_diag = inv[:m].astype(np.int64)
-        self.slot_below = np.full(2 * m, -1, dtype=np.int64)
-        self.slot_below[link] = inv[m:]
-        self.slot_below = self.slot_below.reshape(m, 2)
-        rows = (uniq % m).astype(np.int32)
-        cols = (uniq // m).astype(np.int64)
-        indptr = np.zeros(m + 1, dtype=np.int32)
-        np.add.at(indptr, cols + 1, 1)
-        indptr = np.cumsum(indptr).astype(np.int32)
-        self.vals = np.zeros(self.nslots)
-        self.A = sp.csc_matrix((self.vals.copy(), rows, indptr), shape=(m, m))
-        self.solver = None
-
-    def factor(self):
-        self.A.data[:] = self.vals
-        if qdldl is not None:
-            if self.solver is None:
-                self.solver = qdldl.Solver(self.A, upper=True)
-            else:
-                self.solver.update(self.A, upper=True)
-        else:       # pragma: no cover
-            from scipy.sparse.linalg import splu
-            full = self.A + sp.triu(self.A, 1).T
-            self.solver = splu(full.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                               options=dict(SymmetricMode=True), diag_pivot_thresh=0.0)
-
-    def solve(self, rhs, out):
-        for i in range(3):
-            out[:, i] = self.solver.solve(np.ascontiguousarray(rhs[:, i]))
-
-
-def _metis_order(lat: Lattice):
-    """METIS's nested-dissection order (perm[i]: the crossing at position i) of the lattice's
-    graph (crossings, an edge per segment between two crossings)."""
-    import pymetis
-    m = lat.m
-    c = np.repeat(np.arange(m), 2)
-    lo = lat.low.ravel()
-    link = lo >= 0
-    a, b = c[link], lo[link]
-    key = np.unique(np.concatenate([a * m + b, b * m + a]))
-    rows, cols = key // m, key % m
-    indptr = np.zeros(m + 1, dtype=np.int32)
-    np.add.at(indptr, rows + 1, 1)
-    indptr = np.cumsum(indptr).astype(np.int32)
-    perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(indptr, cols.astype(np.int32)))
-    return np.asarray(perm).astype(np.int64)
-
-
-class _BlockStiffness:
-    """The block preconditioner K (``_kernels.relax.block_values``; with ``nb`` 5 the full one,
-    ``full_values``) of a lattice: its pattern of nb x nb blocks in a nested-dissection order
-    of the band of crossings around the machine axis (``order`` "band", ``band_dissection``
-    with ``leaf`` and ``window``, ``RelaxSettings.order_leaf``, ``order_window``: the factor's
-    fill grows as log m, 6-7 blocks a column at 288 crossings, 11.5-11.8 at 2900) or of the
-    lattice's graph ("metis", ``_metis_order``), the symbolic analysis of its block LDL^T once
-    per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and solves (``ldl_solve``,
-    ``ldl_solve5``)."""
-
-    def __init__(self, lat: Lattice, pos, nb=3, order="band", leaf=4, window=0.15):
-        m = lat.m
-        self.m = m
-        self.nb = nb
-        if order == "metis" and m > 8:
-            perm = _metis_order(lat)
-        else:
-            r = np.hypot(pos[:, 0], pos[:, 1])
-            u = np.arctan2(pos[:, 1], pos[:, 0]) * (float(r.mean()) if m else 1.0)
-            perm = np.empty(m, dtype=np.int64)
-            RK.band_dissection(m, lat.low, lat.up, u, np.ascontiguousarray(pos[:, 2]), leaf,
-                               window, perm)
-        self.perm = perm
-        self.Ap = np.empty(m + 1, dtype=np.int64)
-        Ai = np.empty(3 * m, dtype=np.int64)
-        self.slot_diag = np.empty(m, dtype=np.int64)
-        self.slot_below = np.empty((m, 2), dtype=np.int64)
-        self.below_first = np.empty((m, 2), dtype=np.bool_)
-        self.nslots = RK.block_pattern(m, lat.low, perm, self.Ap, Ai, self.slot_diag,
-                                       self.slot_below, self.below_first)
-        self.Ai = Ai[:self.nslots]
-        self.vals = np.zeros((self.nslots, nb, nb))
-        self.Dg = np.empty((m, nb, nb))
-        self.etree = np.empty(m, dtype=np.int64)
-        self.Lnz = np.empty(m, dtype=np.int64)
-        nnz = RK.ldl_symbolic(m, self.Ap, self.Ai, np.empty(m, dtype=np.int64), self.Lnz,
-                              self.etree)
-        self.Lp = np.empty(m + 1, dtype=np.int64)
-        self.Li = np.empty(max(nnz, 1), dtype=np.int64)
-        self.Lx = np.empty((max(nnz, 1), nb, nb))
-        self.Dinv = np.empty((m, nb, nb))
-        self._marker = np.zeros(m, dtype=np.bool_)
-        self._iw = np.empty((3, m), dtype=np.int64)
-        self._y = np.zeros((m, nb, nb))
-        self._D = np.empty((nb, nb))
-        self._x = np.empty((m, nb))
-        self._rhs = np.zeros((m, nb))
-        self._out = np.empty((m, nb))
-
-    #: the last structure built with an order that depends on the lattice alone ("metis"):
-    #: (nb, order, low, structure); the frontal iterations of a snapshot solve the same
-    #: lattice 60 times over, and its METIS order and symbolic analysis are 20 % of their time
-    _last = None
-
-    @classmethod
-    def of(cls, lat: Lattice, pos, nb=3, order="band", leaf=4, window=0.15):
-        """The structure of ``lat`` (``__init__``), the last one again where it was built for
-        the same block size, order ("metis") and lattice (its ``low``; the pattern and the
-        order depend on nothing else). Its values and factor are scratch of the solve that
-        uses it."""
-        last = cls._last
-        if (order == "metis" and last is not None and last[0] == nb and last[1] == order
-                and last[2].shape == lat.low.shape and np.array_equal(last[2], lat.low)):
-            return last[3]
-        blk = cls(lat, pos, nb, order, leaf, window)
-        if order == "metis":
-            cls._last = (nb, order, lat.low.copy(), blk)
-        return blk
-
-    def factor(self):
-        """Factorise the current ``vals``; False if a pivot is not positive definite."""
-        f = RK.ldl_numeric if self.nb == 3 else RK.ldl_numeric5
-        return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
-                 self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
-                 self._y, self._D)
-
-    def update(self, force, plane, active, low, l_below, cap, lmin, rhs, delta):
-        """delta (m, 3) = K^-1 P force, the force's tangent part at the crossings resting on
-        the wall (``tangent_part``; rhs (m, 3) scratch), scaled down to ``cap`` times each
-        crossing's shortest segment (``cap_moves``); with 3 x 3 blocks in one kernel call
-        (``block_step``)."""
-        if self.nb == 3:
-            RK.block_step(self.m, force, plane, active, low, l_below, cap, self.Lp, self.Li,
-                          self.Lx, self.Dinv, self.perm, rhs, self._x, lmin, delta)
-            return
-        RK.tangent_part(self.m, force, plane, active, rhs)
-        self.solve(rhs, delta)
-        RK.cap_moves(self.m, low, l_below, cap, lmin, delta)
-
-    def solve(self, rhs, out):
-        """out (m, 3) = the position part of K^-1 (rhs, 0): with the materials among the
-        unknowns (nb 5), their right-hand side is 0 (the material equations hold after every
-        sweep)."""
-        if self.nb == 3:
-            RK.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
-                         self._x)
-            return
-        self._rhs[:, :3] = rhs
-        RK.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,
-                       self._out, self._x)
-        out[:] = self._out[:, :3]
-
-
-class _Anderson:
-    """Type-II Anderson mixing of a fixed-point map x -> G(x) (residual r = G(x) - x) over the
-    last ``depth`` iterates: x+ = G(x) - (dX + dR) gamma, gamma = argmin |r - dR gamma| (the
-    paper's eq. 17 is the case of one difference). The least-squares problem goes through the
-    Gram matrix dR^T dR, kept up to date one column per iteration: two passes over the
-    differences and the small solve in one kernel call (``_kernels.relax.anderson_step``)."""
-
-    def __init__(self, depth):
-        self.depth = depth
-        self.n = -1
-        self.reset()
-
-    def reset(self):
-        self.k = 0            # differences stored
-        self.head = 0         # next ring slot
-        self.have_prev = False
-        self.G = np.zeros((max(self.depth, 1), max(self.depth, 1)))
-
-    def __call__(self, x, gx):
-        if self.depth <= 0:
-            return gx
-        n = x.size
-        if n != self.n:
-            self.n = n
-            self.DX = np.empty((n, self.depth))
-            self.DR = np.empty((n, self.depth))
-            self.x_prev = np.empty(n)
-            self.r_prev = np.empty(n)
-            self.b = np.empty(self.depth)
-            self._M = np.empty((self.depth, self.depth))
-            self._gamma = np.empty(self.depth)
-            self.out = np.empty(n)
-            self.reset()
-        j = self.head
-        if self.have_prev:
-            self.head = (j + 1) % self.depth
-            self.k = min(self.k + 1, self.depth)
-        status = RK.anderson_step(n, x, gx, self.x_prev, self.r_prev, self.DX, self.DR, self.G,
-                                  self.k, j, self.have_prev, self.b, self._M, self._gamma,
-                                  self.out)
-        self.have_prev = True
-        if status == 1:
-            return self.out
-        if status < 0:      # a zero pivot: the history is degenerate
-            self.reset()
-        return gx
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
@@ -695,16 +456,12 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
                 h, width, plane, settings, model):
-    """The iteration with the bounds and top tensions held (``relax``)."""
+    """The iteration with the bounds and top tensions held (``relax``): sweep, forces and
+    residual, then the preconditioner's update, wall step and mixing (``preconditioners``)."""
     st = settings
     e = model.energy
     m, ny = lat.m, lat.n_yarns
     EA = float(f_spool) / e.tow_strain
-    eps_f = model.frontal.friction_creep
-    kappa0 = e.kappa0
-    eps2 = e.length_smoothing
-    eps2_top = e.top_smoothing2
-    compression = e.compression
     l_jam = float(width)
     k_jam = e.jam_force * f_spool / max(l_jam, 1e-300)
     times = dict(setup=0.0, sweep=0.0, forces=0.0, factor=0.0, solve=0.0, wall=0.0, smooth=0.0,
@@ -714,10 +471,6 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     s = np.array(s, dtype=float)
     f_top = np.array(f_top, dtype=float)
     g = np.array(bounds, dtype=float)
-    fell = np.ascontiguousarray(fell, dtype=float)
-    top = np.ascontiguousarray(top, dtype=float)
-    s_fell = np.ascontiguousarray(s_fell, dtype=float)
-    s_old = np.ascontiguousarray(s_old, dtype=float)
     if plane is None:
         plane = np.zeros((m, 6))
         plane[:, 2] = -1e300
@@ -726,118 +479,46 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     else:
         plane = np.ascontiguousarray(plane[:m], dtype=float)
         has_wall = True
-    d_below = np.empty((m, 2, 3))
-    l_below = np.empty((m, 2))
-    d_top = np.empty((ny, 3))
-    l_top = np.empty(ny)
-    tension = np.empty((m, 2))
-    chain = np.empty(max(m, 1), dtype=np.int64)
-    work = np.empty((max(m, 1), 6))
-    force = np.empty((m, 3))
-    w_below = np.empty((m, 2))
-    w_top = np.empty(ny)
-    total = np.empty(m)
-    W = np.empty(m)
-    res_c = np.empty(m)
-    diag = np.empty(m)
-    delta = np.empty((m, 3))
-    H3 = np.empty((m, 3, 3))
-    lmin = np.empty(m)
-    wall_force = np.zeros(m)
-    dist = np.empty(m)
-    g_new = np.empty((m, 2))
-    psi = np.zeros((m, 2))
-    active = np.zeros(m, dtype=np.bool_)
+    x = PC.Iterate(
+        lat=lat, law=KZ.law(EA, e.compression, model.frontal.friction_creep, e.kappa0, h,
+                            e.length_smoothing, e.top_smoothing2, l_jam, k_jam, st.floor),
+        prob=KZ.problem(fell, top, s_fell, s_old, g, f_top), settings=st, pos=pos, s=s,
+        tension=np.empty((m, 2)), seg=KZ.segments(m, ny), fo=KZ.forces(m, ny), plane=plane,
+        active=np.zeros(m, dtype=np.bool_), has_wall=has_wall,
+        chain=np.empty(max(m, 1), dtype=np.int64), work=np.empty((max(m, 1), 6)),
+        stats=np.zeros(2, dtype=np.int64), l_prev=np.empty((m, 2)), wall_force=np.zeros(m),
+        dist=np.empty(m))
     if has_wall:
+        dist = x.dist
         RK.wall_distance(m, pos, plane, dist)
-        active[:] = dist < st.wall_contact
-        behind = active & (dist < 0.0)
+        x.active[:] = dist < st.wall_contact
+        behind = x.active & (dist < 0.0)
         pos[behind] -= dist[behind, None] * plane[behind, 3:]
-    full = st.preconditioner == "full"
-    block = st.preconditioner in ("block", "full")
-    if st.preconditioner not in ("block", "scalar", "full"):
-        raise ValueError(f"RelaxSettings.preconditioner = {st.preconditioner!r}: expected "
-                         "'block', 'full' or 'scalar'")
-    lap = _Laplacian(lat) if m and not block else None
-    blk = (_BlockStiffness.of(lat, pos, 5 if full else 3, st.ring_order if full else "band",
-                              st.order_leaf, st.order_window)
-           if m and block else None)
-    rhs = np.empty((m, 3))
+    pc = PC.make(st.preconditioner, x)
+    delta = np.empty((m, 3))
+    new = np.empty((m, 3))
     times["setup"] = time.perf_counter() - t_setup
-    mixer = _Anderson(st.anderson_depth)
+    mixer = PC.Anderson(st.anderson_depth)
     history = []
     residual = np.inf
     it = 0
     converged = False
     factored_active = None
-    set_changes = 0
-    stats = np.zeros(2, dtype=np.int64)
-    smoothing = 0 if block else st.smoothing
     best, best_it = np.inf, 0
     best_f, best_f_it = np.inf, 0
-    l_prev = np.empty((m, 2))
     factorisations = 0
-    jammed = np.zeros((m, 2), dtype=np.bool_)
-    factored_jam = None
-    moved = np.empty((m, 3))
-    new = np.empty((m, 3))
-    predict = False
-    predict_on = st.material_predict and block
-    search = full and st.ring_line_search and m > 0
-    if search:
-        # the top materials at the start: the reference of the energy's payout term
-        s_ref = np.array([s[lat.highest[k], 0 if k < ny // 2 else 1] if lat.highest[k] >= 0
-                          else 0.0 for k in range(ny)])
-        d_t, l_t = np.empty((m, 2, 3)), np.empty((m, 2))
-        dtop_t, ltop_t = np.empty((ny, 3)), np.empty(ny)
-        s_t, ten_t = np.empty((m, 2)), np.empty((m, 2))
-        damped_refactor = False
-
-        def merit(trial):
-            if has_wall:
-                # as the iterate will be: projected onto its plane where behind it
-                RK.wall_distance(m, trial, plane, dist)
-                behind = (dist < 0.0) & active | (dist < -st.wall_release)
-                if behind.any():
-                    trial = trial.copy()
-                    trial[behind] -= dist[behind, None] * plane[behind, 3:]
-            RK.segment_vectors(m, ny, lat.yarn, trial, lat.normal, lat.over, lat.low,
-                               lat.highest, fell, top, h, eps2, eps2_top, d_t, l_t, dtop_t,
-                               ltop_t)
-            s_t[:] = s
-            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_t, s_t, s_fell, s_old, g,
-                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
-                              st.material_newton, ten_t, chain, work, stats, l_below)
-            return RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_t, ltop_t, s_t,
-                                     s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
-                                     l_jam, k_jam, s_ref)
-    swept = False
     while True:
         t0 = time.perf_counter()
-        if swept:
-            # the line search swept the materials at this iterate already
-            d_below[:], l_below[:], d_top[:], l_top[:] = d_t, l_t, dtop_t, ltop_t
-            s[:], tension[:] = s_t, ten_t
-            swept = False
-            if predict_on:
-                l_prev[:] = l_below
-        else:
-            RK.sweep(m, ny, lat.yarn, pos, lat.normal, lat.over, lat.low, lat.up, lat.lowest,
-                     lat.highest, fell, top, h, eps2, eps2_top, s, s_fell, s_old, g, f_top, EA,
-                     compression, eps_f, kappa0, st.material_tol, st.material_newton, d_below,
-                     l_below, d_top, l_top, tension, chain, work, stats, l_prev, predict,
-                     predict_on)
-        predict = predict_on
+        if not pc.take_sweep(x):
+            RK.sweep(x.klat, x.klaw, x.kprob, pos, s, x.kseg, x.tension, x.chain, x.work,
+                     x.stats, x.l_prev, x.predict, pc.predict, st.material_tol,
+                     st.material_newton)
+        x.predict = pc.predict
         t1 = time.perf_counter()
-        residual = RK.forces_residual(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
-                                      d_top, l_top, tension, f_top, l_jam, k_jam, st.floor,
-                                      plane, active, st.wall_release, force, w_below, w_top,
-                                      total, W, res_c)
+        residual = RK.forces_residual(x.klat, x.klaw, x.kprob, x.kseg, x.tension, plane,
+                                      x.active, st.wall_release, x.kfo)
         history.append(residual)
-        if search:
-            E_cur = RK.reduced_energy(m, ny, lat.yarn, lat.low, lat.highest, l_below, l_top, s,
-                                      s_fell, s_old, g, f_top, EA, compression, eps_f, kappa0,
-                                      l_jam, k_jam, s_ref)
+        pc.measure(x)
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
         times["forces"] += t2 - t1
@@ -852,171 +533,58 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             best_f, best_f_it = residual, it
         if residual < best:
             best, best_it = residual, it
-        elif smoothing and it - best_it > st.stall_iterations:
-            smoothing = 0
+        elif pc.smoothing and it - best_it > st.stall_iterations:
+            pc.smoothing = 0
             mixer.reset()
             best_it = it
-        if it >= st.max_iter or (block and it - best_it > (st.ring_stall if full else
-                                                             st.block_stall)):
+        if it >= st.max_iter or (pc.stall is not None and it - best_it > pc.stall):
             break
         it += 1
-        if block:
-            due = bool(st.block_refactor_every) and (it - 1) % st.block_refactor_every == 0
-            # the jamming stiffness k_jam d d^T enters K where a segment is shorter than a
-            # width: where that set changed since the factorisation, K is factorised anew and
-            # Anderson's history (of the old map) cleared
-            # with the full preconditioner only a segment jammed anew (a segment that left the
-            # jam keeps its k_jam in K, which then is stiffer there than the map: the update
-            # falls short rather than beyond)
-            changed_jam = RK.jam_changed(m, lat.low, l_below, l_jam,
-                                         jammed if factored_jam is None else factored_jam,
-                                         full, jammed) and factored_jam is not None
-            if changed_jam:
-                due = True
-                mixer.reset()
-            if search and damped_refactor:
-                due = True
-                damped_refactor = False
-            if full and st.ring_refactor_stall and it - 1 - best_f_it >= st.ring_refactor_stall:
-                due = True
-                mixer.reset()
-        else:
-            due = (it - 1) % st.refactor_every == 0
-        if due or factored_active is None or not RK.same_flags(m, active, factored_active):
+        due = pc.due(x, it, best_f_it, mixer)
+        if due or factored_active is None or not RK.same_flags(m, x.active, factored_active):
             factorisations += 1
             best_f, best_f_it = np.inf, it - 1
-            if block:
-                factored_jam = jammed.copy()
-                reg = st.block_reg
-                while True:
-                    if full:
-                        # a pivot lost (a material whose yarn slides freely on both sides
-                        # has only kappa0): the isotropic share of the positions raised, up
-                        # to 1e6 times; beyond that the step is not converged (Newton's)
-                        RK.full_values(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below,
-                                       d_top, l_top, tension, f_top, s, s_fell, s_old, g, EA,
-                                       compression, eps_f, kappa0, l_jam, k_jam, st.floor, reg,
-                                       plane, active, blk.slot_diag, blk.slot_below,
-                                       blk.below_first, blk.vals, blk.Dg)
-                        if blk.factor() or reg > 1e6 * st.block_reg:
-                            break
-                        reg *= 10.0
-                        continue
-                    RK.block_values(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top,
-                                    tension, f_top, l_jam, k_jam, st.floor, reg, plane, active,
-                                    blk.slot_diag, blk.slot_below, blk.below_first, blk.vals,
-                                    blk.Dg)
-                    if blk.factor():
-                        break
-                    reg *= 10.0     # a pivot lost to round-off: a stiffer isotropic share
-            else:
-                RK.laplacian_values(m, ny, lat.low, lat.highest, w_below, w_top, active,
-                                    lap.slot_diag, lap.slot_below, lap.nslots, lap.vals, diag)
-                lap.factor()
-            factored_active = active.copy()
-            if full and reg > 1e6 * st.block_reg:
+            factored = pc.factor(x)
+            factored_active = x.active.copy()
+            if not factored:
                 break
         t3 = time.perf_counter()
-        if block:
-            blk.update(force, plane, active, lat.low, l_below, st.block_cap, lmin, rhs, delta)
-        else:
-            rhs = np.where(active[:, None], 0.0, force)
-            lap.solve(rhs, delta)
+        pc.update(x, delta)
         t4 = time.perf_counter()
-        changed = False
-        if has_wall and block:
-            # the block update moved the resting crossings in their planes; the local balance
-            # decides who leaves, and who joins (one kernel call: the iteration's fixed cost)
-            changed = RK.block_wall(m, lat.low, lat.up, w_below, force, pos, delta, W, plane,
-                                    active, st.wall_release, wall_force, moved, new)
-            set_changes += changed
-        elif has_wall:
-            delta[active] = 0.0
-            RK.wall_update(m, lat.low, lat.up, w_below, force, pos, delta, diag, plane,
-                           active, st.wall_release, wall_force)
-            np.add(pos, delta, out=new)
-            RK.wall_distance(m, new, plane, dist)
-            join = ~active & (dist < -st.wall_release)
-            leave = active & (dist > st.wall_release)
-            if join.any():
-                new[join] -= dist[join, None] * plane[join, 3:]
-            if join.any() or leave.any():
-                active = (active | join) & ~leave
-                changed = True
-                set_changes += 1
-        else:
-            np.add(pos, delta, out=new)
+        changed = pc.move(x, delta, new)
         t5 = time.perf_counter()
         times["wall"] += t5 - t4
-        for _ in range(smoothing):
-            # block-Jacobi correction with each crossing's own anisotropic stiffness (the
-            # scalar Laplacian cannot tell a crossing's stiff and soft directions apart)
-            RK.segment_vectors(m, ny, lat.yarn, new, lat.normal, lat.over, lat.low,
-                               lat.highest, fell, top, h, eps2, eps2_top, d_below, l_below,
-                               d_top, l_top)
-            RK.material_sweep(ny, lat.lowest, lat.up, lat.yarn, l_below, s, s_fell, s_old, g,
-                              f_top, EA, compression, eps_f, kappa0, st.material_tol,
-                              st.material_newton, tension, chain, work, stats,
-                              l_prev if predict else None)
-            if predict_on:
-                l_prev[:] = l_below
-                predict = True
-            RK.forces(m, ny, lat.yarn, lat.low, lat.highest, d_below, l_below, d_top, l_top,
-                      tension, f_top, l_jam, k_jam, st.floor, force, w_below, w_top, total, W)
-            RK.block_jacobi(m, ny, lat.low, lat.highest, d_below, l_below, d_top, l_top, tension,
-                            f_top, l_jam, k_jam, st.floor, st.smoothing_reg, st.smoothing_cap,
-                            force, plane, active, H3, lmin, delta)
-            new += st.smoothing_weight * delta
+        pc.smooth(x, new, delta)
         t6 = time.perf_counter()
         times["smooth"] += t6 - t5
         t5 = t6
         if changed:
             mixer.reset()
-        if search:
-            cand = mixer(pos.ravel(), new.ravel()).reshape(m, 3).copy()
-            mixed = mixer.k > 0
-            E_c = merit(cand)
-            roundoff = 1e-13 * abs(E_cur)
-            step = new - pos
-            slope = -float(np.vdot(force, step))
-            if not (E_c <= E_cur + roundoff) and slope < -10.0 * roundoff:
-                # the mixed iterate raised the energy: back along the preconditioned step
-                mixer.reset()
-                tt = 1.0 if mixed else 0.5
-                for _ in range(st.ring_halvings):
-                    cand = pos + tt * step
-                    E_c = merit(cand)
-                    if E_c <= E_cur + 1e-4 * tt * slope + roundoff:
-                        break
-                    tt *= 0.5
-                if tt < 1.0:
-                    damped_refactor = st.ring_refactor_damped
-            swept = True
-            pos[:] = cand
-        else:
-            pos[:] = mixer(pos.ravel(), new.ravel()).reshape(m, 3)
+        pc.mix(x, mixer, new)
         # a combination of iterates on the planes stays on them; one that reaches behind a
         # plane (Anderson's weights may be negative) is projected onto it and rests there
-        if has_wall and RK.wall_project(m, pos, plane, active, st.wall_release):
+        if has_wall and RK.wall_project(m, pos, plane, x.active, st.wall_release):
             mixer.reset()
-            set_changes += 1
-        if swept and has_wall and not np.array_equal(pos, cand):
-            swept = False            # projected: the line search's sweep was at another iterate
+            x.set_changes += 1
+        pc.projected(x)
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
     # the friction bounds of the last (converged) geometry, for the next step
-    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, tension, f_top,
-                       float(mu), g_new, psi)
+    seg, tension, active, force = x.seg, x.tension, x.active, x.fo.force
+    g_new = np.empty((m, 2))
+    psi = np.zeros((m, 2))
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, seg.d_below, seg.l_below, seg.d_top, tension,
+                       x.prob.f_top, float(mu), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
     return RelaxResult(pos=pos, s=s, tension=tension, bounds=g_new.copy(), psi=psi.copy(),
-                       f_top=f_top, wall_force=wall_force, active=active.copy(), iterations=it,
-                       residual=float(residual), history=np.array(history),
-                       converged=converged, times=times, set_changes=set_changes,
+                       f_top=x.prob.f_top, wall_force=wall_force, active=active.copy(),
+                       iterations=it, residual=float(residual), history=np.array(history),
+                       converged=converged, times=times, set_changes=x.set_changes,
                        factorisations=factorisations,
-                       sweep_stats=(int(stats[0]), int(stats[1])))
+                       sweep_stats=(int(x.stats[0]), int(x.stats[1])))
 
 
 def _accept(state, res, centres, fr):
@@ -1040,8 +608,8 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     ``max_iter`` solves at most (Newton's frontal iterations), the bounds and ring top tensions
     taken anew from each converged geometry until they change by less than ``friction_tol``
     (``relax`` with consistent bounds). With ``finish`` (a snapshot's final solve, which
-    gives ``friction_tol``) Newton's frontal iteration (``frontal.solve_zone_inplace``) finishes from that
-    state: its wall penalty sets the crossings on the mandrel the micrometre behind their
+    gives ``friction_tol``) Newton's frontal iteration (``frontal.solve_zone_inplace``)
+    finishes from that state: its wall penalty sets the crossings on the mandrel the micrometre behind their
     planes that ``frontal.point_forces`` writes as the wall force, and it takes one iteration
     where the bounds have converged. Otherwise the relaxation's state is the result, the
     newest bounds (of its converged geometry) lagged, as Newton's after ``max_iter``
@@ -1071,7 +639,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     if finish:
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
-                                          where=where, centre=centres)
+                                          where=where, centre=centres, mode="final")
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(), lagged=not res.converged)
 
@@ -1081,9 +649,9 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
 def lattice_of(state) -> Lattice:
     """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
     m = state.m
-    return Lattice(yarn=state.yarn[:m], low=state.low[:m], up=state.up[:m],
-                   over=state.over[:m], normal=state.normal[:m], lowest=state.lowest,
-                   highest=state.highest)
+    return Lattice(m=m, n_yarns=state.n_yarns, yarn=state.yarn[:m], low=state.low[:m],
+                   up=state.up[:m], over=state.over[:m], normal=state.normal[:m],
+                   lowest=state.lowest, highest=state.highest)
 
 
 def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
@@ -1142,27 +710,30 @@ def ring_top_tensions(state, bc):
 
 def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", centre=None,
                tol=None, friction_tol=None, max_iter=None,
-               relax_settings: RelaxSettings | None = None, start=None):
+               relax_settings: RelaxSettings | None = None, start=None, mode="step"):
     """The zone solver with ``frontal.solve_zone_inplace``'s contract (``InteractionZone``'s
     ``solve_zone``; ``[model] solver = "relax"``): brings ``state`` to balance in place
     (positions, material, tensions, friction bounds, slip states, friction offsets) and returns a
     ``frontal.SolveReport`` (iterations: relaxation iterations; ``f_top``: the top tensions).
 
-    A time step (``max_iter`` and ``friction_tol`` not given) is one relaxation with the bounds
-    held, as Newton's single frontal iteration per step; the bounds of the converged geometry go
-    into ``state.bound`` for the next step. Behind a guide ring it is solved again with the top
-    tensions and the new crossings' bounds of its converged geometry until they settle
-    (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``), as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up
-    to k relaxations, each posed by the last one's converged state (its bounds and top tensions,
-    the same friction centres), until the bounds change by less than ``friction_tolerance``, as
-    Newton's frontal iteration. A call that asks for the frontal iteration of the
-    bounds (``max_iter`` or ``friction_tol`` given: the snapshot's re-balance, which must meet Psi
-    to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with consistent
-    bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide ring by
-    ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the relaxation
-    does not converge on (``relax_settings.max_iter`` reached, or the block preconditioner
-    stalled: the first rows of a run, friction-0.5 steps with jamming; ``newton_fallback``,
-    counted in ``FALLBACKS``). Behind a guide ring the relaxation uses
+    ``mode`` (``frontal.SOLVE_MODES``) says what the solve is for. A time step ("step") is one
+    relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds
+    of the converged geometry go into ``state.bound`` for the next step. Behind a guide ring it
+    is solved again with the top tensions and the new crossings' bounds of its converged
+    geometry until they settle (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``),
+    as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up to k
+    relaxations, each posed by the last one's converged state (its bounds and top tensions,
+    the same friction centres), until the bounds change by less than ``friction_tolerance``,
+    as Newton's frontal iteration. A snapshot's frontal iteration of the bounds ("pass": its
+    ring passes of ``max_iter`` iterations; "final": its re-balance to ``friction_tol``, which
+    must meet Psi to 1e-3) is Newton's (``frontal.solve_zone_inplace``; the relaxation's with
+    consistent bounds first, ``_ring_frontal``: its passes and its final solve, behind a guide
+    ring by ``ring_frontal``, without one by ``snapshot_frontal``), as is a step the
+    relaxation does not converge on (``relax_settings.max_iter`` reached, or the block
+    preconditioner stalled: the first rows of a run, friction-0.5 steps with jamming;
+    ``newton_fallback``; the report's ``fallback`` is then set). The report's
+    ``relax_iterations``: the relaxation's iterations of a time step, converged or not.
+    Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
     ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
@@ -1171,19 +742,19 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
     rs = RelaxSettings() if relax_settings is None else relax_settings
-    frontal_iteration = max_iter is not None or friction_tol is not None
+    frontal_iteration = frontal.check_mode(mode) != "step"
     by_relaxation = rs.ring_frontal if bc.has_ring else rs.snapshot_frontal
     if frontal_iteration and by_relaxation and not settings.frontal.consistent_bounds:
         report = _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol,
-                               max_iter, finish=friction_tol is not None, start=start)
+                               max_iter, finish=mode == "final", start=start)
         if report is not None:
             return report
-    if max_iter is not None or friction_tol is not None or settings.frontal.consistent_bounds:
+    if frontal_iteration or settings.frontal.consistent_bounds:
         # consistent bounds: the relaxation does not converge on steps whose crossings stick
         # (docs/decisions.md), Newton's frontal iteration solves them
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
-                                          where=where, centre=centre, start=start)
+                                          where=where, centre=centre, start=start, mode=mode)
     if tol is not None:
         rs = dataclasses.replace(rs, tol=float(tol))
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
@@ -1209,15 +780,13 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
                 fresh=_posed_bounds(state, settings) if bc.has_ring else None)
-    ITERATIONS.append(res.iterations)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
                                                 centre=centres, start=start)
-            FALLBACKS[0] += 1
-            return report
+            return dataclasses.replace(report, relax_iterations=res.iterations, fallback=True)
         raise SimulationError(
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
@@ -1225,4 +794,5 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     _accept(state, res, centres, fr)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
-                               lagged=not (rs.consistent_bounds and res.converged))
+                               lagged=not (rs.consistent_bounds and res.converged),
+                               relax_iterations=res.iterations)
