@@ -337,20 +337,20 @@ def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=N
     safe_folder(out)
     evaluations: list[Evaluation] = []
     seen = {}
-    session = {}   # one Dask client for every stage, made when the first runs are due
+    cluster = {}   # one Dask client for every stage, made when the first runs are due
 
     try:
         return _search(config_path, base, run_data, measurements, params, kinds, noise, out,
-                       evaluations, seen, session, scheduler, workers, resume, progress, settings)
+                       evaluations, seen, cluster, scheduler, workers, resume, progress, settings)
     finally:
-        if session:
-            session["client"].close()
-            if session["local"] is not None:
-                session["local"].close()
+        if cluster:
+            cluster["client"].close()
+            if cluster["local"] is not None:
+                cluster["local"].close()
 
 
 def _search(config_path, base, run_data, measurements, params, kinds, noise, out, evaluations,
-            seen, session, scheduler, workers, resume, progress, settings):
+            seen, cluster, scheduler, workers, resume, progress, settings):
     """The stages of :func:`calibrate` and its files; returns the report."""
 
     def run_stage(name, combos):
@@ -365,13 +365,13 @@ def _search(config_path, base, run_data, measurements, params, kinds, noise, out
                 done = [finished(spec, p) for p in spec.points]
             else:
                 done = [None]
-            if any(d is None for d in done) and not session:
+            if any(d is None for d in done) and not cluster:
                 from .sweeps import open_client
 
-                session["client"], session["local"] = open_client(scheduler, workers)
+                cluster["client"], cluster["local"] = open_client(scheduler, workers)
             rows = run_spec(spec, scheduler=scheduler, workers=workers, resume=resume,
                             progress=progress, label=f"calibrate {name}",
-                            client=session.get("client"))
+                            client=cluster.get("client"))
             for point, row in zip(spec.points, rows):
                 e = Evaluation(stage=name, index=point.index, values=point.values,
                                status=row.get("status", "failed"), results=str(row.get("results")),
