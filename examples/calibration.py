@@ -73,13 +73,12 @@ def write_case(folder: Path, name: str, values: dict, results: str) -> Path:
 def measure(run: Path, out: Path, noise: dict, seed: int) -> list[Path]:
     """The run sampled as a braid is measured, with Gaussian noise of ``noise`` per kind."""
     from preform.compare import history_curve, load_run
+    from preform.interlacing import azimuths
 
     rng = np.random.default_rng(seed)
     r = load_run(run)
-    c = r.vertices[r.faces].mean(axis=1)
-    s, _ = r.centerline.project(c)
-    p, _, N, B = r.centerline.frames_at(s)
-    phi = np.degrees(np.arctan2(np.einsum("ij,ij->i", c - p, B), np.einsum("ij,ij->i", c - p, N)))
+    s, phi = azimuths(r.vertices[r.faces].mean(axis=1), r.centerline)
+    phi = np.degrees(phi)
     a = r.cell_data["braid_angle_deg"]
     faces = rng.choice(np.flatnonzero(a > 0), 60, replace=False)
     files = [out / "angles.csv", out / "convergence.csv", out / "yarns.csv"]

@@ -39,13 +39,12 @@ def case(tmp_path_factory):
 
 def _measurements(run, d):
     from preform.compare import history_curve, load_run
+    from preform.interlacing import azimuths
 
     rng = np.random.default_rng(7)
     r = load_run(run)
-    c = r.vertices[r.faces].mean(axis=1)
-    s, _ = r.centerline.project(c)
-    p, _, N, B = r.centerline.frames_at(s)
-    phi = np.degrees(np.arctan2(np.einsum("ij,ij->i", c - p, B), np.einsum("ij,ij->i", c - p, N)))
+    s, phi = azimuths(r.vertices[r.faces].mean(axis=1), r.centerline)
+    phi = np.degrees(phi)
     a = r.cell_data["braid_angle_deg"]
     faces = rng.choice(np.flatnonzero(a > 0), 60, replace=False)
     files = [d / "angles.csv", d / "H.csv", d / "yarns.csv"]
