@@ -90,6 +90,7 @@ import scipy.sparse as sp
 from .._kernels import frontal as frontal_kernels
 from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
+from .contact import bound_change
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
 
@@ -503,20 +504,12 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
 
 def _relative_change(state, net, bound1, f_top1):
     """Largest change from the network's bounds and top tensions to ``bound1``, ``f_top1``:
-    a bound's relative to f_int + f_ext of its crossing and yarn (at ``f_top1``), a top
-    tension's relative to itself."""
+    a bound's relative to f_int + f_ext of its crossing and yarn (at ``f_top1``,
+    ``contact.bound_change``), a top tension's relative to itself."""
     m = state.m
-    scale = np.empty((m, 2))
-    for side in range(2):
-        u = state.up[:m, side]
-        f_ext = np.where(u >= 0, net.tension[np.maximum(u, 0), side],
-                         f_top1[state.yarn[:m, side]])
-        # a scale that cannot vanish where a yarn goes slack (``change_scale_floor``)
-        scale[:, side] = np.maximum(net.tension[:, side] + f_ext,
-                                    net.settings.frontal.change_scale_floor
-                                    * f_top1[state.yarn[:m, side]])
-    return max(float(np.max(np.abs(bound1 - net.bound) / scale)),
-               float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
+    change = bound_change(state.up[:m], state.yarn[:m], net.tension, f_top1, bound1, net.bound,
+                          net.settings.frontal.change_scale_floor)
+    return max(change, float(np.max(np.abs(f_top1 - net.f_top) / f_top1)))
 
 
 class _BoundMixing:

@@ -127,6 +127,7 @@ from .._kernels import zone as KZ
 from .._kernels.zone import Lattice
 from ..errors import SimulationError
 from . import preconditioners as PC
+from .contact import bound_change
 from .settings import DEFAULT, InteractionSettings
 
 
@@ -443,15 +444,8 @@ def _lag_change(lat, res, held, top_tensions, f_top, floor=DEFAULT.frontal.chang
 
 def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_scale_floor):
     """Largest change of the bounds relative to f_int + f_ext of their crossing and yarn, at
-    least ``floor`` times the yarn's top tension (``FrontalSettings.change_scale_floor``): a
-    scale that cannot vanish where a yarn goes slack."""
-    scale = np.empty_like(tension)
-    for side in range(2):
-        u = lat.up[:, side]
-        top = f_top[lat.yarn[:, side]]
-        scale[:, side] = np.maximum(tension[:, side] + np.where(
-            u >= 0, tension[np.maximum(u, 0), side], top), floor * top)
-    return float(np.max(np.abs(new - old) / scale))
+    least ``floor`` times the yarn's top tension (``contact.bound_change``)."""
+    return bound_change(lat.up, lat.yarn, tension, f_top, new, old, floor)
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
