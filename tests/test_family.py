@@ -134,7 +134,7 @@ def test_mandrel_distance_is_the_closest_points_on_a_sliver_mesh(tri):
     polyhedron; the facets' chord error is 0.1 mm), where the plane of the face with the
     nearest centroid is off by millimetres beside a sliver."""
     from preform.geometry import mandrel_from_arrays
-    from preform.interaction.model import MandrelDistance
+    from preform.interaction.mandrel_distance import MandrelDistance
 
     V, F, _ = shapes.family_part("s_tube", triangulation=tri)
     m = mandrel_from_arrays(V, F)

@@ -23,8 +23,8 @@ from preform.geometry import shapes
 from preform.interaction import frontal, linalg
 from preform.interaction.contact import psi as friction_function
 from preform.geometry.mandrel import mandrel_from_arrays
-from preform.interaction.model import (NEAR, InteractionZone, MandrelDistance, NearSettings,
-                                      creation_point)
+from preform.interaction.mandrel_distance import NEAR, MandrelDistance, NearSettings
+from preform.interaction.model import InteractionZone, creation_point
 from preform.interaction.settings import DEFAULT
 from preform.interaction.zone_state import ZoneState
 from preform.io.vtk_yarns import write_convergence

@@ -33,7 +33,7 @@ Per crossing ``c`` (first ``m`` rows of arrays of capacity ``cap``, grown by dou
 - ``tension (cap, 2) float64, N``: tension of the segment below the crossing on each yarn;
 - ``uid (cap,) int64``: stable crossing id (``contact_id`` in snapshots); ``t_create (cap,)`` s.
 
-Not state, a cache of the mandrel look-ups (``model.MandrelDistance.near``; not in ``to_arrays``,
+Not state, a cache of the mandrel look-ups (``mandrel_distance.MandrelDistance.near``; not in ``to_arrays``,
 unknown after ``from_arrays`` and for a new crossing): ``near_lo``, ``near_hi (cap,) float64, m``,
 bounds from below and above of the crossing's distance to the nearest face sample when it was at
 ``near_at (cap, 3) float64`` (mandrel frame); ``-inf``, ``inf``: none known. That distance is
