@@ -93,7 +93,8 @@ class InteractionZone:
     :class:`~preform.machine.Machine`; mandrel: the mandrel (mandrel frame) whose distance decides
     deposition and whose tangent planes are the wall, or None; distance: instead of the mandrel, a
     :class:`MandrelDistance` or a plain callable ``points (k, 3) -> signed distance (k,)`` (no
-    wall: it has no planes); settings: the numerical settings (default ``settings.DEFAULT``);
+    wall: it has no planes); settings: the numerical settings (default ``settings.DEFAULT``; its
+    ``near`` for the look-ups of ``mandrel``);
     solve_zone: the zone solver, ``frontal.solve_zone_inplace`` or a stand-in with its signature
     (failure-injection tests).
     """
@@ -105,7 +106,7 @@ class InteractionZone:
         self.settings = DEFAULT if settings is None else settings
         self.solve_zone = frontal.solve_zone_inplace if solve_zone is None else solve_zone
         self.distance = distance if distance is not None else (
-            MandrelDistance(mandrel) if mandrel is not None else None)
+            MandrelDistance(mandrel, self.settings.near) if mandrel is not None else None)
         # the tangent planes of the wall: only a mandrel has them
         self.planes = self.distance.planes if isinstance(self.distance, MandrelDistance) else None
         y = config.yarn
