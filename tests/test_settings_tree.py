@@ -35,6 +35,7 @@ from preform.quality import QUALITY, assess, surface_reasons
 from preform.settings import DEFAULT, Settings
 from preform.simulation import load_geometry, make_stepper, make_zone
 from preform.steady import STEADY, steady_state
+from preform.structural.layup import BinSettings, bin_plies
 from preform.tolerances import tol
 from simcase import write_cylinder_case
 
@@ -60,6 +61,7 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.steady == STEADY == _default(steady_state, "settings")
     assert s.quality == QUALITY == _default(assess, "settings") == _default(surface_reasons, "settings")
     assert s.limits == LIMITS == _default(check_work, "limits")
+    assert s.binning == BinSettings() == _default(bin_plies, "settings")
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.interaction.relax.tol = 1.0
@@ -129,19 +131,23 @@ QUALITY_STRICT = dataclasses.replace(QUALITY, max_fell_jump=1e-3)
 STEADY_LONG_TAIL = dataclasses.replace(STEADY, tail=0.5, angle_deg=10.0, rel_H=0.5)
 INTERLACING_COARSE = dataclasses.replace(INTERLACING, points_per_yarn=2)
 REMESH_FEW = dataclasses.replace(RemeshSettings(), iterations=1)
+BINNING_COARSE = BinSettings(angle_step_deg=5.0)
 
 
 @pytest.fixture(scope="module")
 def strict_run(tmp_path_factory):
-    """(result, summary.json, folder) of a short kinematic run on a cylinder through
-    ``pipeline.run_case`` with the non-default settings above."""
+    """(result, summary.json, folder) of a short kinematic run on a cylinder, with tow data and a
+    material (so the RTM fields and the shell deck are written), through ``pipeline.run_case``
+    with the non-default settings above."""
     from preform.pipeline import run_case
 
     folder = tmp_path_factory.mktemp("tree_run")
-    cfg = pf.load_config(write_cylinder_case(folder, braid=0.05, snapshots=0,
-                                             output_extra="pictures = false"))
-    tree = Settings(quality=QUALITY_STRICT, steady=STEADY_LONG_TAIL,
-                    interlacing=INTERLACING_COARSE, remesh=REMESH_FEW)
+    cfg = pf.load_config(write_cylinder_case(
+        folder, braid=0.05, carriers=48, snapshots=0, output_extra="pictures = false",
+        yarn_extra="linear_density_tex = 800.0\nfibre_density = 1780.0\nfibre_radius = 3.5e-6",
+        extra='[rtm]\ncavity_thickness = 1e-3\n[material]\npreset = "AS4/3501-6"'))
+    tree = Settings(quality=QUALITY_STRICT, steady=STEADY_LONG_TAIL, interlacing=INTERLACING_COARSE,
+                    remesh=REMESH_FEW, binning=BINNING_COARSE)
     outcome = run_case(cfg, folder / "out", settings=tree)
     summary = json.loads((folder / "out" / "summary.json").read_text())
     return outcome.result, summary, folder / "out"
@@ -187,3 +193,12 @@ def test_the_remesh_settings_reach_the_field_mesh(strict_run):
     assert written.n_cells == len(F)
     assert np.array_equal(np.asarray(written.points, dtype=float), V)
     assert len(F0) != len(F) or not np.array_equal(V0, V)
+
+
+def test_the_binning_reaches_the_shell_deck(strict_run):
+    """Ply angles binned to 5 deg: the deck's largest angle change is above the 0.125 deg the
+    default 0.25 deg step allows (half a step) and within half the coarse step."""
+    _, summary, out = strict_run
+    structural = summary["structural"]
+    assert structural["written"] and (out / "fe" / "preform.inp").is_file()
+    assert 0.125 < structural["binning_error"]["angle_deg"] <= 2.5

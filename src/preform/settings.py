@@ -27,6 +27,7 @@ from .interaction.settings import InteractionSettings
 from .interlacing import InterlacingSettings
 from .quality import QualitySettings
 from .steady import SteadySettings
+from .structural.layup import BinSettings
 from .tolerances import Tolerances
 
 
@@ -52,6 +53,9 @@ class Settings:
     quality: QualitySettings = field(default_factory=QualitySettings)
     #: the work estimate's limits, refused beyond unless ``--force`` (``budget.check_work``)
     limits: WorkLimits = field(default_factory=WorkLimits)
+    #: how finely the shell deck's plies are binned into element groups
+    #: (``structural.write_structural``)
+    binning: BinSettings = field(default_factory=BinSettings)
 
 
 #: the defaults of every stage

@@ -160,7 +160,8 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         not looked at): it gets ``fields`` before the data files are written, and is waited for
         after them; stopped if writing fails
     settings : the numerical settings of the run (``preform.Settings``; None: the defaults),
-        for the verdict, the steady state and the interlacing in summary.json and the plots
+        for the verdict, the steady state and the interlacing in summary.json and the plots,
+        and the shell deck's binning
     returns : the paths written, summary.json last
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
@@ -201,7 +202,8 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
         rtm = _write_rtm(result, fields, out_dir, written)
-        structural = _write_structural(result, fields, out_dir, written, layer_results)
+        structural = _write_structural(result, fields, out_dir, written, layer_results,
+                                       None if settings is None else settings.binning)
     except BaseException:
         if pictures is not None:
             pictures.stop()
@@ -253,12 +255,13 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
     return said
 
 
-def _write_structural(result, fields, out_dir, written, layer_results) -> dict:
+def _write_structural(result, fields, out_dir, written, layer_results, binning=None) -> dict:
     """``fe/`` when the config has a [material] section and the fields fibre content; what the
-    summary says (``preform.structural``)."""
+    summary says (``preform.structural``; ``binning``: its ``layup.BinSettings``, None: the
+    defaults)."""
     from ..structural import write_structural
 
-    paths, said = write_structural(result, fields, out_dir, layer_results)
+    paths, said = write_structural(result, fields, out_dir, layer_results, binning)
     written += paths
     return said
 
