@@ -182,10 +182,11 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     (``_posed_fixed_point``). Returns a :class:`RelaxResult` (``converged`` False if ``tol``
     was not reached).
 
-    Consistent bounds: an outer fixed point, as Newton's frontal loop (``frontal.solve_zone``):
-    the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
-    from its converged geometry and tensions, and the step is solved again from there until they
-    change by less than ``friction_tol`` relative to the tensions."""
+    Consistent bounds (``consistent``; else the bounds are held): an outer fixed point, as
+    Newton's frontal loop (``frontal.solve_zone``): the step is solved with the bounds held, the
+    bounds (and ring top tensions) are taken anew from its converged geometry and tensions, and
+    the step is solved again from there until they change by less than ``friction_tol``
+    relative to the tensions."""
     kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
               model=model)
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
