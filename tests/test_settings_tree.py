@@ -93,9 +93,10 @@ def test_a_near_clearance_reaches_the_zones_mandrel_look_ups(interaction_case):
 
 
 def test_a_relaxation_tolerance_reaches_the_relaxation(interaction_case):
-    """One relaxation iteration a step, no Newton fallback, and a tolerance of 3.21e-9: the run
-    stops at its first step with crossings, with the relaxation's own message naming that
-    iteration limit and that tolerance (the defaults converge: 200 iterations, 1e-7)."""
+    """One relaxation iteration a step, no Newton fallback, no staged retry of a failed step,
+    and a tolerance of 3.21e-9: the run stops at its first step with crossings, with the
+    relaxation's own message naming that iteration limit and that tolerance (the defaults
+    converge: 200 iterations, 1e-7)."""
     cfg, mandrel, centerline = interaction_case
     rs = dataclasses.replace(INTERACTION.relax, tol=3.21e-9, max_iter=1, newton_fallback=False)
     tree = Settings(interaction=dataclasses.replace(
