@@ -31,7 +31,9 @@ from preform.interaction.mandrel_distance import NEAR, MandrelDistance, NearSett
 from preform.interaction.settings import DEFAULT as INTERACTION
 from preform.interlacing import INTERLACING, interlacing
 from preform.machine import Machine
+from preform.io.rtm_files import write_rtm
 from preform.quality import QUALITY, assess, surface_reasons
+from preform.rtm import RTM, RtmSettings
 from preform.settings import DEFAULT, Settings
 from preform.simulation import load_geometry, make_stepper, make_zone
 from preform.steady import STEADY, steady_state
@@ -62,6 +64,7 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.quality == QUALITY == _default(assess, "settings") == _default(surface_reasons, "settings")
     assert s.limits == LIMITS == _default(check_work, "limits")
     assert s.binning == BinSettings() == _default(bin_plies, "settings")
+    assert s.rtm == RTM and s.rtm.property_sets == _default(write_rtm, "n_sets")
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.interaction.relax.tol = 1.0
@@ -133,6 +136,7 @@ STEADY_LONG_TAIL = dataclasses.replace(STEADY, tail=0.5, angle_deg=10.0, rel_H=0
 INTERLACING_COARSE = dataclasses.replace(INTERLACING, points_per_yarn=2)
 REMESH_FEW = dataclasses.replace(RemeshSettings(), iterations=1)
 BINNING_COARSE = BinSettings(angle_step_deg=5.0)
+RTM_FEW_SETS = RtmSettings(property_sets=2)
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +152,7 @@ def strict_run(tmp_path_factory):
         yarn_extra="linear_density_tex = 800.0\nfibre_density = 1780.0\nfibre_radius = 3.5e-6",
         extra='[rtm]\ncavity_thickness = 1e-3\n[material]\npreset = "AS4/3501-6"'))
     tree = Settings(quality=QUALITY_STRICT, steady=STEADY_LONG_TAIL, interlacing=INTERLACING_COARSE,
-                    remesh=REMESH_FEW, binning=BINNING_COARSE)
+                    remesh=REMESH_FEW, binning=BINNING_COARSE, rtm=RTM_FEW_SETS)
     outcome = run_case(cfg, folder / "out", settings=tree)
     summary = json.loads((folder / "out" / "summary.json").read_text())
     return outcome.result, summary, folder / "out"
@@ -203,3 +207,11 @@ def test_the_binning_reaches_the_shell_deck(strict_run):
     structural = summary["structural"]
     assert structural["written"] and (out / "fe" / "preform.inp").is_file()
     assert 0.125 < structural["binning_error"]["angle_deg"] <= 2.5
+
+
+def test_the_rtm_sets_reach_the_rtm_files(strict_run):
+    """Two property sets: the faces without preform take one, the preform's K1 the other (the
+    default four give this run four)."""
+    _, summary, out = strict_run
+    assert summary["rtm"]["written"] and (out / "rtm" / "rtmsim.bdf").is_file()
+    assert summary["rtm"]["sets"] == 2

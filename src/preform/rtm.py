@@ -132,6 +132,18 @@ def principal_in_plane(K, normals, reference):
     return mean + half, mean - half, direction
 
 
+@dataclass(frozen=True)
+class RtmSettings:
+    """How the RTM solver files bin the faces' properties (``io.rtm_files.write_rtm``)."""
+
+    #: property sets of RTMsim's file at most (its solver takes few; the faces' K1 are binned
+    #: into them, the largest relative error within a set is the summary's binning_error_k1)
+    property_sets: int = 4
+
+
+RTM = RtmSettings()
+
+
 def bin_cells(values, n_sets=4):
     """Bin positive ``values`` into at most ``n_sets`` sets, for solvers that take few property sets.
 

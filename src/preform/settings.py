@@ -26,6 +26,7 @@ from .geometry.remesh import RemeshSettings
 from .interaction.settings import InteractionSettings
 from .interlacing import InterlacingSettings
 from .quality import QualitySettings
+from .rtm import RtmSettings
 from .steady import SteadySettings
 from .structural.layup import BinSettings
 from .tolerances import Tolerances
@@ -53,6 +54,8 @@ class Settings:
     quality: QualitySettings = field(default_factory=QualitySettings)
     #: the work estimate's limits, refused beyond unless ``--force`` (``budget.check_work``)
     limits: WorkLimits = field(default_factory=WorkLimits)
+    #: how the RTM solver files bin the faces' properties (``io.rtm_files.write_rtm``)
+    rtm: RtmSettings = field(default_factory=RtmSettings)
     #: how finely the shell deck's plies are binned into element groups
     #: (``structural.write_structural``)
     binning: BinSettings = field(default_factory=BinSettings)

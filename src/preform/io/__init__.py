@@ -161,7 +161,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         after them; stopped if writing fails
     settings : the numerical settings of the run (``preform.Settings``; None: the defaults),
         for the verdict, the steady state and the interlacing in summary.json and the plots,
-        and the shell deck's binning
+        and the binning of the RTM files and of the shell deck
     returns : the paths written, summary.json last
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
@@ -201,7 +201,8 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
                 written.append(write_input_mesh_fields(fields, result.mandrel, out_dir))
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
-        rtm = _write_rtm(result, fields, out_dir, written)
+        rtm = _write_rtm(result, fields, out_dir, written,
+                         None if settings is None else settings.rtm)
         structural = _write_structural(result, fields, out_dir, written, layer_results,
                                        None if settings is None else settings.binning)
     except BaseException:
@@ -239,9 +240,10 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     return written
 
 
-def _write_rtm(result, fields, out_dir, written) -> dict:
-    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says."""
-    from ..rtm import missing_material
+def _write_rtm(result, fields, out_dir, written, settings=None) -> dict:
+    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says
+    (``settings``: ``rtm.RtmSettings``, None: the defaults)."""
+    from ..rtm import RTM, missing_material
 
     reason = missing_material(result.config) if result.config is not None else "no config"
     if reason:
@@ -250,7 +252,8 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
         return {"written": False, "reason": "no surface fields"}
     from .rtm_files import write_rtm
 
-    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness)
+    paths, said = write_rtm(fields, out_dir, n_sets=(settings or RTM).property_sets,
+                            cavity_thickness=result.config.rtm.cavity_thickness)
     written += paths
     return said
 

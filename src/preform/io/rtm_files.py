@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rtm import RTM
 from .atomic import atomic_path, atomic_write_text
 
 #: Nastran small-field width and large-field width (characters)
@@ -95,7 +96,8 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
 RTM_DIR = "rtm"
 
 
-def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Path], dict]:
+def write_rtm(fields, out_dir, n_sets=RTM.property_sets,
+              cavity_thickness=None) -> tuple[list[Path], dict]:
     """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
 
     Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
