@@ -121,7 +121,7 @@ def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None) -> tuple[list
     """
     import warnings
 
-    from ..rtm import BINNING, bin_cells, compression
+    from ..rtm import BINNING, MAX_COMPACTED_VF, bin_cells, compression
     from .atomic import safe_folder
 
     folder = safe_folder(out_dir, RTM_DIR)
@@ -153,7 +153,10 @@ def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None) -> tuple[list
         values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
                        channel, 1.0, (1.0, 0.0, 0.0)))
     written += write_rtmsim_bdf(folder / "rtmsim.bdf", fields.vertices, fields.faces, index, values)
-    squeeze = compression(cd["fibre_volume_fraction"][valid], cd["thickness_m"][valid], area[valid],
+    # faces packed to V_f 1 or more are no preform to the fields (rtm_valid 0), but the most
+    # compressed: they count here
+    packed = valid | (cd["fibre_volume_fraction"] >= MAX_COMPACTED_VF)
+    squeeze = compression(cd["fibre_volume_fraction"][packed], cd["thickness_m"][packed], area[packed],
                           cavity_thickness)
     for text in squeeze.pop("warnings"):
         warnings.warn(text, UserWarning, stacklevel=3)
