@@ -58,7 +58,7 @@ figure img{max-width:100%;height:auto;display:block;margin:0 auto}
 figcaption{color:#444;font-size:.9rem;margin-top:6px}
 pre{background:#fff;border:1px solid #e0e0e0;padding:10px;overflow:auto;font-size:.85rem}
 details summary{cursor:pointer;color:#333}
-a{color:#0b57d0}
+a{color:#0b57d0} .wide{overflow-x:auto}
 """
 
 
@@ -240,14 +240,15 @@ def _inputs_text(folder: Path, summary: dict) -> tuple[str, str]:
         return "the inputs as read (summary.json)", json.dumps(inputs, indent=2)
 
 
-def _verdict_block(verdict: str, reasons: list[str], detail: str = "") -> str:
+def _verdict_block(verdict: str, reasons: list[str], detail: str = "",
+                   empty: str = "no reasons to doubt the run") -> str:
     word, colour = VERDICT_STYLE[verdict]
     items = "".join(f"<li>{_e(r)}</li>" for r in reasons)
     lines = [f'<section class="verdict" id="verdict" data-verdict="{verdict}" style="background:{colour}">',
              f'<div class="word">{word}</div>']
     if detail:
         lines.append(f"<p>{_e(detail)}</p>")
-    lines.append(f"<ul>{items}</ul>" if items else "<p>no reasons to doubt the run</p>")
+    lines.append(f"<ul>{items}</ul>" if items else f"<p>{_e(empty)}</p>")
     lines.append("</section>")
     return "\n".join(lines)
 
@@ -315,7 +316,10 @@ def sweep_report_html(folder) -> str:
     folder = Path(folder)
     with open(folder / "sweep.csv", newline="", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
-    header = list(rows[0]) if rows else []
+    #: sweep.csv's columns the page leaves out: the verdict is its own (from the point's summary),
+    #: the folder is the link, the message is in the reasons
+    left_out = {"verdict", "results", "message"}
+    header = [k for k in (rows[0] if rows else []) if k not in left_out]
     points = []
     worst = "ok"
     rank = {"ok": 0, "suspect": 1, "failed": 2}
@@ -327,8 +331,8 @@ def sweep_report_html(folder) -> str:
         verdict, reasons = verdict_of(summary) if summary else ("failed", [row.get("message") or "no summary.json"])
         worst = max(worst, verdict, key=rank.__getitem__)
         points.append((row, point, summary, verdict, reasons))
-        link = (f'<a href="{_e(point.relative_to(folder).as_posix() if point.is_relative_to(folder) else point.as_uri())}/{REPORT}">'
-                f"{_e(row.get('point', ''))}</a>")
+        target = point.relative_to(folder).as_posix() if point.is_relative_to(folder) else point.as_uri()
+        link = f'<a href="{_e(target)}/{REPORT}">{_e(row.get("point", ""))}</a>'
         cells = [link if k == "point" else _e(_num(_maybe_float(row[k]))) for k in header]
         word, colour = VERDICT_STYLE[verdict]
         table_rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells)
@@ -337,9 +341,13 @@ def sweep_report_html(folder) -> str:
     n_bad = sum(v != "ok" for *_, v, _ in points)
     reasons = [f"point {r.get('point')}: {verdict_word}: {'; '.join(why)}"
                for r, _, _, verdict_word, why in points if verdict_word != "ok"]
-    parts = [_verdict_block(worst, reasons, f"{len(points) - n_bad} of {len(points)} points ok")]
-    head = "".join(f"<th>{_e(h)}</th>" for h in header) + "<th>verdict</th><th>reasons</th>"
-    parts.append(f"<h2>Points</h2><table><thead><tr>{head}</tr></thead><tbody>{''.join(table_rows)}</tbody></table>")
+    parts = [_verdict_block(worst, reasons, f"{len(points) - n_bad} of {len(points)} points ok",
+                            empty="no reasons to doubt any point")]
+    names = {"braid_angle_final_deg": "final angle (deg)", "braid_angle_steady_deg": "steady angle (deg)",
+             "convergence_length_final_m": "final H (m)", "wall_time_s": "wall (s)"}
+    head = "".join(f"<th>{_e(names.get(h, h))}</th>" for h in header) + "<th>verdict</th><th>reasons</th>"
+    parts.append(f"<h2>Points</h2><p>each point's number links to its own report</p><div class=\"wide\"><table><thead>"
+                 f"<tr>{head}</tr></thead><tbody>{''.join(table_rows)}</tbody></table></div>")
     own = [p for p in sorted([*folder.glob("*.png"), *(folder / PLOTS).glob("*.png")])
            if p.is_file() and not p.is_symlink()]
     if own:
@@ -354,7 +362,14 @@ def sweep_report_html(folder) -> str:
                 caption = f"point {row.get('point')}: {CAPTIONS[name]}"
                 parts.append(f'<figure><img src="{_png_uri(pic)}" alt="{_e(caption)}">'
                              f"<figcaption>{_e(caption)}</figcaption></figure>")
-    return _page(f"{folder.name}: sweep of {len(points)} points", f"results folder {folder}", "\n".join(parts))
+    varied = ", ".join(k for k in header if k not in ("point", *SWEEP_RESULT_COLUMNS))
+    return _page(f"{folder.name}: sweep of {len(points)} points" + (f" over {varied}" if varied else ""),
+                 f"results folder {folder}", "\n".join(parts))
+
+
+#: sweep.csv's result columns (the others are the varied keys)
+SWEEP_RESULT_COLUMNS = ("status", "braid_angle_final_deg", "braid_angle_steady_deg", "convergence_length_final_m",
+                        "wall_time_s")
 
 
 def _maybe_float(text):
