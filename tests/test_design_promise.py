@@ -111,3 +111,30 @@ def test_the_designed_toml_is_one_pair_a_line_and_reruns_into_its_own_folder(unm
     assert not (source.parent / "results" / "cyl").exists()   # the source's results untouched
     np.testing.assert_allclose([row[1] for row in config.process.take_up_speed],
                                [row[1] for row in written["process"]["take_up_speed"]], rtol=0)
+
+
+def synthetic_design(worst_at, radius):
+    """A Design whose largest judged error (0.5 deg) sits at ``worst_at`` m: H_inf 0.1 m, judged
+    from 0.2 m, 2 m long."""
+    from preform.design import Design
+
+    length = np.linspace(0.0, 2.0, 201)
+    error = 0.05 + 0.45 * np.exp(-((length - worst_at) / 0.02) ** 2)
+    return Design(length=length, speed=np.full_like(length, 0.01), target_deg=np.full_like(length, 40.0),
+                  achieved_deg=40.0 + error, passes=5, h_inf=0.1, errors_deg=(0.9, 0.6, 0.5, 0.55, 0.6),
+                  best_pass=3, radius=radius(length))
+
+
+@pytest.mark.parametrize("worst_at, radius, cause", [
+    (0.25, lambda s: np.full_like(s, 0.05), "start-up transient"),
+    # a section that grows by 20 % between 1.0 and 1.1 m, the error at 1.05 m
+    (1.05, lambda s: 0.05 * (1 + 0.2 * np.clip((s - 1.0) / 0.1, 0, 1)), "section changes"),
+    (1.05, lambda s: np.full_like(s, 0.05), "stopped improving after pass 3"),
+])
+def test_the_shortfall_names_its_cause(worst_at, radius, cause):
+    from preform.design import shortfall
+
+    design = synthetic_design(worst_at, radius)
+    assert not design.met and design.max_error_deg() == pytest.approx(0.5, abs=1e-3)
+    said = shortfall(design)
+    assert cause in said and f"at L = {worst_at:.2f} m" in said
