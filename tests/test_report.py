@@ -24,30 +24,30 @@ needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not in
 
 @pytest.fixture(scope="module")
 def run_folder(tmp_path_factory):
-    """A short kinematic run with its pictures (case A's cylinder, 16 carriers, 0.4 m)."""
+    """A short kinematic run with its pictures (the 1 m cone, 16 carriers, 0.4 m braided)."""
     folder = tmp_path_factory.mktemp("report")
-    cfg = folder / "short_tube.toml"
+    cfg = folder / "short_cone.toml"
     cfg.write_text(f"""
 [mandrel]
-stl = "{ROOT / 'mandrels' / 'case_a.stl'}"
-centerline = "{ROOT / 'mandrels' / 'case_a_centerline.csv'}"
+stl = "{ROOT / 'mandrels' / 'cone.stl'}"
+centerline = "{ROOT / 'mandrels' / 'cone_centerline.csv'}"
 [machine]
 carriers = 16
-spool_radius = 0.3
+spool_radius = 0.25
 angular_speed = 20.0
 [yarn]
 width = 4e-3
 thickness = 2.5e-4
 [process]
-take_up_speed = 0.025
-initial_position = 0.168
+take_up_speed = 0.01
+initial_position = 0.15
 braid_length = 0.4
 [output]
-dir = "results/short_tube"
+dir = "results/short_cone"
 snapshots = 0
 """)
     assert main(["run", str(cfg), "--no-progress"]) == 0
-    return folder / "results" / "short_tube"
+    return folder / "results" / "short_cone"
 
 
 def test_the_run_writes_its_report_with_every_picture_and_the_inputs(run_folder):
