@@ -74,6 +74,21 @@ def test_a_failed_run_is_never_ok():
     verdict, reasons = verdict_of({"status": "failed", "message": "the mandrel's end passed the machine",
                                    "quality": {"verdict": "ok", "reasons": []}})
     assert verdict == "failed" and "mandrel's end" in reasons[0]
+    verdict, reasons = verdict_of({"status": "interrupted", "message": "stopped by SIGTERM after step 40",
+                                   "quality": {"verdict": "ok", "reasons": []}})
+    assert verdict == "interrupted" and "SIGTERM" in reasons[0]
+
+
+def test_each_layer_has_its_row():
+    from preform.io.report import key_numbers
+
+    layers = [{"layer": k, "direction": d, "status": "done", "steps": n, "quality": {"verdict": "ok"},
+               "braid_angle_deg": {"final": {"warp": a, "weft": a}}, "fields": {"mean_cover_factor": c}}
+              for k, d, n, a, c in ((1, "forward", 1181, 45.75, 0.57), (2, "backward", 1881, 57.07, 0.66))]
+    rows = {name: (value, note) for name, value, note in key_numbers({"status": "done", "layers": layers})}
+    assert rows["layer 2: final braid angle"][0] == "57.07 / 57.07"
+    assert "1,881 steps" in rows["layer 2: final braid angle"][1]
+    assert "backward layer" in rows["layer 2: final braid angle"][1]
 
 
 CHECK = """<script>

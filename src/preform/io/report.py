@@ -40,7 +40,7 @@ CAPTIONS = {
 
 #: the verdict's words and colours (text on background): ok, suspect, failed or interrupted
 VERDICT_STYLE = {"ok": ("OK", "#1e7b34"), "suspect": ("SUSPECT", "#a85d00"),
-                 "failed": ("FAILED", "#b3261e")}
+                 "failed": ("FAILED", "#b3261e"), "interrupted": ("INTERRUPTED", "#5f3dc4")}
 
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1c1c1c;background:#f6f6f4}
@@ -91,13 +91,14 @@ def _get(data, *path):
 
 
 def verdict_of(summary: dict) -> tuple[str, list[str]]:
-    """("ok" | "suspect" | "failed", reasons): a run that did not finish is failed whatever its
-    quality says; else the quality verdict."""
+    """("ok" | "suspect" | "failed" | "interrupted", reasons): a run that did not finish is failed
+    (or interrupted, when stopped) whatever its quality says; else the quality verdict."""
     status = summary.get("status", "unknown")
     reasons = list(_get(summary, "quality", "reasons") or [])
     if status != "done":
         message = summary.get("message") or ""
-        return "failed", [f"status {status}" + (f": {message}" if message else ""), *reasons]
+        return ("interrupted" if status == "interrupted" else "failed"), \
+            [f"status {status}" + (f": {message}" if message else ""), *reasons]
     return ("ok" if _get(summary, "quality", "verdict") == "ok" else "suspect"), reasons
 
 
@@ -143,12 +144,16 @@ def key_numbers(summary: dict) -> list[tuple[str, str, str]]:
         drift = st.get("drift")
         add("steady state", "not reached", "drift per metre braided: " + _flat(drift) if isinstance(drift, dict) else "")
     for k, layer in enumerate(summary.get("layers") or [], start=1):
-        if isinstance(layer, dict):
-            la = _get(layer, "braid_angle_deg", "final")
-            note = layer.get("status", "")
-            if isinstance(la, dict):
-                add(f"layer {layer.get('layer', k)}: final braid angle",
-                    " / ".join(_num(la[g]) for g in ("warp", "weft") if g in la), f"deg; {note}")
+        if not isinstance(layer, dict):
+            continue
+        la = _get(layer, "braid_angle_deg", "final")
+        notes = [f"{layer.get('direction', '')} layer", f"{_num(layer.get('steps'))} steps",
+                 f"status {layer.get('status', '')}", f"quality {_get(layer, 'quality', 'verdict') or ''}"]
+        notes += [f"{name.replace('_', ' ')} {_num(v)}" for name, v in (layer.get("fields") or {}).items()
+                  if isinstance(v, (int, float))]
+        if isinstance(la, dict):
+            add(f"layer {layer.get('layer', k)}: final braid angle",
+                " / ".join(_num(la[g]) for g in ("warp", "weft") if g in la), "deg, warp / weft; " + "; ".join(notes))
     yarns = summary.get("yarns") or {}
     if yarns.get("flags"):
         add("yarn flags", ", ".join(f"{k} {v}" for k, v in yarns["flags"].items()), "points")
@@ -322,7 +327,7 @@ def sweep_report_html(folder) -> str:
     header = [k for k in (rows[0] if rows else []) if k not in left_out]
     points = []
     worst = "ok"
-    rank = {"ok": 0, "suspect": 1, "failed": 2}
+    rank = {"ok": 0, "suspect": 1, "interrupted": 2, "failed": 3}
     table_rows = []
     for row in rows:
         results = Path(row.get("results") or "")
