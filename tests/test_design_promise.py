@@ -138,3 +138,15 @@ def test_the_shortfall_names_its_cause(worst_at, radius, cause):
     assert not design.met and design.max_error_deg() == pytest.approx(0.5, abs=1e-3)
     said = shortfall(design)
     assert cause in said and f"at L = {worst_at:.2f} m" in said
+
+
+def test_the_runs_csv_has_one_row_per_forward_run(unmet):
+    with open(unmet["out"].with_name("designed_design_runs.csv"), newline="") as f:
+        runs = list(csv.DictReader(f))
+    printed = re.findall(r"design: forward run (\d+): largest error ([0-9.]+) deg", unmet["stderr"])
+    assert [int(r["run"]) for r in runs] == [int(k) for k, _ in printed] == list(range(1, len(runs) + 1))
+    for r, (_, e) in zip(runs, printed):
+        assert float(r["largest_error_deg"]) == pytest.approx(float(e), abs=0.005 + 1e-4)  # %.2f printed
+    best = [r for r in runs if r["best"] == "1"]
+    assert len(best) == 1
+    assert float(best[0]["largest_error_deg"]) == min(float(r["largest_error_deg"]) for r in runs)

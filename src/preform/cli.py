@@ -307,7 +307,7 @@ def cmd_design(args) -> int:
 
     from .config import load_config
     from .design import (DESIGN, design_speed, plot_design, read_target_table, shortfall,
-                         write_design_config, write_design_table)
+                         write_design_config, write_design_runs, write_design_table)
 
     config = load_config(args.config)
     if args.model:
@@ -335,6 +335,7 @@ def cmd_design(args) -> int:
                                                       file=sys.stderr, flush=True))
     toml = write_design_config(config, design, out)
     csv = write_design_table(design, out.with_name(f"{out.stem}_design.csv"))
+    runs = write_design_runs(design, out.with_name(f"{out.stem}_design_runs.csv"))
     title = f"Designed take-up speed: {source.stem} · {config.model.kind} model"
     png = plot_design(design, out.with_name(f"{out.stem}_design.png"), title)
     v = design.speed * 1e3
@@ -343,7 +344,7 @@ def cmd_design(args) -> int:
           f"{design.judged_from:.2f} m of braid (tolerance {settings.tolerance_deg:g} deg); "
           f"take-up speed {v.min():.2f}-{v.max():.2f} mm/s in {len(v)} rows")
     print(f"design: config {toml} (results to {toml.parent / 'results' / toml.stem})")
-    print(f"design: every row in {csv}; plot {png}")
+    print(f"design: every row in {csv}; each forward run in {runs}; plot {png}")
     if not design.met:
         print(f"error: design: the achieved braid angle is {design.max_error_deg():.2f} deg from the "
               f"target, above the tolerance {settings.tolerance_deg:g} deg, {shortfall(design)}; the "

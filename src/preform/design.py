@@ -351,6 +351,16 @@ def write_design_table(design: Design, path) -> Path:
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
+def write_design_runs(design: Design, path) -> Path:
+    """One row per forward run: its number, its largest error where judged (deg), and whether its
+    speed is the answer (the best run), as a CSV."""
+    from .io.atomic import atomic_write_text
+
+    lines = ["run,largest_error_deg,best"]
+    lines += [f"{k},{e:.4f},{int(k == design.best_pass)}" for k, e in enumerate(design.errors_deg, start=1)]
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
 def plot_design(design: Design, path, title: str) -> Path:
     """Target against achieved braid angle, the error, and the speed, along the braided length."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
