@@ -48,10 +48,10 @@ def main(argv=None) -> Path:
         print(f"RTM files: none ({said.get('reason')})")
         return png
     vf, binning = said["fibre_volume_fraction"], said["k1_binning"]
-    print(f"  rtm/lcmsim.h5          LCMsim: mesh and every face's thickness, porosity, K1, K2/K1, direction")
+    print("  rtm/lcmsim.h5          LCMsim: mesh and every face's thickness, porosity, K1, K2/K1, direction")
     print(f"  rtm/rtmsim.bdf         RTMsim: mesh (Nastran), {said['sets']} property sets as SET1 cards")
-    print(f"  rtm/rtmsim_sets.csv    RTMsim's patch table: each set's values, by the bdf's property id")
-    print(f"  plots/rtm_map.png      fibre volume fraction, K1 and porosity, unrolled")
+    print("  rtm/rtmsim_sets.csv    RTMsim's patch table: each set's values, by the bdf's property id")
+    print("  plots/rtm_map.png      fibre volume fraction, K1 and porosity, unrolled")
     print(f"sets: faces {said['faces_per_set']} (the last: {said['faces'] - said['preform_faces']} faces "
           f"without preform, a resin channel); K1 binning error: typically x{binning['rms_factor']:.2f}, "
           f"at most x{binning['max_factor']:.1f} (docs/guide/results.md)")
