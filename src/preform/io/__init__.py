@@ -156,7 +156,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     pictures : the worker :func:`start_pictures` started for ``result`` (then ``background`` is
         not looked at): it gets ``fields`` before the data files are written, and is waited for
         after them; stopped if writing fails
-    returns : the paths written, summary.json last
+    returns : the paths written, summary.json last (then report.html, io.report, from the finished folder)
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
     the summary's ``pictures.failed``) and never stops the rest.
@@ -227,6 +227,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
                      simulation_wall_time_s=float(result.wall_time_s))
     written.append(write_summary(result, summary, extra=extra))
+    from .report import report_hook; report_hook(out_dir)  # noqa: E702 - the page of the finished folder
     return written
 
 
