@@ -33,7 +33,7 @@ from preform.interlacing import INTERLACING, interlacing
 from preform.machine import Machine
 from preform.io.rtm_files import write_rtm
 from preform.quality import QUALITY, assess, surface_reasons
-from preform.rtm import RTM, RtmSettings
+from preform.rtm import BINNING, bin_cells
 from preform.settings import DEFAULT, Settings
 from preform.simulation import load_geometry, make_stepper, make_zone
 from preform.steady import STEADY, steady_state
@@ -64,7 +64,8 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.quality == QUALITY == _default(assess, "settings") == _default(surface_reasons, "settings")
     assert s.limits == LIMITS == _default(check_work, "limits")
     assert s.binning == BinSettings() == _default(bin_plies, "settings")
-    assert s.rtm == RTM and s.rtm.property_sets == _default(write_rtm, "n_sets")
+    assert s.rtm == BINNING == _default(bin_cells, "settings")
+    assert _default(write_rtm, "settings") is None and _default(write_rtm, "n_sets") is None
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.interaction.relax.tol = 1.0
@@ -136,7 +137,7 @@ STEADY_LONG_TAIL = dataclasses.replace(STEADY, tail=0.5, angle_deg=10.0, rel_H=0
 INTERLACING_COARSE = dataclasses.replace(INTERLACING, points_per_yarn=2)
 REMESH_FEW = dataclasses.replace(RemeshSettings(), iterations=1)
 BINNING_COARSE = BinSettings(angle_step_deg=5.0)
-RTM_FEW_SETS = RtmSettings(property_sets=2)
+RTM_FEW_SETS = dataclasses.replace(BINNING, sets=2)
 
 
 @pytest.fixture(scope="module")

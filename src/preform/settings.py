@@ -26,7 +26,7 @@ from .geometry.remesh import RemeshSettings
 from .interaction.settings import InteractionSettings
 from .interlacing import InterlacingSettings
 from .quality import QualitySettings
-from .rtm import RtmSettings
+from .rtm import BinningSettings
 from .steady import SteadySettings
 from .structural.layup import BinSettings
 from .tolerances import Tolerances
@@ -54,8 +54,9 @@ class Settings:
     quality: QualitySettings = field(default_factory=QualitySettings)
     #: the work estimate's limits, refused beyond unless ``--force`` (``budget.check_work``)
     limits: WorkLimits = field(default_factory=WorkLimits)
-    #: how the RTM solver files bin the faces' properties (``io.rtm_files.write_rtm``)
-    rtm: RtmSettings = field(default_factory=RtmSettings)
+    #: how the RTM solver files group the faces' K1 into property sets
+    #: (``io.rtm_files.write_rtm``)
+    rtm: BinningSettings = field(default_factory=BinningSettings)
     #: how finely the shell deck's plies are binned into element groups
     #: (``structural.write_structural``)
     binning: BinSettings = field(default_factory=BinSettings)

@@ -162,7 +162,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     settings : the numerical settings of the run (``preform.Settings``; None: the defaults),
         for the verdict, the steady state and the interlacing in summary.json and the plots,
         and the binning of the RTM files and of the shell deck
-    returns : the paths written, summary.json last
+    returns : the paths written, summary.json last (then report.html, io.report, from the finished folder)
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
     the summary's ``pictures.failed``) and never stops the rest.
@@ -237,13 +237,14 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
                      simulation_wall_time_s=float(result.wall_time_s))
     written.append(write_summary(result, summary, extra=extra, settings=settings))
+    from .report import report_hook; report_hook(out_dir)  # noqa: E702 - the page of the finished folder
     return written
 
 
 def _write_rtm(result, fields, out_dir, written, settings=None) -> dict:
     """``rtm/`` when the fields carry fibre content (tow data given); what the summary says
-    (``settings``: ``rtm.RtmSettings``, None: the defaults)."""
-    from ..rtm import RTM, missing_material
+    (``settings``: ``rtm.BinningSettings``, None: the defaults)."""
+    from ..rtm import missing_material
 
     reason = missing_material(result.config) if result.config is not None else "no config"
     if reason:
@@ -252,8 +253,8 @@ def _write_rtm(result, fields, out_dir, written, settings=None) -> dict:
         return {"written": False, "reason": "no surface fields"}
     from .rtm_files import write_rtm
 
-    paths, said = write_rtm(fields, out_dir, n_sets=(settings or RTM).property_sets,
-                            cavity_thickness=result.config.rtm.cavity_thickness)
+    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness,
+                            settings=settings)
     written += paths
     return said
 
