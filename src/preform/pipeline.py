@@ -98,7 +98,7 @@ def reference_lines(config, mandrel, centerline) -> list[str]:
     ok = perimeter > 0
     if np.count_nonzero(ok) < 2:
         return []
-    return check_lines(config, references(config, s[ok], perimeter[ok]))
+    return check_lines(config, references(config, s[ok], perimeter[ok]), float(centerline.length))
 
 
 def estimate(config, mandrel, centerline, *, force=False, settings=None):

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import plain
 from .analysis import CenterlineProjector, mandrel_friction
+from .checks import end_message, end_passed
 from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
 from .kinematic import Depositor
@@ -160,11 +161,13 @@ class Stepper:
                 if self.step % self.tolerances.braided_length_every == 0:
                     self.braided = self.braided_length_estimate()
                     bar(self.braided)
-                if self.clock.travel - self.lead > L:
+                if end_passed(self.clock.travel, L, self.lead):
+                    # the convergence length now: the tip's travel past the supply plane less
+                    # the braided length
+                    h = self.clock.travel - self.machine.supply_z - self.braided
                     raise SimulationError(
-                        f"the mandrel's end passed the machine at t = {self.clock.t:.4g} s before "
-                        f"{target} m were braided ({self.braided:.4g} m): shorten [process] braid_length "
-                        "or lengthen the mandrel")
+                        end_message(cfg, L, self.lead, h, self.machine.supply_z)
+                        + f" (the run stopped at t = {self.clock.t:.4g} s with {self.braided:.4g} m braided)")
                 if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every_s:
                     self.save_checkpoint(checkpoint)
                     last_save = _time.perf_counter()
