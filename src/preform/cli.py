@@ -186,8 +186,8 @@ def _cmd_run(args, note=None) -> int:
     _print_notes(notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
                        force=args.force, geometry=(mandrel, centerline, []), started=started,
-                       background_pictures=True, startup_s=startup)
-    _print_notes(outcome.notes)
+                       background_pictures=True, startup_s=startup,
+                       say=lambda note: print(note, file=sys.stderr, flush=True))
     result = outcome.result
     summary = written_summary(out_dir)
     for line in summary_lines(result, out_dir, len(outcome.written), summary):

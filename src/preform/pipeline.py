@@ -202,7 +202,7 @@ def with_rtm_fields(result, fields):
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
              started=None, background_pictures=False, startup_s=None,
-             settings=None) -> CaseOutcome:
+             settings=None, say=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
@@ -218,6 +218,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
         listed as the stage ``start`` when given
     settings : the numerical settings of every stage (``preform.Settings``; None: the defaults)
+    say : called with each note as it arises (the work estimate before the simulation starts),
+        or None; the notes are in the outcome either way
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
@@ -235,12 +237,12 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     if config.layers:
         return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
                           geometry=geometry, started=t0, background_pictures=background_pictures,
-                          startup_s=startup_s, settings=settings)
+                          startup_s=startup_s, settings=settings, say=say)
     out_dir = Path(out_dir)
     mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config,
                                                                                          settings)
     work = estimate(config, mandrel, centerline, force=force, settings=settings)
-    notes = [*notes, *(f"note: {line}" for line in work.lines())]
+    notes = [*notes, *_said(say, [f"note: {line}" for line in work.lines()])]
     check_results_folder(out_dir, work.result_bytes)
     checkpoint = out_dir / CHECKPOINT
     with RunLock(out_dir):
@@ -282,6 +284,14 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         if result.status == "done":
             Checkpoint(checkpoint, result.config).remove()
     return CaseOutcome(result=result, out_dir=out_dir, written=written, notes=notes)
+
+
+def _said(say, notes):
+    """``notes``, each passed to ``say`` first (when given): the caller shows them now."""
+    if say is not None:
+        for note in notes:
+            say(note)
+    return notes
 
 
 # ------------------------------------------------------------------------------ several layers
@@ -378,7 +388,7 @@ def check_layers(config, mandrel, centerline, notes=(), *, force=False, settings
 
 def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
                started=None, background_pictures=False, startup_s=None,
-               settings=None) -> CaseOutcome:
+               settings=None, say=None) -> CaseOutcome:
     """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
     from the mandrel outwards, on the mandrel offset by the thickness of the layers below.
 
@@ -412,8 +422,10 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
                                                                                          settings)
     lines = [layer_centerline(centerline, layer.direction, config.mandrel.roll_reference)
              for layer in config.layers]
+    given = len(notes)
     notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force,
                                        settings=settings)
+    _said(say, notes[given:])
     check_results_folder(out_dir, result_bytes)
     stages = {} if startup_s is None else {"start": float(startup_s)}
     stages["load_and_check"] = time.perf_counter() - t0
@@ -424,7 +436,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             if k > 1:   # a surface that folds, or a set-up the stack makes impossible, ends the run
                 try:
                     surface, report = stack.offset_for(layer_fields, f"layer {k}")
-                    notes += [f"warning: layer {k}: {w}" for w in preflight(cfg, surface, cl)]
+                    notes += _said(say, [f"warning: layer {k}: {w}" for w in preflight(cfg, surface, cl)])
                 except PreformError as err:
                     refused = f"layer {k} cannot be braided on the layers below: {err}"
                     break

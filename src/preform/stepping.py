@@ -19,6 +19,7 @@ import numpy as np
 from . import plain
 from .analysis import CenterlineProjector, mandrel_friction
 from .checks import end_message, end_passed
+from .config import DEFAULT_SNAPSHOTS
 from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
 from .kinematic import Depositor
@@ -119,7 +120,8 @@ class Stepper:
         rng = np.random.default_rng(config.model.seed)
         self.F, self.face = tie_points(config, machine, mandrel, centerline, pose, rng, s)
         self.recording = Recording(len(self.F))
-        n_snap = config.output.snapshots if config.output is not None else 20
+        n_snap = (config.output.snapshot_count(config.model.kind) if config.output is not None
+                  else DEFAULT_SNAPSHOTS[config.model.kind])
         self.snapshot_stride = 0 if n_snap <= 0 else self._snapshot_stride(n_snap)
         self.zone = zone
         self.zone.start(0.0, pose.to_machine(self.F), pose)

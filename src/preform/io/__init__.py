@@ -224,7 +224,9 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     from ..quality import QUALITY, surface_reasons
 
     quality = QUALITY if settings is None else settings.quality
-    extra = {"files": files, "rtm": rtm, "structural": structural,
+    from ..key_numbers import key_numbers
+
+    extra = {**key_numbers(result, fields), "files": files, "rtm": rtm, "structural": structural,
              "quality_reasons": surface_reasons(result, fields, quality),
              "pictures": {"failed": failed}}
     if layers is not None:   # the run is suspect when a layer above the first is
