@@ -342,8 +342,9 @@ STARTING = "starting (compiling the kernels on a first run)"
 def progress_bar(total, enabled, start=0.0):
     """A callable updated with the braided length; None closes it.
 
-    ``start``: the braided length a resumed run starts from; the remaining time is estimated from
-    the length braided since (tqdm's ``initial``), not as if the resumed part took no time.
+    ``start``: the braided length a resumed run starts from. The remaining time is estimated from
+    the length braided since the first steps (tqdm's ``initial`` and start time, reset there): not
+    as if the resumed part took no time, and not slowed by the kernels' compilation.
     """
     if not enabled:
         return lambda value: None
@@ -359,9 +360,12 @@ def progress_bar(total, enabled, start=0.0):
             bar.close()
             return
         calls[0] += 1
+        bar.n = round(min(value, total), 6)
         if calls[0] == 2:   # the first steps are done: kernels compiled, braiding under way
             bar.set_description_str("braiding", refresh=False)
-        bar.n = round(min(value, total), 6)
+            # the rate counts from here: the compilation and the tie-up before it are no part of
+            # the braiding pace, and counted in they make the first ETAs hours for a run of minutes
+            bar.start_t, bar.initial = bar._time(), bar.n
         bar.refresh()
 
     update.bar = bar
