@@ -68,7 +68,8 @@ def written_summary(out_dir) -> dict | None:
 
 def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     """The three lines ``preform run`` prints at the end, from the written ``summary`` (whose wall
-    time is the command's, with its stages), else from the result."""
+    time is the command's, with its stages), else from the result; then one line per layer of a
+    run with [[layer]] tables."""
     from .io.tables import summary_dict
 
     s = summary if summary is not None else summary_dict(result)
@@ -83,6 +84,7 @@ def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     else:
         steady_line = "steady state not reached in this run"
     status = s["status"] + (f" ({s['message']})" if s["message"] else "")
+    layers = [_layer_line(e) for e in s.get("layers") or []]
     return [
         f"results: {out_dir} ({n_files} files)",
         f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall{stage_text}, "
@@ -90,7 +92,19 @@ def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
         f"final braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
         f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])}); "
         + steady_line,
+        *layers,
     ]
+
+
+def _layer_line(entry) -> str:
+    """One console line of a layer of a run with [[layer]] tables (summary.json's entry)."""
+    angle = (entry.get("braid_angle_deg") or {}).get("final") or {}
+    quality = (entry.get("quality") or {}).get("verdict") or "not judged"
+    status = entry.get("status") or "not run"
+    return (f"layer {entry.get('layer')} ({entry.get('direction')}): {status}; {entry.get('steps')} steps, "
+            f"braided length {_fmt(entry.get('braided_length_m'))} m, final braid angle warp "
+            f"{_fmt(angle.get('warp'), '.2f')} deg, weft {_fmt(angle.get('weft'), '.2f')} deg; "
+            f"quality {quality}")
 
 
 #: the exit code of a run stopped by a signal: 128 + the signal number, as shells report it

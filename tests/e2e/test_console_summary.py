@@ -113,3 +113,19 @@ def test_a_kinematic_run_writes_no_snapshots_unless_asked(kinematic_run, tmp_pat
     res = pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=centerline)
     # about 3 (the stride is the estimated step count over 3, so 3 or 4 with the tie's)
     assert 3 <= len(res.snapshots) <= 5
+
+
+def test_a_layered_run_prints_one_line_per_layer(kinematic_run, tmp_path):
+    """The end of ``preform run`` for a run with two layers: the run's three lines, then each
+    layer's status, steps and final angles from summary.json's ``layers``."""
+    from preform.cli import summary_lines
+
+    outcome, summary, _ = kinematic_run
+    layer = {"layer": 2, "direction": "backward", "status": "done", "steps": 1881,
+             "braided_length_m": 0.3, "braid_angle_deg": {"final": {"warp": 57.04, "weft": 56.96}},
+             "quality": {"verdict": "ok", "reasons": []}}
+    first = {**layer, "layer": 1, "direction": "forward", "steps": summary["steps"]}
+    lines = summary_lines(outcome.result, tmp_path, 3, {**summary, "layers": [first, layer]})
+    assert len(lines) == 5 and lines[3].startswith("layer 1 (forward): done; ")
+    assert lines[4] == ("layer 2 (backward): done; 1881 steps, braided length 0.300 m, final braid "
+                        "angle warp 57.04 deg, weft 56.96 deg; quality ok")
