@@ -124,9 +124,33 @@ COMPILING = ("note: compiling the numba kernels (a first run in this environment
              "later runs load them from the cache)")
 
 
+def _compile_note_marker():
+    """The file whose presence says :data:`COMPILING` was printed in this environment (the
+    interpreter's prefix and the versions of preform and numba, hashed), in the preform cache
+    folder (``io.cache.cache_dir``); None with the cache off."""
+    import hashlib
+
+    from ._version import __version__
+    from .io.cache import cache_dir
+
+    folder = cache_dir()
+    if folder is None:
+        return None
+    try:
+        import numba
+
+        numba_version = numba.__version__
+    except ImportError:   # pragma: no cover - numba is a dependency
+        numba_version = ""
+    key = hashlib.sha256("\0".join((sys.prefix, __version__, numba_version)).encode()).hexdigest()[:16]
+    return folder / f"compile-note-{key}"
+
+
 class _CompileNote:
     """Prints :data:`COMPILING` on stderr at numba's first compilation while registered (numba's
-    ``numba:compile`` event, raised for a compilation, not for a cache load)."""
+    ``numba:compile`` event, raised for a compilation, not for a cache load), once per
+    environment: a run that compiles kernels for a new config in an environment that already
+    compiled some says nothing (:func:`_compile_note_marker`)."""
 
     def __enter__(self):
         self.listener = None
@@ -142,9 +166,21 @@ class _CompileNote:
                 self.say()
 
             def say(self):
-                if not self.said:
-                    self.said = True
-                    print(COMPILING, file=sys.stderr, flush=True)
+                if self.said:
+                    return
+                self.said = True
+                marker = _compile_note_marker()
+                if marker is not None and marker.exists():
+                    return
+                print(COMPILING, file=sys.stderr, flush=True)
+                if marker is not None:
+                    try:
+                        from .io.atomic import atomic_write_text
+
+                        marker.parent.mkdir(parents=True, exist_ok=True)
+                        atomic_write_text(marker, "the numba compile note was printed\n")
+                    except OSError:   # a cache that cannot be written: the note comes again
+                        pass
 
             def on_end(self, ev):
                 pass
