@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from preform.io import write_results
 
 EXPECTED = ["history.csv", "yarns.vtp", "convergence.pvd", "convergence/step_0000.vtp",
@@ -63,10 +65,16 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
                                               write_surface_pictures=write_surface_pictures,
                                               INPUT_VTU="surface_input.vtu",
                                               write_input_mesh_fields=None))
-    fields = object()
+    # one reached triangle: the summary's field statistics are its values
+    one = np.ones(1)
+    fields = types.SimpleNamespace(vertices=np.eye(3), faces=np.array([[0, 1, 2]]), cell_data={
+        "braid_angle_deg": 40.0 * one, "cover_factor": 0.5 * one, "thickness_m": 3e-4 * one,
+        "reached_warp": np.ones(1, np.uint8), "reached_weft": np.zeros(1, np.uint8)})
     written = write_results(small_result, fields, tmp_path)
     assert calls[0] == (fields, tmp_path, False)   # the data files, then the pictures
     assert calls[1][:2] == (fields, tmp_path / "plots")
     names = [p.relative_to(tmp_path).as_posix() for p in written]
     assert "surface.vtu" in names and names[-1] == "summary.json"
-    assert "surface.vtu" in json.loads((tmp_path / "summary.json").read_text())["files"]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert "surface.vtu" in summary["files"]
+    assert summary["fields"]["braid_angle_deg"] == {"mean": 40.0, "min": 40.0, "max": 40.0}
