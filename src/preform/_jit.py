@@ -212,7 +212,7 @@ _ROLE: list = []
 
 #: environment variable naming a file to which every process of the run appends one JSON line per
 #: numba compilation and per warm-up job (``benchmarks/bench_pipeline.py --jit``,
-#: ``tests/test_jit.py``)
+#: ``tests/e2e/test_jit.py``)
 LOG_ENV = "PREFORM_JIT_LOG"
 
 

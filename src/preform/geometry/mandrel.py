@@ -274,7 +274,7 @@ def face_neighbors(faces, settings=INTAKE) -> np.ndarray:
     # the half-edges grouped by undirected edge (no sort), then within each group the lowest
     # half-edge running the other way; an edge used twice in the same direction is non-manifold
     # or mis-wound: no neighbour (the same arrays as a stable argsort of the directed keys
-    # searched for each twin key, tests/test_big_mesh_kernels.py)
+    # searched for each twin key, tests/unit/test_big_mesh_kernels.py)
     order = np.empty(3 * nf, dtype=np.int64)
     _, count = edge_table(faces, int(faces.max()) + 1, np.empty(3 * nf, dtype=np.int64), order)
     out = np.empty(3 * nf, dtype=np.int64)
