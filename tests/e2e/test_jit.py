@@ -1,8 +1,7 @@
 """The first run's compile worker (``preform._jit``): each job runs once, in one of the two
 processes; a failing job does not stop the run; and on a real first run the main process
 compiles none of the stepper's or the field kernels (the worker's small jobs compile the same
-specialisations the run needs), and neither process the intake kernels (a small mandrel takes
-their NumPy forms)."""
+specialisations the run needs)."""
 
 from __future__ import annotations
 
@@ -177,12 +176,6 @@ def test_first_run_main_process_compiles_no_stepper_or_field_kernel(tmp_path):
     jobs = sorted(d["job"] for d in events if d["event"] == "job")
     assert jobs == sorted(_jit.JOBS)
     assert not [d for d in lines if d["role"] == "main" and d["kernel"].endswith(".project_to_polyline")]
-    # a small mandrel's intake, arrays, sections and checks, and the field mesh's weld test,
-    # take their NumPy forms (geometry.small_mesh): neither process compiles those kernels
-    from support.intake import INTAKE_KERNELS
-
-    intake = {f"preform._kernels.{m}.{k}" for m, names in INTAKE_KERNELS.items() for k in names}
-    assert sorted({(d["kernel"], d["job"]) for d in lines if d["kernel"] in intake}) == []
     # the field mesh in the cache was built by a job before the simulation, and the map used it
     # (it would have written the entry again after the simulation had it been missing)
     finished = [d["start_s"] for d in events if d["event"] == "finished"]

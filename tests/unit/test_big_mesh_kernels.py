@@ -1,6 +1,7 @@
-"""Kernels for big STLs against the slow obvious NumPy forms they replace, bit for
-bit: long-side faces, triangle moments, the undirected edge table, the face across each directed
-edge, first faces of each vertex set, the winding of each body; and the paths that skip work
+"""Mesh kernels against slow, obvious NumPy references (``support.naive_intake`` and forms
+written here), bit for bit: long-side faces, triangle moments, the undirected edge table, the face
+across each directed edge, first faces of each vertex set, the winding of each body; and the paths
+that skip work
 (the field mesh's weld of an already welded mandrel, the mandrel's ray scene reused)."""
 
 from __future__ import annotations
@@ -12,9 +13,8 @@ import trimesh
 from preform._kernels.edges import (INSERTION_MAX, directed_neighbors, edge_table, first_of_each_face,
                                     orient_bodies)
 from preform._kernels.mesh import long_side_faces, triangle_moments
-from preform.geometry import small_mesh
+from support import naive_intake
 
-KERNELS = small_mesh.IntakeSettings(kernel_faces=0)
 
 
 def meshes():
@@ -88,7 +88,7 @@ def test_edge_table_is_numpy_unique_of_the_edge_keys():
             side = np.empty(3 * len(F), dtype=np.int64)
             order = np.empty(3 * len(F), dtype=np.int64)
             key, count = edge_table(F, n, side, order)
-            ref_key, ref_count, ref_inverse, ref_order = small_mesh.edge_table(F, n)
+            ref_key, ref_count, ref_inverse, ref_order = naive_intake.edge_table(F, n)
             np.testing.assert_array_equal(key, ref_key)
             np.testing.assert_array_equal(count, ref_count)
             np.testing.assert_array_equal(side, ref_inverse)
@@ -102,13 +102,13 @@ def test_face_neighbors_equal_the_sort_based_form():
         _, F = arrays(m)
         collapsed = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])      # a repeated vertex too
         for faces in (F, collapsed):
-            np.testing.assert_array_equal(face_neighbors(faces, KERNELS), small_mesh.face_neighbors(faces))
+            np.testing.assert_array_equal(face_neighbors(faces), naive_intake.face_neighbors(faces))
             side = np.empty(3 * len(faces), dtype=np.int64)
             order = np.empty(3 * len(faces), dtype=np.int64)
             _, count = edge_table(faces, int(faces.max()) + 1, side, order)
             out = np.empty(3 * len(faces), dtype=np.int64)
             directed_neighbors(faces, order, count, out)
-            np.testing.assert_array_equal(out.reshape(-1, 3), small_mesh.face_neighbors(faces))
+            np.testing.assert_array_equal(out.reshape(-1, 3), naive_intake.face_neighbors(faces))
 
 
 def test_first_of_each_face_is_numpy_unique_return_index():
@@ -168,7 +168,7 @@ def test_orient_bodies_is_the_double_cover_components(seed):
     flipped = np.empty(len(F), dtype=bool)
     component = np.empty(len(F), dtype=np.int64)
     bad = orient_bodies(F, pairs, flipped, component)
-    ref_flipped, ref_component, ref_bad = small_mesh.orient_bodies(F, pairs)
+    ref_flipped, ref_component, ref_bad = naive_intake.orient_bodies(F, pairs)
     assert bad == ref_bad
     assert (bad >= 0) == bool(seed % 2)
     np.testing.assert_array_equal(component, ref_component)
@@ -176,18 +176,15 @@ def test_orient_bodies_is_the_double_cover_components(seed):
         np.testing.assert_array_equal(flipped, ref_flipped)
 
 
-@pytest.mark.parametrize("kernel_faces", [0, 10**12])   # the kernel, and the NumPy form
-def test_field_mesh_weld_returns_welded_arrays_as_they_are(kernel_faces):
+def test_field_mesh_weld_returns_welded_arrays_as_they_are():
     from preform.fields import _merge_exact_duplicates
-    from preform.geometry.small_mesh import IntakeSettings
 
-    settings = IntakeSettings(kernel_faces=kernel_faces)
     V, F = arrays(trimesh.creation.icosphere(subdivisions=2))
-    U, G = _merge_exact_duplicates(V, F, settings)
+    U, G = _merge_exact_duplicates(V, F)
     assert U is V and G is F
     soup_V = V[F.reshape(-1)]
     soup_F = np.arange(3 * len(F)).reshape(-1, 3)
-    U, G = _merge_exact_duplicates(soup_V, soup_F, settings)
+    U, G = _merge_exact_duplicates(soup_V, soup_F)
     ref, inverse = np.unique(soup_V, axis=0, return_inverse=True)
     np.testing.assert_array_equal(U, ref)
     np.testing.assert_array_equal(G, inverse.reshape(-1)[soup_F])
@@ -236,7 +233,7 @@ def test_face_cross_normals_are_the_numpy_form():
         F = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])             # a zero-area face
         cross, normals = np.empty((len(F), 3)), np.empty((len(F), 3))
         face_cross_normals(V, F, cross, normals)
-        ref_cross, ref_normals = small_mesh.face_cross_normals(V, F)
+        ref_cross, ref_normals = naive_intake.face_cross_normals(V, F)
         np.testing.assert_array_equal(cross, ref_cross)
         np.testing.assert_array_equal(normals, ref_normals)
 
@@ -252,7 +249,7 @@ def test_edge_ray_geometry_is_the_numpy_form():
         a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
         length, eps = np.empty(k), np.empty(k)
         n = edge_ray_geometry(V, e, ok, a, u, length, eps, origin)
-        keep, ra, ru, L, reps, rorigin = small_mesh.edge_ray_geometry(V, e)
+        keep, ra, ru, L, reps, rorigin = naive_intake.edge_ray_geometry(V, e)
         assert not keep.all() and n == keep.sum()
         np.testing.assert_array_equal(ok, keep)
         np.testing.assert_array_equal(a[:n], ra)
@@ -274,7 +271,7 @@ def test_merge_clusters_are_the_components_form(seed):
     survivors, new_index = np.empty(900, dtype=np.int64), np.empty(900, dtype=np.int64)
     n = merge_clusters(inverse, pairs, n_exact, survivors, new_index)
     # the NumPy form of geometry.repair._merge_vertices
-    keeper, ref_index = small_mesh.merge_clusters(inverse, pairs, n_exact)
+    keeper, ref_index = naive_intake.merge_clusters(inverse, pairs, n_exact)
     assert n == len(keeper)
     np.testing.assert_array_equal(survivors[:n], keeper)
     np.testing.assert_array_equal(new_index, ref_index)

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from preform.errors import MandrelError
-from preform.geometry.repair import SMALL_HOLE, RepairReport, repair_mesh, self_intersections
+from preform.geometry.repair import INTAKE, RepairReport, repair_mesh, self_intersections
 from preform.tolerances import tol
 
 # Volumes of meshes made of the very same vertices and faces agree to round-off; 1e-9 leaves room
@@ -165,7 +165,7 @@ def test_zero_area_cap_is_dropped_and_its_neighbour_split(sphere):
 
 def test_a_small_hole_is_filled(mesh):
     # two neighbouring faces; on the box one triangle of its smallest side (a triangle of a larger
-    # side covers more than MAX_FILL_SHARE of the surface)
+    # side covers more than INTAKE.max_fill_share of the surface)
     gone = mesh.face_adjacency[0] if len(mesh.faces) > 12 else [np.argmin(mesh.area_faces)]
     f = np.delete(mesh.faces, gone, axis=0)
     v2, f2, report = repair_mesh(mesh.vertices, f)
@@ -193,13 +193,13 @@ def test_a_hole_of_a_few_faces_is_filled_within_one_percent():
 
 
 def test_one_long_missing_triangle_of_a_coarse_mesh_is_filled():
-    # a CAD cylinder's side triangles run its whole length: far above SMALL_HOLE of the diagonal
+    # a CAD cylinder's side triangles run its whole length: far above INTAKE.small_hole of the diagonal
     mesh = _mesh("cylinder")
     side = np.nonzero(np.abs(mesh.face_normals[:, 2]) < 0.5)[0]
     gone = side[np.argmin(mesh.area_faces[side])]
     f = np.delete(mesh.faces, gone, axis=0)
     v2, f2, report = repair_mesh(mesh.vertices, f)
-    assert report.largest_hole > SMALL_HOLE * np.linalg.norm(np.ptp(mesh.vertices, axis=0))
+    assert report.largest_hole > INTAKE.small_hole * np.linalg.norm(np.ptp(mesh.vertices, axis=0))
     _assert_closed_outward(v2, f2, mesh.volume)     # the same triangle is put back: exact
 
 
@@ -221,11 +221,11 @@ def test_a_large_hole_is_refused_with_its_size(mesh):
 
 
 def test_large_hole_threshold_is_the_small_hole_fraction(sphere):
-    # a hole just above SMALL_HOLE of the diagonal is refused, the span quoted in mm
+    # a hole just above INTAKE.small_hole of the diagonal is refused, the span quoted in mm
     centre = sphere.vertices[0]
     d = np.linalg.norm(sphere.vertices[sphere.faces].mean(axis=1) - centre, axis=1)
     diag = np.linalg.norm(np.ptp(sphere.vertices, axis=0))
-    f = sphere.faces[d > SMALL_HOLE * diag]
+    f = sphere.faces[d > INTAKE.small_hole * diag]
     with pytest.raises(MandrelError, match="open surface"):
         repair_mesh(sphere.vertices, f)
 
@@ -391,10 +391,10 @@ def test_exact_weld_kernel_matches_numpy_unique():
 
 def test_degenerate_face_kernel_matches_numpy():
     """degenerate_faces against the NumPy form in _drop_degenerate's docstring
-    (``small_mesh.degenerate_faces``), on random faces with repeated vertices, near-caps and
+    (``support.naive_intake.degenerate_faces``), on random faces with repeated vertices, near-caps and
     equal sides."""
     from preform._kernels.mesh import degenerate_faces
-    from preform.geometry import small_mesh
+    from support import naive_intake
 
     rng = np.random.default_rng(11)
     V = rng.normal(size=(300, 3))
@@ -405,7 +405,7 @@ def test_degenerate_face_kernel_matches_numpy():
     radius = 1e-8
     collapsed, caps, longest = (np.empty(len(F), bool), np.empty(len(F), bool), np.empty(len(F), np.int64))
     degenerate_faces(V, F, radius, collapsed, caps, longest)
-    ref_collapsed, ref_caps, ref_longest = small_mesh.degenerate_faces(V, F, radius)
+    ref_collapsed, ref_caps, ref_longest = naive_intake.degenerate_faces(V, F, radius)
     np.testing.assert_array_equal(collapsed, ref_collapsed)
     np.testing.assert_array_equal(caps, ref_caps)
     np.testing.assert_array_equal(longest, ref_longest)

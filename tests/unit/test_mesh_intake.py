@@ -216,19 +216,19 @@ def test_hole_fill_is_reported_with_its_triangles_and_share(tmp_path, cone, caps
 
 
 def test_hole_fill_above_the_share_is_refused(tmp_path, capsys):
-    from preform.geometry.repair import MAX_FILL_SHARE
+    from preform.geometry.repair import INTAKE
 
     box = trimesh.creation.box(extents=(0.1, 0.2, 0.4))        # largest triangle: 14 % of the surface
     big = int(np.argmax(box.area_faces))
     stl = tmp_path / "open_box.stl"
     trimesh.Trimesh(box.vertices, np.delete(box.faces, big, axis=0), process=False).export(stl)
     share = 100 * box.area_faces[big] / (box.area - box.area_faces[big])
-    assert share > 100 * MAX_FILL_SHARE
+    assert share > 100 * INTAKE.max_fill_share
     assert main(["mandrel", "info", str(stl)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "open surface" in err
     assert f"a patch of 1 triangle covering {share:.1f} % of the surface" in err
-    assert f"filled up to {MAX_FILL_SHARE:.0%} of the surface" in err
+    assert f"filled up to {INTAKE.max_fill_share:.0%} of the surface" in err
 
 
 def test_non_utf8_centerline_csv_is_an_error_line(tmp_path, cone, capsys):

@@ -1,5 +1,6 @@
-"""Mesh kernels of the intake (``_kernels.mesh``) against the NumPy forms they replace, bit for
-bit: corner angles' cosines, the corners around each vertex, face centroids and reach."""
+"""Mesh kernels of the intake (``_kernels.mesh``) against their NumPy references
+(``support.naive_intake``), bit for bit: corner angles' cosines, the corners around each vertex,
+face centroids and reach."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 import trimesh
 
 from preform._kernels.mesh import centroids_and_reach, corner_cosines, corners_by_vertex
-from preform.geometry import small_mesh
+from support import naive_intake
 
 
 def meshes():
@@ -24,7 +25,7 @@ def test_corner_cosines_equal_numpy():
         V, F = np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64)
         got = np.empty((len(F), 3))
         corner_cosines(V, F, got)
-        np.testing.assert_array_equal(got, small_mesh.corner_cosines(V, F))
+        np.testing.assert_array_equal(got, naive_intake.corner_cosines(V, F))
 
 
 def test_corners_by_vertex_equal_stable_argsort():
@@ -34,7 +35,7 @@ def test_corners_by_vertex_equal_stable_argsort():
         faces = np.empty(3 * len(F), dtype=np.int64)
         corner = np.empty(3 * len(F), dtype=np.int64)
         corners_by_vertex(F, len(V), ptr, faces, corner)
-        ref_ptr, ref_faces, ref_corner = small_mesh.corners_by_vertex(F, len(V))
+        ref_ptr, ref_faces, ref_corner = naive_intake.corners_by_vertex(F, len(V))
         np.testing.assert_array_equal(ptr, ref_ptr)
         np.testing.assert_array_equal(faces, ref_faces)
         np.testing.assert_array_equal(corner, ref_corner)
@@ -46,7 +47,7 @@ def test_centroids_and_reach_equal_numpy():
         c = np.empty((len(F), 3))
         r = np.empty(len(F))
         centroids_and_reach(V, F, c, r)
-        ref_c, ref_r = small_mesh.centroids_and_reach(V, F)
+        ref_c, ref_r = naive_intake.centroids_and_reach(V, F)
         np.testing.assert_array_equal(c, ref_c)
         np.testing.assert_array_equal(r, ref_r)
 

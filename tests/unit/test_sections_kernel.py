@@ -1,13 +1,34 @@
 """Section chaining (``geometry.centerline.chain_segments`` on ``_kernels.sections.chain_loops``)
-against its Python form (``small_mesh.chain_loops``, a small mesh's first sections), on shuffled and
-awkward segment soups."""
+against the slow Python walk of ``support.naive_intake.chain_loops`` (dictionaries of neighbours),
+on shuffled and awkward segment soups and a mesh section: the same loops, nodes and kept ends."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from preform.geometry.centerline import chain_segments
+from preform._kernels.sections import chain_loops
+from preform.geometry.centerline import _row_ids, chain_segments
+from support import naive_intake
+
+
+def reference_chain(segments, rel_tol=1e-9):
+    """``chain_segments`` with the Python walk: the nodes as ``chain_segments`` welds them, the
+    loops from ``naive_intake.chain_loops``; also (ids, node count) for the kernel's own call."""
+    segments = np.asarray(segments, dtype=float)
+    scale = float(np.ptp(segments.reshape(-1, 3), axis=0).max()) or 1.0
+    keys = np.round(segments.reshape(-1, 3) / (rel_tol * 1e3 * scale)).astype(np.int64)
+    ids = np.ascontiguousarray(_row_ids(keys).reshape(-1, 2), dtype=np.int64)
+    nodes, offsets, src = naive_intake.chain_loops(ids, int(ids.max()) + 1)
+    ends = segments.reshape(-1, 3)
+    loops = [ends[src[np.append(nodes[a:b], nodes[a])]] for a, b in zip(offsets[:-1], offsets[1:])]
+    return loops, (ids, int(ids.max()) + 1)
+
+
+def assert_same_walk(ids, n_nodes):
+    """The kernel's (nodes, offsets, src) are the Python walk's, array for array."""
+    for got, ref in zip(chain_loops(ids, n_nodes), naive_intake.chain_loops(ids, n_nodes)):
+        np.testing.assert_array_equal(got, ref)
 
 
 def _polygon(n, r, z, phase=0.0):
@@ -40,7 +61,8 @@ def _soup(rng):
 @pytest.mark.parametrize("seed", range(6))
 def test_chain_segments_matches_the_python_reference(seed):
     seg = _soup(np.random.default_rng(seed))
-    ref = chain_segments(seg, kernels=False)
+    ref, walk = reference_chain(seg)
+    assert_same_walk(*walk)
     got = chain_segments(seg)
     assert len(got) == len(ref) >= 2                                  # the figure eight gives 0-2
     for a, b in zip(got, ref):
@@ -55,7 +77,8 @@ def test_chain_segments_on_a_mesh_section():
     mesh = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
     seg = mesh_plane(mesh, plane_normal=[0.2, 0.1, 1.0], plane_origin=[0, 0, 0.03])
     (loop,) = chain_segments(np.asarray(seg))
-    (ref,) = chain_segments(np.asarray(seg), kernels=False)
+    (ref,), walk = reference_chain(seg)
+    assert_same_walk(*walk)
     np.testing.assert_array_equal(loop, ref)
     assert len(loop) == len(seg) + 1
     assert chain_segments(np.zeros((0, 2, 3))) == []

@@ -1,5 +1,6 @@
 """The winding-number kernel (``_kernels.mesh.winding_numbers``, the centerline-inside check of
-``preform check``) against its NumPy form (``geometry.small_mesh``, small meshes' path) and
+``preform check``) against its NumPy reference (``support.naive_intake``, solid angles summed in
+face order) and
 against known answers on well-shaped and sliver triangulations."""
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ import pytest
 import trimesh
 
 from preform._kernels.mesh import winding_numbers
-from preform.geometry.small_mesh import winding_numbers as numpy_winding
+from support.naive_intake import winding_numbers as numpy_winding
 
 MESHES = {
     "icosphere": lambda: trimesh.creation.icosphere(3, radius=0.05),

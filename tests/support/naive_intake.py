@@ -1,38 +1,14 @@
-"""NumPy forms of the mesh intake and check kernels, for small meshes.
-
-The numba kernels of ``_kernels.mesh``, ``edges`` and ``sections`` exist for STLs of 1-2 M faces;
-on a first run each costs 0.15-0.8 s to compile, while on a mandrel of some 10 k faces its NumPy
-form takes milliseconds. Below :attr:`IntakeSettings.kernel_faces` faces the intake
-(``geometry.repair``), a mandrel's own arrays (``geometry.mandrel``), the section index and a
-mesh's first sections (``geometry.centerline``) and the centerline-inside check (``checks``) call
-these functions instead. Each returns what its kernel writes, bit for bit (the tests compare both
-on the same meshes; the winding numbers to round-off), so the size of a mesh changes how long its
-intake takes, never its result.
+"""Slow, obvious NumPy references of the mesh intake and check kernels (``_kernels.mesh``,
+``_kernels.edges``, ``_kernels.sections``) that ``geometry.repair``, ``geometry.mandrel``,
+``geometry.centerline`` and ``checks`` call. Each returns what its kernel writes, bit for bit (the
+winding numbers to round-off: NumPy's arctan2 is not libm's); the tests compare the two on the
+same meshes. Sorts and SciPy's connected components where the kernels use hash tables and
+union-find passes.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-
-
-@dataclass(frozen=True)
-class IntakeSettings:
-    """Which meshes the intake and the checks hand to the numba kernels."""
-
-    #: smaller meshes take the NumPy forms: there their extra time equals one kernel's compile time
-    kernel_faces: int = 200_000
-    #: a small mesh's first sections chain in Python (a CSV-centerline run cuts ~90, at 0.5-1 ms)
-    python_sections: int = 100
-
-    def kernels(self, n_faces) -> bool:
-        """Whether a mesh of ``n_faces`` faces uses the numba kernels."""
-        return n_faces >= self.kernel_faces
-
-
-#: the defaults
-INTAKE = IntakeSettings()
 
 
 def vertex_bounds(V, F):
