@@ -185,7 +185,7 @@ def test_the_summary_wall_time_is_the_commands_with_its_stages(reference):
 
 
 def test_every_picture_of_a_run_is_drawn_and_readable_by_others(reference):
-    """Issue 16: every PNG non-blank and, under umask 022, readable by colleagues (0644)."""
+    """Every PNG non-blank and, under umask 022, readable by colleagues (0644)."""
     import stat
 
     import numpy as np

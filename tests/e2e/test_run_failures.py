@@ -165,7 +165,7 @@ def test_a_curved_millimetre_part_runs_or_fails_cleanly(tmp_path, mu, ring):
 
 def test_the_bounds_change_of_a_slack_yarn_is_finite():
     """A crossing whose yarn has no tension (slack): the change of its bound is measured against
-    the floor (1 % of the top tension), not against zero (1e298 before)."""
+    the floor (1 % of the top tension), not against zero: a finite figure."""
     lat = NS(up=np.array([[0, 0]]), yarn=np.array([[0, 1]]))     # the crossing above: its own row
     tension = np.zeros((1, 2))
     f_top = np.array([4.7, 4.7])
@@ -258,8 +258,8 @@ def test_snapshot_reasons_flag_a_state_far_from_its_rebalance_and_a_failed_rebal
 
 
 def test_the_interaction_note_gives_this_runs_steps(tmp_path):
-    """Before an interaction run starts, its note gives the work estimate's step count (the
-    figure the estimate prints after the run), not a fixed sentence about large machines."""
+    """Before an interaction run starts, its note gives the work estimate's step count for this
+    run (the figure the estimate prints after the run)."""
     from preform.pipeline import checked_geometry, estimate
 
     cfg = _cylinder_interaction(tmp_path)

@@ -1,6 +1,5 @@
 """Slow obvious NumPy references of the braid-angle kernels (``_kernels/kinematic.py``:
-``braid_angles_batch``, ``laid_yarn_angles``), as ``preform.analysis`` computed them before the
-kernels: whole-array NumPy, one operation at a time."""
+``braid_angles_batch``, ``laid_yarn_angles``): whole-array NumPy, one operation at a time."""
 
 from __future__ import annotations
 

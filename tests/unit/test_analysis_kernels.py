@@ -1,6 +1,6 @@
 """The braid-angle kernels of laid yarn (``_kernels.kinematic.braid_cosines_batch``,
 ``laid_yarn_angles`` through ``preform.analysis``) against their slow NumPy reference
-(``naive_analysis``, what ``analysis`` computed before the kernels), on a curved mandrel."""
+(``support.naive_analysis``, whole-array NumPy), on a curved mandrel."""
 
 from __future__ import annotations
 

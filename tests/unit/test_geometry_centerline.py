@@ -313,10 +313,10 @@ def test_case_b_perimeter_equal_at_both_ends(shipped):
 @pytest.mark.parametrize("encoding", ["stl", "stl_ascii"])
 @pytest.mark.parametrize("scale", [1.0, 1000.0])
 def test_auto_centerline_on_trimesh_capped_cylinders(tmp_path, sections, encoding, scale):
-    # trimesh's capped cylinders: long side slivers, so no side face centroid is near the tip; the
-    # tip direction used to come from the sign of a dot product of two perpendicular vectors and
-    # refused 7 of these 12 ("no cross-section near the tip"); scale 1000 is an STL in mm read
-    # as m, which must reach the unit check (preflight) instead of failing here
+    # trimesh's capped cylinders: long side slivers, so no side face centroid is near the tip (a
+    # tip direction from the sign of a dot product of two perpendicular vectors would refuse 7 of
+    # these 12, "no cross-section near the tip"); scale 1000 is an STL in mm read as m, which
+    # must reach the unit check (preflight) instead of failing here
     import trimesh
 
     m = trimesh.creation.cylinder(radius=0.04, height=1.6, sections=sections)

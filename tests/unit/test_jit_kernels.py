@@ -1,5 +1,6 @@
-"""The kernels rewritten for a shorter first-run compile against the NumPy / numba forms they
-replace, bit for bit (docs/decisions.md, "Kernel code written for compile time, same results")."""
+"""Kernels written for a short compile against the library forms they stand for, bit for bit
+(docs/decisions.md, "Kernel code written for compile time, same results"): ``cell_order``
+against numba's own ``np.argsort`` (quicksort)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from preform._kernels.fields import cell_order
 
 @njit
 def numba_argsort(keys):
-    """What pool_sums called before: numba's own np.argsort (quicksort)."""
+    """numba's own np.argsort (quicksort), the order ``cell_order`` writes out."""
     return np.argsort(keys)
 
 

@@ -1,4 +1,5 @@
-"""The run verdict and honest steady values (item 2), on constructed histories."""
+"""The run verdict and honest steady values, on constructed histories: each reason triggered
+by the history built for it, and the steady figures taken over the steady stretch only."""
 
 from __future__ import annotations
 

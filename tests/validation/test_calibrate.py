@@ -17,7 +17,7 @@ from support.simcase import write_cylinder_case
 
 TRUTH = {"yarn.friction": 0.22, "process.initial_position": 0.085}
 #: the measurement noise of the synthetic measurements: small against what the friction
-#: changes on this machine (friction 0.2 to 0.3 moves the angles by 0.03 deg RMS, H by 0.2 mm)
+#: changes on this set-up (friction 0.2 to 0.3 moves the angles by 0.03 deg RMS, H by 0.2 mm)
 NOISE = {"angle": 0.02, "convergence": 5e-5, "yarn": 2e-5}
 
 

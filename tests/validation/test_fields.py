@@ -104,7 +104,7 @@ def test_no_yarns_at_all_gives_zero_fields():
 
 
 def test_yarns_narrow_to_the_available_width_and_jam_only_below_their_least_width():
-    """Issue 16: 144 yarns of 4 mm on the 150 mm cylinder at 60 deg (the paper's case A) narrow to
+    """144 yarns of 4 mm on the 150 mm cylinder at 60 deg (the paper's case A) narrow to
     the available width 4 pi r cos(alpha) / N = 3.27 mm (paper §2.4.2) and get thicker by w / w'
     (cross-section kept): full coverage, thickness 2 t w / w', not jammed; with a least width
     above 3.27 mm they cannot, and the faces are flagged jammed."""
@@ -211,7 +211,7 @@ def test_refinement_keeps_area_winding_and_is_conforming():
 
 
 def test_triaxial_cover_factor_and_thickness_closed_forms():
-    """Issue 19: with n_a axial yarns of width w_a (thickness t_a) on the cylinder, k_a = n_a w_a /
+    """With n_a axial yarns of width w_a (thickness t_a) on the cylinder, k_a = n_a w_a /
     (2 pi r), CF = 1 - (1 - k)^2 (1 - k_a), thickness = 2 t k + t_a k_a (yarn volume per area)."""
     alpha, n, n_axial, w_a, t_a = np.radians(30.0), 24, 16, 3e-3, 3e-4
     result = make_result(cylinder(), helices(alpha, n))

@@ -31,7 +31,7 @@ def _config(tmp_path, iterations, solver="relax"):
 def test_make_zone_passes_the_iterations_to_the_solver(tmp_path):
     """The zone's settings carry the iterations; with more than one the relaxation retries a
     stalled block step with the "full" preconditioner (``RelaxSettings.full_retry``) before
-    Newton; with one the zone is as before (default settings, the plain solver)."""
+    Newton; with one the zone has the default settings (the plain solver)."""
     for iterations in (1, 3):
         cfg = _config(tmp_path, iterations)
         mandrel, _ = load_geometry(cfg)

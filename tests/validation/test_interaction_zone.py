@@ -161,9 +161,9 @@ def test_near_bounds_the_distance_to_the_surface_from_below():
 def test_near_planes_give_the_states_of_every_crossings_plane(clearance):
     """The zone on the flared mandrel (wall and deposits active) with the tangent planes of the
     crossings near it only (``NearSettings``) and with every crossing's plane (a clearance of
-    10 m): the same states, bit for bit, the same deposits; some steps moved a crossing without
-    its plane as far as it was from the mandrel and were solved again with every plane (6 and
-    16 of 90 measured)."""
+    10 m): the same states, bit for bit, the same deposits, also where a step moves a crossing
+    without its plane as far as it is from the mandrel and is solved again with every plane (6
+    and 16 of the 90 steps)."""
     near, _, _, last = run_zone(mu=0.3, steps=90, wall=True,
                                 near=NearSettings(wall_clearance=clearance))
     every, _, _, last_every = run_zone(mu=0.3, steps=90, wall=True,

@@ -1,6 +1,6 @@
 """A held-out-style curved mandrel: an elliptic section swept along a 70 deg arc,
 in millimetres, rotated into an arbitrary frame. With the pose lead at the convergence length
-(the advice the README used to give) the run is nonsense and the verdict says so; with the
+the run is nonsense and the verdict says so; with the
 automatic pose lead the run is sane."""
 
 from __future__ import annotations

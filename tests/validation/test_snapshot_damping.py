@@ -1,8 +1,8 @@
 """A snapshot's final frontal iteration that cycles between stick and slip states is damped
 (``FrontalSettings.snapshot_damping``): the bent tube's snapshot at t = 5.634 s (step 177 of its
-start-up, the third of its 20 snapshots) cycled at a bound change of 2-3e-3 for its 100
-iterations and was written with crossings outside the friction cone by 4.7e-3 of their tension;
-damped, it converges and every crossing meets the friction law (Psi <= 1e-3) and
+start-up, the third of its 20 snapshots) cycles undamped at a bound change of 2-3e-3 for 100
+iterations, with crossings outside the friction cone by 4.7e-3 of their tension; damped, it
+converges and every crossing meets the friction law (Psi <= 1e-3) and
 balances (1e-3), read from the snapshot's own arrays. The written snapshot is the
 run's own state; the re-balanced copy that checks it is what is damped (``rebalanced``). The
 start-up's steps exceed ``ZoneSettings.max_step_residual`` (1.31 at step 119), which would stop

@@ -9,9 +9,9 @@ initial iterate (``start=``) only seeds the iteration: the default (lagged) step
 posed state, from starts shaken by 0.1 and 0.3 mm and from start predictors (the lowest crossings
 moved with their fell points; a linear extrapolation of the last two steps) lands on one state
 within 1e-6 m with the same slip states, by Newton and by the relaxation, on steps of case A runs
-(16 and 48 carriers, friction 0.25 and 0.5) and of a case-B-like run behind a guide ring. Before
-the problem was separated from the start, new crossings' bounds and the ring's top tensions were
-taken at the start itself, and two starts of the 48-carrier step landed 7.5 mm and 1.7 cm apart
+(16 and 48 carriers, friction 0.25 and 0.5) and of a case-B-like run behind a guide ring. With
+new crossings' bounds and the ring's top tensions taken at the start itself instead, two starts
+of the 48-carrier step land 7.5 mm and 1.7 cm apart
 (``test_start_geometry_bounds_depend_on_the_start``).
 
 With ``FrontalSettings.consistent_bounds`` every step's friction bounds and top tensions are
@@ -261,9 +261,8 @@ def test_default_step_from_any_start_lands_on_one_state(name, runs, captured):
 
 
 def test_start_geometry_bounds_depend_on_the_start(captured):
-    """The contrast: where the shaken start is handed in as the posed state (what a step did
-    before the problem was separated from the start: new crossings' bounds and the top tensions
-    taken at the start), the 48-carrier step's two starts land far apart (measured 7.5 mm and
+    """The contrast: where the shaken start is handed in as the posed state (new crossings'
+    bounds and the top tensions taken at the start), the 48-carrier step's two starts land far apart (measured 7.5 mm and
     1.7 cm): its 24 new crossings' bounds move with a 0.1 mm shake by a few per cent and the
     crossings under small held bounds slide along a soft mode."""
     st, bc, centre = captured((48, 0.25, 250))
@@ -331,8 +330,8 @@ def test_relaxation_reports_the_lag_of_its_bounds(name, captured):
     iteration does: both solve the same problem to 1e-9, so the two figures agree to the
     difference of their converged geometries (measured 2e-6 relative at 48 carriers and 1.9e-3
     behind the ring, where the relaxation's exact wall and Newton's penalty wall differ by about
-    1 um; 1e-2 allowed), and the figure is far above the balance tolerance (it was the balance
-    residual alone, ~1e-9)."""
+    1 um; 1e-2 allowed), and the figure is far above the balance tolerance (the balance residual
+    alone is ~1e-9)."""
     st, bc, centre = captured(name)
     _, newton = _solve(st, bc, centre, DEFAULT)
     x = st.copy()
