@@ -124,20 +124,6 @@ def test_a_failing_render_in_the_worker_keeps_the_data_files(small_result, tmp_p
     assert summary["wall_time_s"] == pytest.approx(sum(summary["stages_s"].values()))
 
 
-def test_the_first_run_kernel_warmup_maps_a_small_cylinder(tmp_path):
-    """The warm-up a first run forks (``pipeline.start_kernel_warmup``) runs the field kernels
-    with the run's settings; once they are in numba's cache it is not started."""
-    from preform import pipeline
-    from preform._kernels import fields as field_kernels
-    from preform.config import load_config
-    from support.simcase import write_cylinder_case
-
-    config = load_config(write_cylinder_case(tmp_path, length=0.6, braid=0.06, carriers=16, friction=0.0))
-    assert pipeline._compile_map_kernels(config) == []
-    assert pipeline._kernels_cached(field_kernels)
-    assert pipeline.start_kernel_warmup(config) is None
-
-
 # ------------------------------------------------------------------ the worker started early
 
 
