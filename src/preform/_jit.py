@@ -5,15 +5,16 @@ numba compiles a kernel the first time it is called with new argument types; the
 with those types, in any process, loads it from there. A first run of ``preform run`` in an
 environment compiles, one kernel after another, in the order the run needs them: the mesh intake
 and the checks, the stepper, the braid angles, the field map. At the command's first compilation
-(numba's ``numba:compile`` event, raised for a compilation, not for a cache load) :class:`Warmup`
-starts, when a core is idle, a worker process (``python -m preform._jit``) that runs the same code on a small cylinder
-with the run's settings (the same argument types, so the same compiled specialisations): while
-the command compiles the repair's and then the stepper's kernels, the worker compiles the
-checks' and a mandrel's, then the map's and the braid angles' (:data:`JOBS`), and builds the
-run's field mesh into the preform cache; what one compiled, the other loads. Nothing is
-coordinated beyond that: a job that fails, or a worker that is slow or dies, only means that the
-command compiles or builds that part itself. The worker is a fresh interpreter, not a fork:
-embree's thread pool and numba's state are not fork-safe once started.
+(numba's ``numba:compile`` event, raised for a compilation, not for a cache load) and when a
+core is idle, :class:`Warmup` starts a worker process (``python -m preform._jit``) that runs the
+same code on a small cylinder with the run's settings (the same argument types, so the same
+compiled specialisations): while the command compiles the repair's and then the stepper's
+kernels, the worker compiles the checks', a mandrel's and the projector's, then the braid
+angles' and the map's (:data:`JOBS`), and builds the run's field mesh into the preform cache;
+what one compiled, the other loads. Nothing is coordinated beyond that: a job that fails, or a
+worker that is slow or dies, only means that the command compiles or builds that part itself.
+The worker is a fresh interpreter, not a fork: embree's thread pool and numba's state are not
+fork-safe once started.
 """
 
 from __future__ import annotations
@@ -172,14 +173,12 @@ def job_field_mesh(config):
         cached_field_mesh(SimpleNamespace(config=config, mandrel=mandrel))
 
 
-#: the worker's jobs, in order: the checks', a mandrel's and the stepper's projector kernels,
-#: which the command needs right after the repair's (which it compiles meanwhile); the map's; the
-#: field mesh (from the mandrel the command stores in the cache when it has loaded it: tried again
-#: last if it was not there yet); the braid angles' (needed after the stepper's, which the command
-#: compiles itself, and the simulation)
-JOBS = (("checks", job_checks), ("arrays", job_arrays), ("projector", job_projector), ("pool", job_pool),
-        ("clip", job_clip), ("field_mesh", job_field_mesh), ("laid", job_laid), ("angles", job_angles),
-        ("field_mesh", job_field_mesh))
+#: the worker's jobs, in the order the command needs what they compile while it compiles the
+#: repair's and then the stepper's kernels itself: the checks', a mandrel's and the stepper's
+#: projector kernels (right after the repair), the braid angles' (after the simulation), the map's
+#: and the field mesh (from the mandrel the command stored in the cache when it loaded it)
+JOBS = (("checks", job_checks), ("arrays", job_arrays), ("projector", job_projector), ("laid", job_laid),
+        ("angles", job_angles), ("pool", job_pool), ("clip", job_clip), ("field_mesh", job_field_mesh))
 
 
 # ------------------------------------------------------------------------------ compile log

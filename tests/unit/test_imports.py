@@ -200,3 +200,20 @@ def test_a_kinematic_run_does_not_load_the_interaction_model(tmp_path):
                          env={**os.environ, "PREFORM_CACHE": "0"}, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_no_test_module_imports_another():
+    """Test modules share code through ``tests/support`` only: no ``import`` of a ``test_*``
+    module anywhere under ``tests/`` (read with ``ast``, imports inside functions included), and
+    every test module is in a folder of its kind."""
+    tests = SRC.parent / "tests"
+    found = []
+    for path in sorted(tests.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            found += [f"{path.relative_to(tests)}: {n}" for n in names if n.split(".")[-1].startswith("test_")]
+    assert found == []
+    astray = [str(p.relative_to(tests)) for p in sorted(tests.rglob("test_*.py"))
+              if p.parent.name not in ("unit", "validation", "e2e")]
+    assert astray == [], "test modules outside tests/unit, tests/validation, tests/e2e"
