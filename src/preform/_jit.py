@@ -235,6 +235,9 @@ class WarmupSettings:
     #: the worker only gains on a core nobody else uses: it is started while the 1-minute load
     #: average is below the number of cores minus this
     idle_core: float = 0.5
+    #: seconds the command waits, at its end, for a worker still running to leave after SIGTERM
+    #: (it leaves once the compilation in progress returns) before killing it
+    stop_wait_s: float = 5.0
 
 
 #: the defaults
@@ -255,7 +258,7 @@ class Warmup:
     """While entered: at the command's first numba compilation, the worker for ``config`` (read
     from ``config_path``, ``[model] kind`` replaced by ``model`` when given), for the kinematic
     model and when a core is idle then (``settings``); on exit it is stopped if still running
-    (SIGTERM, then killed after 5 s)."""
+    (SIGTERM, then killed after ``settings.stop_wait_s``)."""
 
     def __init__(self, config, config_path, model: str = "", settings: WarmupSettings = WARMUP):
         self.argv = [sys.executable, "-m", "preform._jit", str(config_path), model]
@@ -285,7 +288,7 @@ class Warmup:
         if self.process is not None and self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout=5)
+                self.process.wait(timeout=self.settings.stop_wait_s)
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()

@@ -20,8 +20,9 @@ from preform.config import load_config
 
 ROOT = Path(__file__).resolve().parents[2]
 CASE_A = ROOT / "examples" / "case_a.toml"
-#: a worker whatever the machine's load (the suite runs on loaded machines too)
-ANY_LOAD = _jit.WarmupSettings(idle_core=-1e9)
+#: a worker whatever the machine's load (the suite runs on loaded machines too), and on a loaded
+#: machine the time for its compilation in progress to return after SIGTERM
+ANY_LOAD = _jit.WarmupSettings(idle_core=-1e9, stop_wait_s=120.0)
 
 
 def _compile_something():
