@@ -1,5 +1,5 @@
 """Slow obvious NumPy references of the braid-angle kernels (``_kernels/kinematic.py``:
-``braid_angles_batch``, ``laid_yarn_angles``), as ``preform.analysis`` computed them before the
+``braid_angles_batch``, ``laid_yarn_angles``), as ``preform.laid`` computed them before the
 kernels: whole-array NumPy, one operation at a time."""
 
 from __future__ import annotations

@@ -178,7 +178,7 @@ def test_orient_bodies_is_the_double_cover_components(seed):
 
 @pytest.mark.parametrize("kernel_faces", [0, 10**12])   # the kernel, and the NumPy form
 def test_field_mesh_weld_returns_welded_arrays_as_they_are(kernel_faces):
-    from preform.fields import _merge_exact_duplicates
+    from preform.analysis.fields import _merge_exact_duplicates
     from preform.geometry.small_mesh import IntakeSettings
 
     settings = IntakeSettings(kernel_faces=kernel_faces)

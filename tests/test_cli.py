@@ -195,7 +195,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
         simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
     monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
-    monkeypatch.setitem(sys.modules, "preform.fields",
+    monkeypatch.setitem(sys.modules, "preform.analysis.fields",
                         types.SimpleNamespace(map_to_surface=lambda r, mesh=None: None))
     import preform.io.cache
     import preform.pipeline
@@ -264,10 +264,10 @@ def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status
 
 @pytest.fixture
 def stubbed_geometry(tmp_path, monkeypatch):
-    """preform.geometry.info / write_centerline_csv replaced by stubs recording their calls."""
+    """preform.geometry.info / io.centerline_csv.write_centerline_csv replaced by stubs recording their calls."""
     import types
 
-    import preform.geometry
+    import preform.io.centerline_csv
 
     calls = {}
 
@@ -281,7 +281,7 @@ def stubbed_geometry(tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "preform.geometry.info", types.SimpleNamespace(
         mandrel_info=mandrel_info, format_mandrel_info=lambda info: "watertight: yes"))
-    monkeypatch.setattr(preform.geometry, "write_centerline_csv", write_centerline_csv, raising=False)
+    monkeypatch.setattr(preform.io.centerline_csv, "write_centerline_csv", write_centerline_csv)
     stl = tmp_path / "case_b.stl"
     stl.write_text("solid placeholder\nendsolid placeholder\n")
     shipped = tmp_path / "case_b_centerline.csv"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from preform import fields as F
+from preform.analysis import fields as F
 from preform._kernels import fields as K
 from naive_geometry import point_triangle_distance
 from test_helpers_fields import cylinder, helices

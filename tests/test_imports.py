@@ -140,7 +140,7 @@ def test_lazy_public_names_resolve_to_the_real_objects():
     import inspect
 
     import preform
-    from preform.fields import SurfaceFields, map_to_surface
+    from preform.analysis.fields import SurfaceFields, map_to_surface
 
     assert preform.map_to_surface is map_to_surface
     assert preform.SurfaceFields is SurfaceFields

@@ -111,7 +111,7 @@ def test_the_worker_field_mesh_is_the_one_the_run_builds(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
     from preform.config import load_config
-    from preform.fields import field_mesh
+    from preform.analysis.fields import field_mesh
     from preform.geometry.mandrel import load_mandrel
     from preform.io.cache import cached_field_mesh, cached_mandrel
 

@@ -143,7 +143,7 @@ def test_the_first_run_kernel_warmup_maps_a_small_cylinder(tmp_path):
 
 @pytest.fixture(scope="module")
 def fields():
-    from preform.fields import map_to_surface
+    from preform.analysis.fields import map_to_surface
     from test_helpers_fields import cylinder, helices, make_result
 
     return map_to_surface(make_result(cylinder(height=0.2), helices(np.radians(30.0), 16, z1=0.14)),

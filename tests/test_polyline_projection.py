@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from preform._kernels.mesh import project_to_polyline, sample_tree
-from preform.analysis import CenterlineProjector
+from preform.laid import CenterlineProjector
 from preform.geometry.centerline import centerline_from_points
 import naive_kinematic as naive
 

@@ -12,12 +12,12 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from preform import rtm
-from preform.fields import map_to_surface, stack_layers
+from preform.analysis import rtm
+from preform.analysis.fields import map_to_surface, stack_layers
 from preform.structural import write_structural
 from preform.structural.deck import curved_midpoint
 from preform.structural.layup import BinSettings
-from preform.structural.materials import PRESETS
+from preform.materials import PRESETS
 from preform.structural.micromechanics import chamis
 from test_helpers_fields import R, cylinder, helices, make_result
 

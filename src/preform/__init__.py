@@ -24,7 +24,7 @@ def __getattr__(name):
     if name == "simulate":
         from .simulation import simulate as value
     elif name in ("map_to_surface", "SurfaceFields"):
-        from . import fields
+        from .analysis import fields
         value = getattr(fields, name)
     elif name == "write_results":
         from .io import write_results as value
@@ -33,10 +33,10 @@ def __getattr__(name):
         value = getattr(geometry, name)
     elif name == "CheckpointError":
         from .checkpoint import CheckpointError as value
-    elif name == "sweep":   # the module is preform.sweeps, so this name stays the function
-        from .sweeps import sweep as value
+    elif name == "sweep":   # the module is preform.studies.sweeps, so this name stays the function
+        from .studies.sweeps import sweep as value
     elif name == "design_speed":
-        from .design import design_speed as value
+        from .studies.design import design_speed as value
     else:
         raise AttributeError(f"module 'preform' has no attribute {name!r}")
     globals()[name] = value

@@ -128,7 +128,7 @@ def _analysis_case(config):
 def job_angles(config, mandrel=None):
     """The braid angles of the history (``analysis.braid_angles_at``), as a result computes
     them, on two points of :func:`small_case`'s surface."""
-    from .analysis import braid_angles_at
+    from .laid import braid_angles_at
 
     _, arrays, centerline, points, faces, s, directions = _analysis_case(config)
     braid_angles_at(arrays, centerline, points, faces, s, directions)
@@ -137,7 +137,7 @@ def job_angles(config, mandrel=None):
 def job_laid(config, mandrel=None):
     """The laid yarn's braid angles of the yarn paths (``analysis.laid_braid_angles``), as a
     result computes them, on the same two points."""
-    from .analysis import laid_braid_angles, mandrel_friction
+    from .laid import laid_braid_angles, mandrel_friction
     from .tolerances import tol
 
     small, arrays, centerline, points, faces, s, _ = _analysis_case(config)
@@ -148,7 +148,7 @@ def job_laid(config, mandrel=None):
 def job_clip(config, mandrel=None):
     """Two helices clipped to the faces of a small cylinder (``fields.clip_yarns`` as
     ``fields.map_to_surface`` calls it, on ``pipeline.small_map_case``): the clipping kernels."""
-    from .fields import clip_yarns, face_geometry
+    from .analysis.fields import clip_yarns, face_geometry
     from .pipeline import small_map_case
 
     result, (V, F, _, _) = small_map_case(config)
@@ -159,7 +159,7 @@ def job_clip(config, mandrel=None):
 def job_pool(config, mandrel=None):
     """The neighbourhood sums of the same small cylinder's faces (``fields.pool`` as
     ``fields.map_to_surface`` calls it): the pooling kernels."""
-    from .fields import face_geometry, pool
+    from .analysis.fields import face_geometry, pool
     from .pipeline import small_map_case
 
     _, (V, F, _, h) = small_map_case(config)

@@ -267,7 +267,7 @@ def cmd_mandrel_info(args) -> int:
     csv = Path(args.csv).expanduser().absolute() if args.csv else None
     if csv is not None and not csv.parent.is_dir():
         raise MandrelError(f"--csv {args.csv}: the folder {csv.parent} does not exist")
-    from .geometry import write_centerline_csv
+    from .io.centerline_csv import write_centerline_csv
     from .geometry.info import format_mandrel_info, mandrel_info
 
     info = mandrel_info(stl, unit=args.unit, centerline=centerline)
@@ -287,7 +287,7 @@ def cmd_mandrel_info(args) -> int:
 # ---------------------------------------------------------------- preform sweep
 
 def cmd_sweep(args) -> int:
-    from .sweeps import SWEEP_CSV, load_sweep, sweep
+    from .studies.sweeps import SWEEP_CSV, load_sweep, sweep
 
     spec = load_sweep(args.sweep)   # bad input fails here, before a cluster starts
     rows = sweep(args.sweep, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
@@ -306,7 +306,7 @@ def cmd_design(args) -> int:
     import dataclasses
 
     from .config import load_config
-    from .design import design_speed, plot_design, read_target_table, write_design_config
+    from .studies.design import design_speed, plot_design, read_target_table, write_design_config
 
     config = load_config(args.config)
     if args.model:
@@ -339,7 +339,7 @@ def cmd_design(args) -> int:
 # ---------------------------------------------------------------- preform compare
 
 def cmd_compare(args) -> int:
-    from .compare import compare, off_lines, summary_lines
+    from .studies.compare import compare, off_lines, summary_lines
 
     comparisons, written = compare(args.results, args.measured, args.out, plot=not args.no_plot)
     for line in summary_lines(comparisons):
@@ -365,7 +365,7 @@ def add_compare_parser(sub) -> None:
 # ---------------------------------------------------------------- preform calibrate
 
 def cmd_calibrate(args) -> int:
-    from .calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
+    from .studies.calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
                             report_lines)
 
     params = [parse_param(p) for p in args.param]   # bad input fails here, before a cluster starts

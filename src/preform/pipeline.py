@@ -139,7 +139,7 @@ def _compile_map_kernels(config):
     compiled for the argument types of the run and written to numba's cache (``cache=True``).
     The cylinder's own triangles are the field mesh, so nothing here remeshes or casts rays
     (embree's thread pool, started in the parent, is not to be used after a fork)."""
-    from .fields import map_to_surface
+    from .analysis.fields import map_to_surface
 
     result, mesh = small_map_case(config)
     map_to_surface(result, mesh=mesh)
@@ -184,8 +184,8 @@ def start_kernel_warmup(config):
 
 
 def with_rtm_fields(result, fields):
-    """``fields`` with the RTM arrays (``preform.rtm``) when the config has tow material data."""
-    from .rtm import missing_material, rtm_fields
+    """``fields`` with the RTM arrays (``preform.analysis.rtm``) when the config has tow material data."""
+    from .analysis.rtm import missing_material, rtm_fields
 
     if fields is None or missing_material(result.config):
         return fields
@@ -216,7 +216,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
     from .checkpoint import Checkpoint
-    from .fields import map_to_surface
+    from .analysis.fields import map_to_surface
     from .io import start_pictures, write_results
     from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
@@ -315,7 +315,7 @@ class LayerStack:
 
     @property
     def reach(self) -> float:
-        from .fields import LOCATE_REACH_EDGES
+        from .analysis.fields import LOCATE_REACH_EDGES
 
         return LOCATE_REACH_EDGES * float(self.field_mesh[3])
 
@@ -378,7 +378,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     (status "failed" for the latter, naming the layer); the layers done so far are written. The top-level
     ``history.csv``, ``yarns.vtp`` and ``convergence`` are the first layer's, ``layer{k}/`` holds
     those of layer k >= 2; the surface files hold every layer's fields (``layer{k}_*``) and the
-    stacked totals (``preform.fields.stack_layers``, ``preform.rtm.stacked_rtm_fields``);
+    stacked totals (``preform.analysis.fields.stack_layers``, ``preform.analysis.rtm.stacked_rtm_fields``);
     ``summary.json`` ``layers`` has one entry per layer.
     offset_settings : preform.geometry.offset.OffsetSettings (None: the defaults)
     """
@@ -387,7 +387,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
 
     from .checks import preflight
     from .checkpoint import Checkpoint
-    from .fields import map_to_surface
+    from .analysis.fields import map_to_surface
     from .geometry.offset import OffsetSettings
     from .io import write_results
     from .io.cache import cached_field_mesh
@@ -452,8 +452,8 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
 def _stacked_fields(configs, layer_fields, centerline, cavity_thickness):
     """The stacked SurfaceFields of the layers mapped (with the stacked RTM arrays when every
     layer has tow data), or None when no layer was."""
-    from .fields import stack_layers
-    from .rtm import missing_material, stacked_rtm_fields
+    from .analysis.fields import stack_layers
+    from .analysis.rtm import missing_material, stacked_rtm_fields
 
     if not layer_fields:
         return None
@@ -491,7 +491,7 @@ def layer_summary(k, layer, result, fields, offset) -> dict:
     history, yarns and fields, located on its own centerline), its fields' means over the faces
     it reached, and for k >= 2 the offset surface it was braided on."""
     from .io.tables import summary_dict
-    from .quality import surface_reasons
+    from .analysis.quality import surface_reasons
 
     s = summary_dict(result, {"quality_reasons": surface_reasons(result, fields)})
     entry = {"layer": k, "direction": layer.direction, "model": s["model"], "status": s["status"],

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import plain
-from .analysis import braid_angles_at, laid_braid_angles
+from .laid import braid_angles_at, laid_braid_angles
 from .result import FLAG_SLIP, HISTORY_COLUMNS, Snapshot, YarnPaths
 
 #: columns of Recording.rows: time, H mean, H min, H max, contacts, iterations, residual

@@ -1,6 +1,6 @@
 """Numba kernel clipping deposited yarn polylines to the faces of a mesh (docs/theory.md §5).
 
-Arrays and scalars only; the wrapper is :func:`preform.fields.map_to_surface`, the slow NumPy
+Arrays and scalars only; the wrapper is :func:`preform.analysis.fields.map_to_surface`, the slow NumPy
 reference lives in ``tests/test_fields_kernels.py``.
 
 Which face owns a point in space: face ``f`` owns the wedge bounded by its three *edge planes*.

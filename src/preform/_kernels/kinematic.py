@@ -346,7 +346,7 @@ def lifted_points(V, T, CN, faces, points, clearance, out):
 
 
 # ---------------------------------------------------------------- braid angles of laid yarn
-# Post-processing of a run (``preform.analysis``): per point, the centerline tangent at its arc
+# Post-processing of a run (``preform.laid``): per point, the centerline tangent at its arc
 # length s (linear blend of the polyline's vertex tangents, as ``Centerline.frames_at``), the
 # smooth normal n, and the braid angle between a direction d and t, both projected on the tangent
 # plane: alpha = arccos(|d_p . t_p| / (|d_p| |t_p|)); the kernels give the cosine, NumPy takes the

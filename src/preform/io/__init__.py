@@ -81,7 +81,7 @@ _FIELD_NUMBERS = ("unmapped_length_m", "edge_length_m", "pool_radius_m")
 
 
 def fields_arrays(fields) -> dict:
-    """``fields`` (preform.fields.SurfaceFields) as a dict name -> numpy array, to hand to a
+    """``fields`` (preform.analysis.fields.SurfaceFields) as a dict name -> numpy array, to hand to a
     picture worker without pickling (:func:`fields_from_arrays` makes it back)."""
     import numpy as np
 
@@ -95,7 +95,7 @@ def fields_arrays(fields) -> dict:
 
 def fields_from_arrays(arrays):
     """The SurfaceFields of :func:`fields_arrays`' dict."""
-    from ..fields import SurfaceFields
+    from ..analysis.fields import SurfaceFields
 
     cell_data = {name[len("cell_data/"):]: values for name, values in arrays.items()
                  if name.startswith("cell_data/")}
@@ -141,7 +141,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
-    fields : preform.fields.SurfaceFields or None (no surface files then)
+    fields : preform.analysis.fields.SurfaceFields or None (no surface files then)
     out_dir : str or Path, created if missing
     stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
         ``wall_time_s`` is then the whole command's, these stages, the writing of the data files
@@ -213,7 +213,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=2)
     written += [p for p in drawn_here if Path(p).is_file()]
     files = [_relative(p, out_dir) for p in [*written, summary]]
-    from ..quality import surface_reasons
+    from ..analysis.quality import surface_reasons
 
     extra = {"files": files, "rtm": rtm, "structural": structural, "quality_reasons": surface_reasons(result, fields),
              "pictures": {"failed": failed}}
@@ -232,7 +232,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
 
 def _write_rtm(result, fields, out_dir, written) -> dict:
     """``rtm/`` when the fields carry fibre content (tow data given); what the summary says."""
-    from ..rtm import missing_material
+    from ..analysis.rtm import missing_material
 
     reason = missing_material(result.config) if result.config is not None else "no config"
     if reason:

@@ -166,7 +166,7 @@ def plot_history(result, plots_dir, refs=None) -> list[Path]:
 
     refs : preform.reference.References, or None to compute them from the result's geometry.
     """
-    from ..steady import steady_state
+    from ..analysis.steady import steady_state
 
     plots_dir = Path(plots_dir)
     refs = refs if refs is not None else history_references(result)

@@ -9,7 +9,7 @@
   set as their property id, and one ``SET1`` per property set listing its cells; the sets'
   values (thickness, porosity, K1, alpha, reference direction) are in ``rtmsim_sets.csv`` beside
   it, for RTMsim's patch table. The cells are binned into at most four sets
-  (:func:`preform.rtm.bin_cells`), and the binning error is reported.
+  (:func:`preform.analysis.rtm.bin_cells`), and the binning error is reported.
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Pa
     own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is
     preform).
     """
-    from ..rtm import bin_cells
+    from ..analysis.rtm import bin_cells
     from .atomic import safe_folder
 
     folder = safe_folder(out_dir, RTM_DIR)

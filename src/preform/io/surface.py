@@ -56,7 +56,7 @@ def surface_mesh(fields):
 def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> list[Path]:
     """Write ``surface.vtu``, ``surface.xdmf`` + ``surface.h5`` and the pictures into ``out_dir``.
 
-    fields : preform.fields.SurfaceFields
+    fields : preform.analysis.fields.SurfaceFields
     out_dir : str or Path, created if missing
     pictures : also render the pictures (:func:`write_surface_pictures`) into ``out_dir/plots``
     returns : the paths written (pictures only if rendering worked)
@@ -86,7 +86,7 @@ def write_input_mesh_fields(fields, mandrel, out_dir) -> Path:
     after repair; ``fields.fields_on_input``, area-weighted), written atomically."""
     import meshio
 
-    from ..fields import fields_on_input
+    from ..analysis.fields import fields_on_input
 
     path = Path(out_dir) / INPUT_VTU
     with atomic_path(path) as tmp:

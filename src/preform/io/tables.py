@@ -115,7 +115,7 @@ def _final(result, name):
 
 
 def _steady_state(result):
-    from ..steady import steady_state
+    from ..analysis.steady import steady_state
 
     if not result.steps:
         return None
@@ -123,7 +123,7 @@ def _steady_state(result):
 
 
 def _quality(result, fields_reasons=(), interlacing=False):
-    from ..quality import assess, verdict
+    from ..analysis.quality import assess, verdict
 
     q = assess(result, interlacing=interlacing)
     return verdict([*q["reasons"], *fields_reasons])
@@ -141,7 +141,7 @@ def _snapshot_checks(result):
     the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
     times of the snapshots beyond it and of those whose re-balance failed; None where no
     snapshot was checked."""
-    from ..quality import QUALITY
+    from ..analysis.quality import QUALITY
 
     shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
     failed = [s.time_s for s in result.snapshots if s.rebalance_error]
@@ -157,7 +157,7 @@ def _snapshot_checks(result):
 
 
 def _interlacing(il):
-    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``;
+    """Warp-weft crossings of the laid yarns against the pattern's (``preform.analysis.interlacing``;
     ``il``: ``quality.run_interlacing``'s)."""
     if il is None:
         return None
@@ -174,7 +174,7 @@ def summary_dict(result, extra=None) -> dict:
     model = config.model.kind if config is not None else None
     extra = dict(extra or {})
     steady = _steady_state(result) or {}
-    from ..quality import run_interlacing
+    from ..analysis.quality import run_interlacing
 
     interlaced = run_interlacing(result)
     summary = {

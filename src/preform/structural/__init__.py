@@ -17,7 +17,7 @@ FE_DIR = "fe"
 
 def missing_inputs(result, fields) -> str:
     """Why the structural files cannot be written for this run ("" if they can)."""
-    from ..rtm import missing_material
+    from ..analysis.rtm import missing_material
 
     config = result.config
     if config is None or getattr(config, "material", None) is None:
@@ -39,14 +39,14 @@ def write_structural(result, fields, out_dir, layer_results=(), settings=None) -
     """``<out_dir>/fe/preform.inp`` and ``layup.csv`` of a run; (paths, what the summary says).
 
     result : the Result of the (first) layer; layer_results : those of layers 2, 3, ...
-    fields : its SurfaceFields with the RTM arrays (``preform.rtm``), stacked for several layers
+    fields : its SurfaceFields with the RTM arrays (``preform.analysis.rtm``), stacked for several layers
     settings : layup.BinSettings (None: the defaults)
     """
     reason = missing_inputs(result, fields)
     if reason:
         _remove_earlier(out_dir)
         return [], {"written": False, "reason": reason}
-    from ..fields import face_geometry, surface_tangent
+    from ..analysis.fields import face_geometry, surface_tangent
     from ..io.atomic import safe_folder
     from .deck import largest_component, write_deck
     from .layup import BinSettings, bin_plies, face_plies
@@ -75,7 +75,7 @@ def write_structural(result, fields, out_dir, layer_results=(), settings=None) -
                              arc_length, axis_at, title=f"preform: {_run_name(result)}")
     said["left_out_faces"] = int(len(fields.faces) - len(plies.faces))
     said["left_out"] = ("faces that are no preform (no yarn, or a fibre fraction below "
-                        "preform.rtm.MIN_VF at the braid's fringe) and pieces apart from the braided part")
+                        "preform.analysis.rtm.MIN_VF at the braid's fringe) and pieces apart from the braided part")
     return paths, said
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..io.atomic import atomic_write_text
 from .layup import Groups, Plies
-from .materials import FibreMatrix
+from ..materials import FibreMatrix
 from .micromechanics import chamis
 
 ELEMENT_TYPE = "S6"

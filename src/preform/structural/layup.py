@@ -10,7 +10,7 @@ family: warp, weft and, in a triaxial braid, axial. A ply's
   ``+alpha`` and ``-alpha`` or the other way round, as the machine turns, axial at 0;
 * **thickness** is its share of the layer's thickness ``t_k`` in proportion to its fibre volume
   per area, ``L_g tex_g / sum_h L_h tex_h`` (``L`` the yarn length per area): the layer's
-  thickness is the one its fibre volume fraction is computed over (``preform.rtm``: the preform's
+  thickness is the one its fibre volume fraction is computed over (``preform.analysis.rtm``: the preform's
   own, or its share of the mould's cavity), so the plies hold the layer's fibre and fill its
   thickness;
 * **fibre volume fraction** is the layer's at the face (the plies of a layer share it, since
@@ -82,12 +82,12 @@ def layer_prefixes(cell_data, n_layers: int) -> list[str]:
 def face_plies(fields, configs, tangent) -> Plies:
     """The plies of every preform face (see module docstring).
 
-    fields : preform.fields.SurfaceFields with the RTM arrays (``preform.rtm.rtm_fields`` or, for
+    fields : preform.analysis.fields.SurfaceFields with the RTM arrays (``preform.analysis.rtm.rtm_fields`` or, for
         a stack, ``stacked_rtm_fields``)
     configs : each layer's Config, from the mandrel outwards (one for a single layer)
     tangent : (nf, 3), the surface projection of the centerline tangent (0 where undefined)
     """
-    from ..fields import face_geometry, local_frames
+    from ..analysis.fields import face_geometry, local_frames
 
     cd = fields.cell_data
     normals, _, _ = face_geometry(fields.vertices, fields.faces)

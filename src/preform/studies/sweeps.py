@@ -40,7 +40,7 @@ from pathlib import Path
 
 import tomli_w
 
-from .errors import ConfigError, PreformError
+from ..errors import ConfigError, PreformError
 
 SWEEP_CSV = "sweep.csv"
 POINT_JSON = "point.json"
@@ -196,7 +196,7 @@ def spec_of_points(source: Path, base: Path, base_data: dict, combos: list, out_
     """The sweep of the points ``combos`` (dotted key -> value each) over the base config's TOML
     data ``base_data`` (from the file ``base``), results under ``out_dir``; every point's config
     is validated here, before any run (errors name ``source``)."""
-    from .config import config_from_dict
+    from ..config import config_from_dict
 
     keys = list(dict.fromkeys(k for c in combos for k in c))
     path = source
@@ -234,7 +234,7 @@ def point_config_data(spec: SweepSpec, point: Point) -> dict:
 def inputs_hash(config) -> str:
     """The checkpoint's inputs hash: the config (less [output]) and the contents of its STL and
     centerline (``preform.checkpoint.input_record``)."""
-    from .checkpoint import inputs_sha256
+    from ..checkpoint import inputs_sha256
 
     return inputs_sha256(config)
 
@@ -243,7 +243,7 @@ def inputs_hash(config) -> str:
 
 def run_point(config, out_dir: str, index: int, values: dict, digest: str) -> dict:
     """Run one point in a worker; return its sweep.csv row. Never raises for a failed run."""
-    from .pipeline import run_case
+    from ..pipeline import run_case
 
     row = {"point": index, **values, "results": str(out_dir)}
     t0 = time.perf_counter()
@@ -259,7 +259,7 @@ def run_point(config, out_dir: str, index: int, values: dict, digest: str) -> di
 
 
 def _write_point_json(out_dir: Path, index, values, digest, status) -> None:
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     atomic_write_text(out_dir / POINT_JSON, json.dumps(
         {"point": index, "values": values, "inputs_hash": digest, "status": status}, indent=2) + "\n")
@@ -337,9 +337,9 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
     inputs); return their rows in the points' order. ``label`` starts the progress lines;
     ``client``: a ``distributed.Client`` to use (and leave open), else one is made for the run
     (:func:`open_client`) and closed after it."""
-    from .io.atomic import safe_folder
+    from ..io.atomic import safe_folder
 
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     safe_folder(spec.out_dir)
     rows, todo = {}, []
@@ -385,7 +385,7 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
 
 
 def write_sweep_csv(spec: SweepSpec, rows) -> Path:
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
@@ -415,8 +415,8 @@ def plot_sweep(spec: SweepSpec, rows) -> list[Path]:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .io.atomic import atomic_path, safe_folder
-    from .io.plots import start_rows
+    from ..io.atomic import atomic_path, safe_folder
+    from ..io.plots import start_rows
 
     histories = {}
     for row in rows:

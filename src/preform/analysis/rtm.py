@@ -189,7 +189,7 @@ def _principal_values(config, vf, angle_deg):
 
 def read_permeability_table(path) -> PermeabilityTable:
     """A CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 rows on a full grid."""
-    from .errors import ConfigError
+    from ..errors import ConfigError
 
     try:
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
@@ -208,7 +208,7 @@ def read_permeability_table(path) -> PermeabilityTable:
 def rtm_fields(fields, config, tangents, thickness=None) -> dict:
     """The RTM cell arrays of :data:`RTM_ARRAYS` on the field mesh (see module docstring).
 
-    fields : preform.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
+    fields : preform.analysis.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
     tangents : (nf, 3), the centerline tangent at each face (fixes the in-plane reference)
     thickness : (nf,) m, the thickness the fibres fill, or None: ``[rtm] cavity_thickness``,
         else the preform's own ``thickness_m`` (a layer of a stack: its share of the cavity)

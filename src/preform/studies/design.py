@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ConfigError, PreformError
+from ..errors import ConfigError, PreformError
 
 
 @dataclass(frozen=True)
@@ -140,9 +140,9 @@ def with_speed_table(config, length, speed):
 def design_speed(config, target, *, model=None, settings: DesignSettings = DESIGN,
                  mandrel=None, centerline=None, progress=None) -> Design:
     """The take-up speed table for ``target`` (deg, or an (n, 2) table of s_m, deg)."""
-    from .geometry.centerline import section_perimeters
-    from .reference import references
-    from .simulation import load_geometry, simulate
+    from ..geometry.centerline import section_perimeters
+    from ..reference import references
+    from ..simulation import load_geometry, simulate
 
     if model is not None:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
@@ -205,10 +205,10 @@ def write_design_config(config, design: Design, out) -> Path:
     """The input config with ``take_up_speed`` = the designed table, as a runnable TOML file.
 
     Paths become absolute, so the file runs from wherever it is written."""
-    from .config import dump_config
+    from ..config import dump_config
     import tomli_w
 
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     data = dump_config(config)
     data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
@@ -228,7 +228,7 @@ def plot_design(design: Design, path, title: str) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .io.atomic import atomic_path
+    from ..io.atomic import atomic_path
 
     fig = Figure(figsize=(7.2, 8.0), layout="constrained")
     ax_a, ax_e, ax_v = fig.subplots(3, 1, sharex=True)

@@ -5,10 +5,10 @@ of the parameters the measurements determine: Levenberg-Marquardt rounds from th
 each running the slopes of the residuals (a forward difference per parameter, a tenth of the
 coarse spacing) and then damped least-squares steps from them (several dampings at once, in
 parallel), until a round lowers chi2 by less than half a unit. Every point is an ordinary run
-through ``preform sweep``'s machinery (:func:`preform.sweeps.run_spec`: Dask, a LocalCluster
+through ``preform sweep``'s machinery (:func:`preform.studies.sweeps.run_spec`: Dask, a LocalCluster
 or ``--scheduler``, ``--resume``) without pictures; each stage has its own folder
 (``coarse/``, ``refine1_slopes/``, ``refine1_steps/``, ...). Every run is compared with the
-measurements (:mod:`preform.compare`).
+measurements (:mod:`preform.studies.compare`).
 
 The misfit. Per measurement kind ``k`` (angle, convergence, yarn) the residuals ``d`` of
 ``compare`` (simulated minus measured; the yarn's distance) are scaled by the kind's noise
@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from .compare import KINDS, QUANTITY, MeasurementError, compare_run, read_measurements
-from .errors import ConfigError, PreformError
+from ..errors import ConfigError, PreformError
 
 CALIBRATE_CSV = "calibrate.csv"
 CALIBRATE_JSON = "calibrate.json"
@@ -332,7 +332,7 @@ def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=N
     _set(run_data, "output.pictures", False, "calibrate")
     out = (Path(out_dir).expanduser().resolve() if out_dir is not None
            else config_path.parent / "results" / f"{config_path.stem}_calibration")
-    from .io.atomic import safe_folder
+    from ..io.atomic import safe_folder
 
     safe_folder(out)
     evaluations: list[Evaluation] = []
@@ -501,7 +501,7 @@ def _write_outputs(out, config_path, base, params, evaluations, chis, n_points, 
     import tomli_w
 
     from .compare import compare
-    from .io.atomic import atomic_write_text, safe_folder
+    from ..io.atomic import atomic_write_text, safe_folder
     from .sweeps import _set
 
     kinds = list(report["noise"])
@@ -548,7 +548,7 @@ def plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_mi
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .io.atomic import atomic_path, safe_folder
+    from ..io.atomic import atomic_path, safe_folder
 
     plots = safe_folder(out, "plots")
     written = []
