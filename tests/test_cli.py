@@ -171,8 +171,8 @@ def test_example_mandrel_files_exist_or_are_being_built():
 
 @pytest.fixture
 def stubbed_run(small_result, tmp_path, monkeypatch):
-    """A valid case file, with preform.simulation / checks / fields replaced by stubs that return
-    the synthetic Result: tests the command's plumbing, not the physics."""
+    """A valid case file, with the pipeline's geometry, checks, simulation and map replaced by
+    stubs that return the synthetic Result: tests the command's plumbing, not the physics."""
     import dataclasses
     import types
 
@@ -183,7 +183,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
              "mandrel": types.SimpleNamespace(repairs=("filled 1 small hole",))}
 
     def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
-                 keep_checkpoint=False):
+                 keep_checkpoint=False, settings=None):
         state["progress"] = progress
         return dataclasses.replace(small_result, config=cfg, status=state["status"],
                                    message="" if state["status"] == "done" else "stopped")
@@ -192,18 +192,16 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
         state["preflight"].append((mandrel, centerline))
         return ["guide ring is tight"]
 
-    monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
-        simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
-    monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
-    monkeypatch.setitem(sys.modules, "preform.analysis.fields",
-                        types.SimpleNamespace(map_to_surface=lambda r, mesh=None: None))
-    import preform.io.cache
     import preform.pipeline
     from preform.budget import WorkEstimate
 
-    # the pipeline loads the geometry and the field mesh through the cache (io.cache)
+    # the pipeline's stages call these through its own names: the geometry and the field mesh
+    # (through the cache), the checks, the simulation and the map
     monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
-    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result: None)
+    monkeypatch.setattr(preform.pipeline, "cached_field_mesh", lambda result: None)
+    monkeypatch.setattr(preform.pipeline, "preflight", preflight)
+    monkeypatch.setattr(preform.pipeline, "_simulate", simulate)
+    monkeypatch.setattr(preform.pipeline, "map_to_surface", lambda r, mesh=None: None)
 
     # the placeholder mandrel has no geometry to estimate the work or the references from
     monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))

@@ -13,13 +13,13 @@ import pytest
 
 import preform as pf
 from preform.analysis import quality
+from preform.analysis.derived import summary_dict
 from preform._kernels import kinematic as K
 from preform.errors import SimulationError
 from preform.geometry import shapes
 from preform.interaction import relax
 from preform.interaction.model import InteractionZone
 from preform.interaction.settings import DEFAULT
-from preform.io.tables import summary_dict
 from preform.machine import Machine
 from preform.reference import resolve_pose_lead
 from preform.result import FLAG_SLIP

@@ -27,7 +27,7 @@ def __getattr__(name):
         from .analysis import fields
         value = getattr(fields, name)
     elif name == "write_results":
-        from .io import write_results as value
+        from .pipeline import write_results as value   # analyse, then write
     elif name in ("load_mandrel", "Mandrel", "Centerline"):
         from . import geometry
         value = getattr(geometry, name)

@@ -69,7 +69,7 @@ def written_summary(out_dir) -> dict | None:
 def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     """The three lines ``preform run`` prints at the end, from the written ``summary`` (whose wall
     time is the command's, with its stages), else from the result."""
-    from .io.tables import summary_dict
+    from .analysis.derived import summary_dict
 
     s = summary if summary is not None else summary_dict(result)
     stages = s.get("stages_s") or {}
@@ -159,7 +159,7 @@ def cmd_run(args) -> int:
 
 def _cmd_run(args, note=None) -> int:
     from .config import load_config
-    from .pipeline import checked_geometry, run_case
+    from .pipeline import load, run_case
 
     started = time.perf_counter()
     # the interpreter's start and the imports count when this process is the command itself
@@ -176,16 +176,16 @@ def _cmd_run(args, note=None) -> int:
     try:
         if warmup is not None:
             warmup.lead()
-        mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
+        loaded = load(config)  # the load stage: impossible set-ups fail here, before simulating
     except BaseException:
         if warmup is not None:
             warmup.stop()
         raise
     if warmup is not None:
-        warmup.finish(mandrel)
-    _print_notes(notes)
+        warmup.finish(loaded.mandrel)
+    _print_notes(loaded.notes)
     outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                       force=args.force, geometry=(mandrel, centerline, []), started=started,
+                       force=args.force, geometry=(loaded.mandrel, loaded.centerline, []), started=started,
                        background_pictures=True, startup_s=startup)
     _print_notes(outcome.notes)
     result = outcome.result
@@ -232,20 +232,11 @@ def cmd_check(args) -> int:
 
 def _cmd_check(args) -> int:
     from .config import load_config
-    from .pipeline import checked_geometry, estimate
+    from .pipeline import check, load
 
     config = _with_model(load_config(args.config), getattr(args, "model", None))
-    mandrel, centerline, notes = checked_geometry(config)
-    if config.layers:   # [[layer]] tables: every layer's checks and estimate
-        from .pipeline import check_layers
-
-        _print_notes(check_layers(config, mandrel, centerline, notes, force=args.force)[0])
-        print(f"OK: {config.source or args.config}")
-        return EXIT_DONE
-    _print_notes(notes)
-    work = estimate(config, mandrel, centerline, force=args.force)
-    for line in work.lines():
-        print(f"note: {line}", file=sys.stderr)
+    # the run's load and check stages, without a results folder: every layer's checks and estimate
+    _print_notes(check(load(config), None, force=args.force).notes)
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 

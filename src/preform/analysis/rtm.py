@@ -156,6 +156,92 @@ def bin_cells(values, n_sets=4):
     return index.astype(np.int64), rep, error
 
 
+# ------------------------------------------------------------------------------ solver cells
+
+#: the property sets of RTMsim's patch table (``rtmsim.bdf``): the solver takes few
+RTMSIM_SETS = 4
+
+
+@dataclass(frozen=True)
+class SolverProperties:
+    """The per-cell properties of the RTM solver files (``io.rtm_files.write_rtm`` writes them).
+
+    vertices (nv, 3) float64 m, cells (nf, 3) int64: the field mesh; per cell thickness (m),
+    porosity, k1 (m^2, along ``direction``), alpha (K2 / K1) and direction (nf, 3); set_index
+    (nf,) int64 and set_values (one (thickness, porosity, K1, alpha, direction) per set): the
+    binning for RTMsim; binning_error: the largest relative K1 error of a preform cell's set;
+    preform_faces: the cells that carry preform (``rtm_valid``).
+    """
+
+    vertices: np.ndarray
+    cells: np.ndarray
+    thickness: np.ndarray
+    porosity: np.ndarray
+    k1: np.ndarray
+    alpha: np.ndarray
+    direction: np.ndarray
+    set_index: np.ndarray
+    set_values: tuple
+    binning_error: float
+    preform_faces: int
+
+    def said(self) -> dict:
+        """What summary.json says of the files."""
+        return {"written": True, "sets": len(self.set_values), "binning_error_k1": self.binning_error,
+                "preform_faces": self.preform_faces, "faces": int(len(self.k1))}
+
+
+def solver_properties(config, fields, n_sets=RTMSIM_SETS) -> tuple[SolverProperties | None, str]:
+    """(the solver files' properties, "") of fields with the RTM arrays, or (None, why not).
+
+    Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
+    Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (``[rtm] cavity_thickness``; without
+    it, the largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set
+    of their own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every
+    cell is preform), binned by :func:`bin_cells`.
+    """
+    reason = missing_material(config)
+    if reason:
+        return None, reason
+    if fields is None or "fibre_volume_fraction" not in fields.cell_data:
+        return None, "no surface fields"
+    cd = fields.cell_data
+    valid = cd["rtm_valid"] > 0
+    if not np.any(valid):
+        return None, "no face carries preform (no yarn reached the mandrel)"
+    cavity_thickness = config.rtm.cavity_thickness
+    thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
+    channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
+    k1 = np.where(valid, cd["permeability_k1_m2"], channel)
+    alpha = np.where(valid, np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0), 1.0)
+    direction = cd["permeability_direction"]
+    sets = n_sets - 1 if np.any(~valid) else n_sets
+    index_valid, rep, error = bin_cells(k1[valid], sets)
+    index = np.full(len(k1), len(rep), dtype=np.int64)
+    index[valid] = index_valid
+    values = []
+    for k in range(len(rep)):
+        members = index == k
+        values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
+                       float(rep[k]), float(np.mean(alpha[members])),
+                       _mean_direction(direction[members])))
+    if np.any(~valid):
+        values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
+                       channel, 1.0, (1.0, 0.0, 0.0)))
+    return SolverProperties(vertices=fields.vertices, cells=fields.faces, thickness=thickness,
+                            porosity=cd["porosity"], k1=k1, alpha=alpha, direction=direction,
+                            set_index=index, set_values=tuple(values), binning_error=error,
+                            preform_faces=int(np.count_nonzero(valid))), ""
+
+
+def _mean_direction(d):
+    """A sign-free mean of unit directions (principal axis of sum d d^T)."""
+    if len(d) == 0:
+        return (1.0, 0.0, 0.0)
+    w, v = np.linalg.eigh(d.T @ d)
+    return tuple(float(x) for x in v[:, -1])
+
+
 # ------------------------------------------------------------------------------ per face
 
 #: where no yarn lies, or so little that the face is a resin channel rather than preform (fibre
