@@ -3,8 +3,9 @@
 :func:`analyse_run` takes a simulated run (its Result and SurfaceFields) and returns an
 :class:`Analysed`: the summary's figures (steady state, the quality verdict, interlacing, the
 snapshot checks, flag counts, the echoed inputs), the RTM solver properties
-(``rtm.solver_properties``) and the structural plies and their binning
-(``structural.layup.structural_layup``). The writers only write what it holds.
+(``rtm.solver_properties``), the structural plies and their binning
+(``structural.layup.structural_layup``) and the fields on the input mesh where asked. The
+writers only write what it holds.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from ..config import dump_config
 from ..plain import jsonable
 from ..result import FLAG_NAMES
 from ..structural.layup import BinSettings, StructuralLayup, structural_layup
+from .fields import fields_on_input
 from .quality import QUALITY, assess, run_interlacing, surface_reasons, verdict
 from .rtm import SolverProperties, solver_properties
 from .steady import steady_state
@@ -37,6 +39,8 @@ class Analysed:
     rtm : the RTM solver properties, or None with ``rtm_reason`` saying why there are none
     structural : the structural plies and groups, or None with ``structural_reason``
     layers : summary.json's ``layers`` entries of a stack, or None for one layer
+    input_mesh_fields : the fields on the mandrel's own triangles (``[output]
+        input_mesh_fields``: ``fields.fields_on_input``), or None
     """
 
     result: object
@@ -48,6 +52,7 @@ class Analysed:
     structural: StructuralLayup | None = None
     structural_reason: str = ""
     layers: list | None = None
+    input_mesh_fields: object = None
 
 
 def analyse_run(result, fields, layer_results=(), layers=None,
@@ -67,10 +72,14 @@ def analyse_run(result, fields, layer_results=(), layers=None,
         rtm, rtm_reason = solver_properties(config, fields)
     structural, structural_reason = structural_layup(result, fields, layer_results,
                                                      structural_settings or BinSettings())
+    output = getattr(config, "output", None)
+    on_input = None
+    if fields is not None and output is not None and output.input_mesh_fields and result.mandrel is not None:
+        on_input = fields_on_input(fields, result.mandrel)
     return Analysed(result=result, fields=fields, layer_results=tuple(layer_results),
                     summary=summary_dict(result, quality_reasons=reasons), rtm=rtm,
                     rtm_reason=rtm_reason, structural=structural,
-                    structural_reason=structural_reason, layers=layers)
+                    structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input)
 
 
 # ---------------------------------------------------------------- the summary's figures

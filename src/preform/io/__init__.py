@@ -182,9 +182,8 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
             written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
         if fields is not None:
             written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
-            output = result.config.output
-            if output is not None and output.input_mesh_fields and result.mandrel is not None:
-                written.append(write_input_mesh_fields(fields, result.mandrel, out_dir))
+            if analysed.input_mesh_fields is not None:
+                written.append(write_input_mesh_fields(analysed.input_mesh_fields, out_dir))
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
         if analysed.rtm is not None:

@@ -81,17 +81,14 @@ def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> li
     return written + (write_surface_pictures(fields, out_dir / PLOTS, title) if pictures else [])
 
 
-def write_input_mesh_fields(fields, mandrel, out_dir) -> Path:
-    """``surface_input.vtu``: the fields carried over to the mandrel's own triangles (the STL's,
-    after repair; ``fields.fields_on_input``, area-weighted), written atomically."""
+def write_input_mesh_fields(input_fields, out_dir) -> Path:
+    """``surface_input.vtu``: the fields on the mandrel's own triangles (the STL's, after repair;
+    ``analysis.fields.fields_on_input``, area-weighted), written atomically."""
     import meshio
-
-    from ..analysis.fields import fields_on_input
 
     path = Path(out_dir) / INPUT_VTU
     with atomic_path(path) as tmp:
-        meshio.write(tmp, surface_mesh(fields_on_input(fields, mandrel)), file_format="vtu",
-                     compression=None)
+        meshio.write(tmp, surface_mesh(input_fields), file_format="vtu", compression=None)
     return path
 
 
