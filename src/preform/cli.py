@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ._version import __version__
 from .errors import MandrelError, PreformError
-from .pipeline import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
+from .checkpoint import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``time.perf_counter()`` when this module was imported (the fallback of :func:`process_started`)

@@ -49,7 +49,7 @@ from .analysis.derived import Analysed, analyse_run, layer_summary
 from .analysis.fields import LOCATE_REACH_EDGES, map_to_surface, stack_layers
 from .analysis.rtm import missing_material, rtm_fields, stacked_rtm_fields
 from .budget import check_work, estimate_work
-from .checkpoint import Checkpoint
+from .checkpoint import CHECKPOINT, LAYER_CHECKPOINT, Checkpoint
 from .checks import preflight
 from .errors import PreformError
 from .geometry import centerline_from_points, section_perimeters, shapes
@@ -65,13 +65,6 @@ from .result import Result, YarnPaths
 from .simulation import load_geometry as _load_geometry
 from .simulation import simulate as _simulate
 from .stepping import default_time_step
-
-#: the state of a running simulation, saved periodically and on a stop, removed once the results
-#: are written
-CHECKPOINT = "checkpoint.npz"
-#: the checkpoint of layer k (from 1) of a run with [[layer]] tables
-LAYER_CHECKPOINT = "checkpoint_layer{k}.npz"
-
 
 class ResultsWriteError(PreformError):
     """The results could not be written; the simulation is kept in the checkpoint."""
