@@ -33,8 +33,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
+from ..config import dump_config
 from ..errors import ConfigError, PreformError
+from ..geometry.centerline import section_perimeters
+from ..io.atomic import atomic_path, atomic_write_text
+from ..reference import references
+from ..simulation import load_geometry, simulate
 
 
 @dataclass(frozen=True)
@@ -140,10 +146,6 @@ def with_speed_table(config, length, speed):
 def design_speed(config, target, *, model=None, settings: DesignSettings = DESIGN,
                  mandrel=None, centerline=None, progress=None) -> Design:
     """The take-up speed table for ``target`` (deg, or an (n, 2) table of s_m, deg)."""
-    from ..geometry.centerline import section_perimeters
-    from ..reference import references
-    from ..simulation import load_geometry, simulate
-
     if model is not None:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
     if mandrel is None or centerline is None:
@@ -205,11 +207,6 @@ def write_design_config(config, design: Design, out) -> Path:
     """The input config with ``take_up_speed`` = the designed table, as a runnable TOML file.
 
     Paths become absolute, so the file runs from wherever it is written."""
-    from ..config import dump_config
-    import tomli_w
-
-    from ..io.atomic import atomic_write_text
-
     data = dump_config(config)
     data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
     data = {section: {k: v for k, v in table.items() if v is not None}
@@ -227,8 +224,6 @@ def plot_design(design: Design, path, title: str) -> Path:
     """Target against achieved braid angle, the error, and the speed, along the braided length."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from ..io.atomic import atomic_path
 
     fig = Figure(figsize=(7.2, 8.0), layout="constrained")
     ax_a, ax_e, ax_v = fig.subplots(3, 1, sharex=True)
