@@ -129,7 +129,7 @@ def test_the_reader_finds_a_climb_inside_a_function_and_a_module_without_layer(t
 
 def test_layer_of_takes_the_longest_entry():
     assert layer_of("preform.structural.layup") == (5, "analysis")
-    assert layer_of("preform.structural.deck") == (6, "io")
+    assert layer_of("preform.structural.results") == (6, "io")
     assert layer_of("preform.analysis.fields") == (5, "analysis")
     assert layer_of("preform") == (9, "front")
     assert layer_of("preform.stray") is None
@@ -139,6 +139,37 @@ def test_layer_of_takes_the_longest_entry():
 def test_imports_only_go_down_the_layers():
     found = climbs(SRC)
     assert not found, "imports that climb the layers (docs/architecture.md §3):\n" + "\n".join(found)
+
+
+def package_cycles(src: Path) -> list[str]:
+    """Import cycles that run through a package's ``__init__``: importing ``package.x`` from
+    outside ``package`` runs ``package/__init__.py`` first, so a module that imports ``package.x``
+    depends on everything that ``__init__`` imports at module level. One sentence per module
+    that such an ``__init__`` imports and that imports back into the package."""
+    modules = module_names(src)
+    out = []
+    for package, path in modules.items():
+        if path.name != "__init__.py" or package == "preform":
+            continue
+        top = [node for node in ast.parse(path.read_text(encoding="utf-8")).body
+               if isinstance(node, (ast.Import, ast.ImportFrom))]
+        imported = {target for line, target in imports_in(package, path, modules)
+                    if any(node.lineno == line for node in top)}
+        for name in sorted(imported):
+            if name.startswith(package + "."):
+                continue
+            for line, target in imports_in(name, modules[name], modules):
+                if target.startswith(package + "."):
+                    out.append(f"{modules[name].relative_to(src.parent)}:{line}: {name} imports "
+                               f"{target}, whose package __init__ imports {name} at module level")
+    return out
+
+
+def test_no_cycle_through_a_package_init():
+    """A module imported by a package's ``__init__`` must not import from that package: imported
+    first, in a fresh interpreter, it would meet the package half made (an ImportError)."""
+    found = package_cycles(SRC)
+    assert not found, "cycles through a package __init__:\n" + "\n".join(found)
 
 
 def test_the_architecture_page_lists_the_layers_in_order():

@@ -15,8 +15,8 @@ import pytest
 from preform.analysis import rtm
 from preform.analysis.fields import map_to_surface, stack_layers
 from preform.materials import PRESETS
-from preform.structural import deck
-from preform.structural.deck import curved_midpoint
+from preform.io import fe_files
+from preform.io.fe_files import curved_midpoint
 from preform.structural.layup import BinSettings, structural_layup
 from preform.structural.micromechanics import chamis
 from test_helpers_fields import R, cylinder, helices, make_result
@@ -27,10 +27,10 @@ FM = PRESETS["AS4/3501-6"][0]
 
 def write_structural(result, fields, folder, layer_results=(), settings=None):
     """The structural files of a run as the pipeline makes them: its layup (the analysis,
-    ``layup.structural_layup``) written by ``deck.write_structural``; (paths, what the summary
+    ``layup.structural_layup``) written by ``io.fe_files.write_structural``; (paths, what the summary
     says)."""
     layup, reason = structural_layup(result, fields, layer_results, settings or BinSettings())
-    paths, said = deck.write_structural(layup, folder)
+    paths, said = fe_files.write_structural(layup, folder)
     return paths, (said if layup is not None else {"written": False, "reason": reason})
 
 

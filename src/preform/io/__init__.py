@@ -11,8 +11,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..structural.deck import write_structural
 from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_folder
+from .fe_files import write_structural
 from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
 from .rtm_files import write_rtm
 from .surface import INPUT_VTU, PICTURES, write_input_mesh_fields, write_surface

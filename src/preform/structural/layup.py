@@ -203,7 +203,7 @@ def largest_component(faces) -> np.ndarray:
 
 @dataclass(frozen=True)
 class StructuralLayup:
-    """What ``fe/preform.inp`` and ``fe/layup.csv`` hold (``structural.deck.write_structural``
+    """What ``fe/preform.inp`` and ``fe/layup.csv`` hold (``io.fe_files.write_structural``
     writes them): the fields, the plies of the preform faces of the braided part and their
     groups, the fibre and matrix, the centerline the deck's tip and end are found along, the
     deck's title and how many faces were left out."""

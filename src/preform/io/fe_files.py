@@ -31,12 +31,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..io.atomic import atomic_write_text, safe_folder
 from ..materials import FibreMatrix
-from .micromechanics import chamis
+from ..structural.micromechanics import chamis
+from .atomic import atomic_write_text, safe_folder
 
 if TYPE_CHECKING:   # the types of the plies only: the writer imports no analysis
-    from .layup import Groups, Plies
+    from ..structural.layup import Groups, Plies
 
 ELEMENT_TYPE = "S6"
 #: Simpson integration points through each ply (Abaqus reads it; CalculiX ignores the field)
