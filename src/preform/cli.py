@@ -159,7 +159,6 @@ def cmd_run(args) -> int:
 
 def _cmd_run(args, note=None) -> int:
     from .config import load_config
-    from .pipeline import load, run_case
 
     started = time.perf_counter()
     # the interpreter's start and the imports count when this process is the command itself
@@ -168,6 +167,7 @@ def _cmd_run(args, note=None) -> int:
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
     from . import _jit
+    from .pipeline import load, run_case   # the stages' imports (numba, SciPy): after the config
 
     # a first run: the stepper's and the field kernels compile in a worker meanwhile
     warmup = _jit.start(config, args.config, args.model or "")
@@ -232,9 +232,9 @@ def cmd_check(args) -> int:
 
 def _cmd_check(args) -> int:
     from .config import load_config
-    from .pipeline import check, load
 
     config = _with_model(load_config(args.config), getattr(args, "model", None))
+    from .pipeline import check, load   # the stages' imports (numba, SciPy): after the config
     # the run's load and check stages, without a results folder: every layer's checks and estimate
     _print_notes(check(load(config), None, force=args.force).notes)
     print(f"OK: {config.source or args.config}")
