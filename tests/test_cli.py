@@ -198,7 +198,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
     # the pipeline's stages call these through its own names: the geometry and the field mesh
     # (through the cache), the checks, the simulation and the map
     monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
-    monkeypatch.setattr(preform.pipeline, "cached_field_mesh", lambda result: None)
+    monkeypatch.setattr(preform.pipeline, "cached_field_mesh", lambda result, remesh=None: None)
     monkeypatch.setattr(preform.pipeline, "preflight", preflight)
     monkeypatch.setattr(preform.pipeline, "_simulate", simulate)
     monkeypatch.setattr(preform.pipeline, "map_to_surface", lambda r, mesh=None: None)

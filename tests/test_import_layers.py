@@ -28,7 +28,7 @@ LAYERS = (
     ("models", ("preform.kinematic", "preform.interaction", "preform.laid", "preform.reference",
                 "preform.recording", "preform.stepping", "preform.checkpoint", "preform.simulation")),
     ("analysis", ("preform.analysis", "preform.checks", "preform.budget", "preform.structural.layup",
-                  "preform.structural.micromechanics")),
+                  "preform.structural.micromechanics", "preform.settings")),
     ("io", ("preform.io", "preform.structural")),
     ("pipeline", ("preform.pipeline",)),
     ("studies", ("preform.studies",)),

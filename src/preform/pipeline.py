@@ -54,14 +54,14 @@ from .checks import preflight
 from .errors import PreformError
 from .geometry import centerline_from_points, section_perimeters, shapes
 from .geometry.mandrel import mandrel_from_arrays
-from .geometry.offset import (OffsetSettings, interpolate, offset_surface, refined_surface, vertex_means,
-                              vertex_normals)
+from .geometry.offset import interpolate, offset_surface, refined_surface, vertex_means, vertex_normals
 from .io.cache import cached_field_mesh, cached_mandrel
 from .io.folder import RunLock, check_results_folder
 from .io.pictures import PictureJob, PictureWorker
 from .machine import Machine
 from .reference import check_lines, end_convergence_length, references, resolve_pose_lead
 from .result import Result, YarnPaths
+from .settings import resolved
 from .simulation import load_geometry as _load_geometry
 from .simulation import simulate as _simulate
 from .stepping import default_time_step
@@ -100,19 +100,21 @@ class Loaded:
     notes: tuple = ()
 
 
-def load(config, geometry=None) -> Loaded:
+def load(config, geometry=None, settings=None) -> Loaded:
     """The geometry of ``config`` after :func:`checked_geometry`, or ``geometry`` (mandrel,
-    centerline, notes) that a caller already checked."""
+    centerline, notes) that a caller already checked; ``settings``: ``preform.Settings`` (None:
+    the defaults), for the work estimate's time step."""
     first = config.layer_config(0) if config.layers else config
-    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(first)
+    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(first, settings)
     return Loaded(config=config, mandrel=mandrel, centerline=centerline, notes=tuple(notes))
 
 
-def checked_geometry(config):
+def checked_geometry(config, settings=None):
     """(mandrel, centerline, notes): the geometry of ``config`` after the pre-flight checks.
 
     Impossible set-ups raise PreformError; the mandrel's repairs, the doubtful points and the
     quasi-static references (Ko, H_inf, whether the braid can settle) come back as notes.
+    settings : ``preform.Settings`` (None: the defaults), for the work estimate's time step
     """
     mandrel, centerline = load_geometry(config)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
@@ -121,7 +123,7 @@ def checked_geometry(config):
     if config.model.kind == "interaction" and not config.layers:
         # the model's cost for this run (the work estimate's steps), before it starts; the
         # estimate's limits are checked in the check stage
-        line = estimate(config, mandrel, centerline, force=True).model_line()
+        line = estimate(config, mandrel, centerline, force=True, settings=settings).model_line()
         notes += [f"note: {line}"] if line else []
     return mandrel, centerline, notes
 
@@ -172,17 +174,19 @@ class Checked:
         return bool(self.loaded.config.layers)
 
 
-def estimate(config, mandrel, centerline, *, force=False):
-    """The work estimate of a run (``preform.budget``), refused beyond its limits unless ``force``."""
+def estimate(config, mandrel, centerline, *, force=False, settings=None):
+    """The work estimate of a run (``preform.budget``), refused beyond its limits
+    (``settings.limits``; None: the defaults) unless ``force``."""
+    settings = resolved(settings)
     config = resolve_pose_lead(config, mandrel, centerline)
     dt = config.model.time_step or default_time_step(config, Machine.from_config(config.machine),
-                                                     mandrel, centerline)
+                                                     mandrel, centerline, settings.tolerances)
     tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
     area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
     distance = centerline.project(mandrel.vertices)[1]
     work = estimate_work(config, area, dt, end_convergence_length(config, float(np.median(distance))))
     max_radius = float(np.max(distance))
-    check_work(config, work, max_radius, force=force)
+    check_work(config, work, max_radius, force=force, limits=settings.limits)
     return work
 
 
@@ -196,10 +200,11 @@ def layer_centerline(centerline, direction: str, roll_reference=None):
                                   perimeter=perimeter)
 
 
-def check(loaded: Loaded, out_dir, *, force=False) -> Checked:
+def check(loaded: Loaded, out_dir, *, force=False, settings=None) -> Checked:
     """Every layer's set-up against the mandrel and its work estimate, before any runs, then the
     results folder ``out_dir`` (writable, with room for the estimated results; None: no folder,
-    as ``preform check``).
+    as ``preform check``); ``settings``: ``preform.Settings`` (None: the defaults) for the work
+    estimates.
 
     Impossible set-ups raise (PreformError), work beyond the limits is refused unless ``force``.
     The layers of a stack are checked on the mandrel: their warnings not already in the
@@ -221,7 +226,7 @@ def check(loaded: Loaded, out_dir, *, force=False) -> Checked:
             name = LAYER_CHECKPOINT.format(k=k)
         else:
             cfg, cl, name = config, centerline, CHECKPOINT
-        work = estimate(cfg, mandrel, cl, force=force)
+        work = estimate(cfg, mandrel, cl, force=force, settings=settings)
         prefix = f"layer {k}: " if stacked else ""
         notes += [f"note: {prefix}{line}" for line in work.lines()]
         result_bytes += work.result_bytes
@@ -282,7 +287,7 @@ class Simulated:
     refused), the SurfaceFields of those mapped for the layers above them, the OffsetReport of
     the surface each was braided on (None: the mandrel), why the next layer could not start ("":
     none was refused), the stack's geometry (None until a layer of a stack was mapped), the
-    Result the top-level files describe (:func:`top_result`), the stack's offset settings, the
+    Result the top-level files describe (:func:`top_result`), the run's ``preform.Settings``, the
     notes of the offset surfaces' checks and the stage timings (s)."""
 
     results: tuple
@@ -291,7 +296,7 @@ class Simulated:
     refused: str
     stack: LayerStack | None
     result: Result
-    offset_settings: OffsetSettings = OffsetSettings()
+    settings: object = None
     notes: tuple = ()
     stages: dict = field(default_factory=dict)
 
@@ -302,41 +307,42 @@ def _on_mandrel(result, centerline):
     return dataclasses.replace(result, centerline=centerline)
 
 
-def _mapped(checked: Checked, stack, result, offset_settings):
+def _mapped(checked: Checked, stack, result, settings):
     """(SurfaceFields, stack) of a layer's Result, located on the mandrel's centerline: a single
     layer on its field mesh (kept in the disk cache: it depends only on the mandrel and the
     settings), a stack's layer on the field mesh of the first layer moved by the layers below
-    (the stack's geometry started on first use)."""
+    (the stack's geometry started on first use); ``settings``: the run's ``preform.Settings``
+    (its ``remesh`` and ``offset``)."""
     on_mandrel = _on_mandrel(result, checked.loaded.centerline)
     if not checked.stacked:
-        return map_to_surface(on_mandrel, mesh=cached_field_mesh(on_mandrel)), stack
+        return map_to_surface(on_mandrel, mesh=cached_field_mesh(on_mandrel, remesh=settings.remesh)), stack
     if stack is None:
-        stack = LayerStack.start(checked.loaded.mandrel, cached_field_mesh(on_mandrel), offset_settings)
+        stack = LayerStack.start(checked.loaded.mandrel, cached_field_mesh(on_mandrel, remesh=settings.remesh),
+                                 settings.offset)
     return map_to_surface(on_mandrel, mesh=stack.layer_mesh()), stack
 
 
-def simulate(checked: Checked, *, progress=False, resume=False, offset_settings=None, warmup=None,
-             settings=None) -> Simulated:
+def simulate(checked: Checked, *, progress=False, resume=False, warmup=None, settings=None) -> Simulated:
     """Braid the layers of ``checked`` in turn (module docstring, stage 3).
 
     resume : continue each layer from its checkpoint (a stack's layers without one start anew)
-    offset_settings : preform.geometry.offset.OffsetSettings of a stack (None: the defaults)
     warmup : a worker compiling the field kernels meanwhile (:func:`start_kernel_warmup`),
         finished once the first layer is simulated; stopped if it fails
-    settings : the interaction model's numerical settings, passed to ``simulation.simulate``
+    settings : ``preform.Settings`` (None: the defaults): passed to ``simulation.simulate``; its
+        ``remesh`` and ``offset`` for the fields and surfaces of a stack
     """
+    settings = resolved(settings)
     loaded = checked.loaded
     stacked = checked.stacked
     stages, notes = {}, []
     results, layer_fields, offsets, stack, refused = [], [], [], None, ""
-    offset_settings = offset_settings or OffsetSettings()
     surface = loaded.mandrel
     for layer in checked.layers:
         name = f"_layer{layer.k}" if stacked else ""
         report = None
         if layer.k > 1:   # the layer below lies under this one: map it, offset the surface by it
             t = time.perf_counter()
-            mapped, stack = _mapped(checked, stack, results[-1], offset_settings)
+            mapped, stack = _mapped(checked, stack, results[-1], settings)
             layer_fields.append(mapped)
             stages[f"map_layer{layer.k - 1}"] = time.perf_counter() - t
             try:   # a surface that folds, or a set-up the stack makes impossible, ends the run
@@ -365,7 +371,7 @@ def simulate(checked: Checked, *, progress=False, resume=False, offset_settings=
             break
     return Simulated(results=tuple(results), layer_fields=tuple(layer_fields), offsets=tuple(offsets),
                      refused=refused, stack=stack, result=top_result(checked, results, refused),
-                     offset_settings=offset_settings, notes=tuple(notes), stages=stages)
+                     settings=settings, notes=tuple(notes), stages=stages)
 
 
 def top_result(checked: Checked, results, refused=""):
@@ -392,21 +398,23 @@ def top_result(checked: Checked, results, refused=""):
 
 # ------------------------------------------------------------------------------ 4. analyse
 
-def analyse(checked: Checked, simulated: Simulated, *, structural_settings=None) -> tuple[Analysed, dict]:
+def analyse(checked: Checked, simulated: Simulated) -> tuple[Analysed, dict]:
     """(everything the result files need, the stage timings): the last layer's fields (a single
     layer's whenever it deposited yarn; a stack's layer only when it is done, its thickness
     would be partial otherwise), with the RTM arrays or, for a stack, the stacked totals; then
     ``analysis.derived.analyse_run``: the verdict, steady state, interlacing, the RTM solver
-    properties, the structural plies, the summary's figures and a stack's layer entries."""
+    properties, the structural plies, the summary's figures and a stack's layer entries, with
+    the run's settings (``Simulated.settings``)."""
+    settings = resolved(simulated.settings)
     t = time.perf_counter()
     results, layer_fields = simulated.results, list(simulated.layer_fields)
     last = results[-1]
     if len(layer_fields) < len(results) and len(last.yarns.points) and (not checked.stacked
                                                                        or last.status == "done"):
-        layer_fields.append(_mapped(checked, simulated.stack, last, simulated.offset_settings)[0])
+        layer_fields.append(_mapped(checked, simulated.stack, last, settings)[0])
     if not checked.stacked:
         fields = with_rtm_fields(last, layer_fields[0]) if layer_fields else None
-        analysed = analyse_run(simulated.result, fields, structural_settings=structural_settings)
+        analysed = analyse_run(simulated.result, fields, settings=settings)
         return analysed, {"analyse": time.perf_counter() - t}
     stages = {}
     if len(layer_fields) > len(simulated.layer_fields):
@@ -415,10 +423,9 @@ def analyse(checked: Checked, simulated: Simulated, *, structural_settings=None)
     configs = [layer.config for layer in checked.layers]
     fields = _stacked_fields(configs, layer_fields, checked.loaded.centerline,
                              checked.loaded.config.rtm.cavity_thickness)
-    entries = [layer_summary(layer.k, layer.config.layers[-1], r, f, o) for layer, r, f, o
+    entries = [layer_summary(layer.k, layer.config.layers[-1], r, f, o, settings) for layer, r, f, o
                in zip(checked.layers, results, [*layer_fields, None], simulated.offsets)]
-    analysed = analyse_run(simulated.result, fields, results[1:], layers=entries,
-                           structural_settings=structural_settings)
+    analysed = analyse_run(simulated.result, fields, results[1:], layers=entries, settings=settings)
     stages["analyse"] = time.perf_counter() - t
     return analysed, stages
 
@@ -471,19 +478,18 @@ def write(analysed: Analysed, out_dir, *, stages=None, pictures=None, background
     return io.write_summary_last(analysed, writing, extra)
 
 
-def write_results(result, fields, out_dir, *, background=False) -> list[Path]:
+def write_results(result, fields, out_dir, *, background=False, settings=None) -> list[Path]:
     """Analyse a simulated Result and its SurfaceFields (``analysis.derived.analyse_run``) and
     write all its result files into ``out_dir`` (:func:`write`): the Python API's way to files
-    from ``preform.simulate`` and ``preform.map_to_surface``. Returns the paths, summary.json
-    last."""
-    return write(analyse_run(result, fields), out_dir, background=background)
+    from ``preform.simulate`` and ``preform.map_to_surface``; ``settings``: ``preform.Settings``
+    (None: the defaults). Returns the paths, summary.json last."""
+    return write(analyse_run(result, fields, settings=settings), out_dir, background=background)
 
 
 # ------------------------------------------------------------------------------ the run
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None, background_pictures=False, startup_s=None, offset_settings=None,
-             settings=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None, settings=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir``: the five stages of the module
     docstring, for one layer or a stack.
 
@@ -498,20 +504,20 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         simulated (:func:`start_kernel_warmup`). Embree is not used in the workers.
     startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
         listed as the stage ``start`` when given
-    offset_settings : preform.geometry.offset.OffsetSettings of a stack (None: the defaults)
-    settings : the interaction model's numerical settings (``simulation.simulate``'s)
+    settings : the numerical settings of every stage (``preform.Settings``; None: the defaults);
+        its ``offset`` for the surfaces of a stack
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoints are kept).
     """
     t0 = time.perf_counter() if started is None else started
+    settings = resolved(settings)
     out_dir = Path(out_dir)
-    checked = check(load(config, geometry), out_dir, force=force)
+    checked = check(load(config, geometry, settings), out_dir, force=force, settings=settings)
     with RunLock(out_dir):
         stages = {} if startup_s is None else {"start": float(startup_s)}
         stages["load_and_check"] = time.perf_counter() - t0
         warmup = start_kernel_warmup(checked.layers[0].config) if background_pictures else None
-        simulated = simulate(checked, progress=progress, resume=resume, offset_settings=offset_settings,
-                             warmup=warmup, settings=settings)
+        simulated = simulate(checked, progress=progress, resume=resume, warmup=warmup, settings=settings)
         stages.update(simulated.stages)
         # the 3-D pictures start now, on the second core, beside the analysis and the data files
         pictures = io.start_pictures(simulated.result, out_dir) if background_pictures else None

@@ -18,7 +18,8 @@ from .._version import __version__
 from ..config import dump_config
 from ..plain import jsonable
 from ..result import FLAG_NAMES
-from ..structural.layup import BinSettings, StructuralLayup, structural_layup
+from ..settings import resolved
+from ..structural.layup import StructuralLayup, structural_layup
 from .fields import fields_on_input
 from .quality import QUALITY, assess, run_interlacing, surface_reasons, verdict
 from .rtm import SolverProperties, solver_properties
@@ -41,6 +42,7 @@ class Analysed:
     layers : summary.json's ``layers`` entries of a stack, or None for one layer
     input_mesh_fields : the fields on the mandrel's own triangles (``[output]
         input_mesh_fields``: ``fields.fields_on_input``), or None
+    settings : the run's ``preform.Settings`` (the history plots mark its steady state)
     """
 
     result: object
@@ -53,33 +55,35 @@ class Analysed:
     structural_reason: str = ""
     layers: list | None = None
     input_mesh_fields: object = None
+    settings: object = None
 
 
-def analyse_run(result, fields, layer_results=(), layers=None,
-                structural_settings: BinSettings | None = None) -> Analysed:
+def analyse_run(result, fields, layer_results=(), layers=None, settings=None) -> Analysed:
     """Everything the result files of ``result`` need beyond its arrays (module docstring).
 
     layers : summary.json's ``layers`` entries of a stack (:func:`layer_summary`), whose
         reasons to doubt a layer above the first make the whole run suspect
-    structural_settings : the binning of the structural plies (None: the defaults)
+    settings : ``preform.Settings`` (None: the defaults): its ``steady``, ``interlacing`` and
+        ``quality`` read the run, ``rtm`` bins the RTM solver cells, ``binning`` the plies
     """
-    reasons = surface_reasons(result, fields)
+    settings = resolved(settings)
+    reasons = surface_reasons(result, fields, settings.quality)
     if layers is not None:
         reasons += [f"layer {e['layer']}: {reason}" for e in layers[1:] for reason in e["quality"]["reasons"]]
     config = result.config
     rtm, rtm_reason = None, "no config"
     if config is not None:
-        rtm, rtm_reason = solver_properties(config, fields)
-    structural, structural_reason = structural_layup(result, fields, layer_results,
-                                                     structural_settings or BinSettings())
+        rtm, rtm_reason = solver_properties(config, fields, settings.rtm)
+    structural, structural_reason = structural_layup(result, fields, layer_results, settings.binning)
     output = getattr(config, "output", None)
     on_input = None
     if fields is not None and output is not None and output.input_mesh_fields and result.mandrel is not None:
         on_input = fields_on_input(fields, result.mandrel)
     return Analysed(result=result, fields=fields, layer_results=tuple(layer_results),
-                    summary=summary_dict(result, quality_reasons=reasons), rtm=rtm,
+                    summary=summary_dict(result, quality_reasons=reasons, settings=settings), rtm=rtm,
                     rtm_reason=rtm_reason, structural=structural,
-                    structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input)
+                    structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input,
+                    settings=settings)
 
 
 # ---------------------------------------------------------------- the summary's figures
@@ -100,17 +104,17 @@ def flag_counts(yarns) -> dict:
     return {name: int(np.count_nonzero(flags & bit)) for bit, name in FLAG_NAMES.items()}
 
 
-def snapshot_checks(result):
+def snapshot_checks(result, settings=QUALITY):
     """The written snapshots against the re-balance that checks each (the written state is the
     run's own): the largest distance of a crossing from its re-balanced place (m), the tolerance
     the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
     times of the snapshots beyond it and of those whose re-balance failed; None where no
-    snapshot was checked."""
+    snapshot was checked; ``settings``: the verdict's (``quality.QualitySettings``)."""
     shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
     failed = [s.time_s for s in result.snapshots if s.rebalance_error]
     if not shifts and not failed:
         return None
-    tolerance = (QUALITY.max_snapshot_shift_widths * float(result.config.yarn.width)
+    tolerance = (settings.max_snapshot_shift_widths * float(result.config.yarn.width)
                  if result.config is not None else None)
     beyond = [s.time_s for s in result.snapshots if tolerance is not None
               and np.isfinite(s.rebalance_shift_m) and s.rebalance_shift_m > tolerance]
@@ -129,19 +133,22 @@ def _interlacing(il):
             "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
 
 
-def summary_dict(result, extra=None, quality_reasons=()) -> dict:
+def summary_dict(result, extra=None, quality_reasons=(), settings=None) -> dict:
     """summary.json's figures of ``result``, as JSON-able data (non-finite numbers become null).
 
     quality_reasons : reasons to doubt the run found beyond its own (its fields', a stack's
         layers'), joined into the verdict
     extra : merged in at the top level
+    settings : the run's ``preform.Settings`` (None: the defaults), whose ``steady``,
+        ``interlacing`` and ``quality`` read the run
     """
+    settings = resolved(settings)
     config = result.config
     model = config.model.kind if config is not None else None
-    steady = steady_state(result.history) if result.steps else None
+    steady = steady_state(result.history, settings.steady) if result.steps else None
     steady = steady or {}
-    interlaced = run_interlacing(result)
-    q = assess(result, interlacing=interlaced)
+    interlaced = run_interlacing(result, settings.interlacing)
+    q = assess(result, settings.quality, interlacing=interlaced)
     summary = {
         "preform_version": __version__,
         "model": model,
@@ -168,7 +175,7 @@ def summary_dict(result, extra=None, quality_reasons=()) -> dict:
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
-        "snapshot_checks": snapshot_checks(result),
+        "snapshot_checks": snapshot_checks(result, settings.quality),
         "interlacing": _interlacing(interlaced),
         "inputs": echo_inputs(config),
     }
@@ -177,11 +184,14 @@ def summary_dict(result, extra=None, quality_reasons=()) -> dict:
     return jsonable(summary)
 
 
-def layer_summary(k, layer, result, fields, offset) -> dict:
+def layer_summary(k, layer, result, fields, offset, settings=None) -> dict:
     """summary.json's entry for layer k (from 1) of a stack: its process figures and quality
     verdict (its history, yarns and fields, located on its own centerline), its fields' means
-    over the faces it reached, and for k >= 2 the offset surface it was braided on."""
-    s = summary_dict(result, quality_reasons=surface_reasons(result, fields))
+    over the faces it reached, and for k >= 2 the offset surface it was braided on;
+    ``settings``: ``preform.Settings`` (None: the defaults)."""
+    settings = resolved(settings)
+    s = summary_dict(result, quality_reasons=surface_reasons(result, fields, settings.quality),
+                     settings=settings)
     entry = {"layer": k, "direction": layer.direction, "model": s["model"], "status": s["status"],
              "message": s["message"], "steps": s["steps"], "wall_time_s": s["wall_time_s"],
              "braided_length_m": s["braided_length_m"], "braid_angle_deg": s["braid_angle_deg"],

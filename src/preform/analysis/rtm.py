@@ -132,35 +132,120 @@ def principal_in_plane(K, normals, reference):
     return mean + half, mean - half, direction
 
 
-def bin_cells(values, n_sets=4):
-    """Bin positive ``values`` into at most ``n_sets`` sets, for solvers that take few property sets.
+@dataclass(frozen=True)
+class BinningSettings:
+    """How the faces' K1 are grouped into the few property sets of RTMsim's patch table."""
 
-    Equal widths in ``log(value)``, each set represented by the geometric midpoint of its members'
-    range, which minimises the largest relative error within it. Returns (index (f,) int, the
-    sets' values (k,), the largest relative error ``|value / set value - 1|`` of any cell).
+    #: property sets at most: RTMsim reads four cell sets (patches) with their own thickness,
+    #: porosity and permeability from the mesh file (its ``read_nastran_mesh``, patches 1-4)
+    sets: int = 4
+    #: Lloyd iterations at most; each lowers the binning error and they stop when no face
+    #: changes set, which takes a few tens on a field mesh
+    max_iterations: int = 200
+
+
+BINNING = BinningSettings()
+
+
+@dataclass(frozen=True)
+class Binning:
+    """Faces grouped into property sets by K1 (see :func:`bin_cells`).
+
+    index : (f,) int, each face's set (0-based, sets ordered by K1);  values : (k,) m^2, each
+    set's K1, the area-weighted geometric mean of its faces';  rms_factor : the binning error,
+    ``exp(sqrt(sum_f a_f ln(K_f / K_set)^2 / sum_f a_f))``, the typical factor between a face's
+    K1 and the K1 its set gives it (1 = none);  max_factor : the largest such factor of any face.
     """
+
+    index: np.ndarray
+    values: np.ndarray
+    rms_factor: float
+    max_factor: float
+
+
+def _lloyd(logs, weights, centres, max_iterations):
+    """Area-weighted 1-D k-means of ``logs`` from sorted ``centres``: (index, centres)."""
+    index = None
+    for _ in range(max_iterations):
+        cuts = 0.5 * (centres[1:] + centres[:-1])
+        new = np.searchsorted(cuts, logs, side="right")
+        used = np.unique(new)
+        remap = np.full(len(centres), -1)
+        remap[used] = np.arange(len(used))
+        new = remap[new]
+        centres = (np.bincount(new, weights * logs, len(used)) / np.bincount(new, weights, len(used)))
+        if index is not None and np.array_equal(new, index):
+            break
+        index = new
+    return index, centres
+
+
+def bin_cells(values, n_sets=None, weights=None, settings: BinningSettings = BINNING) -> Binning:
+    """Group positive ``values`` (K1 per face) into at most ``n_sets`` sets for a solver that takes
+    few property sets, so that the area-weighted mean square of ``ln(K / K_set)`` is as small as
+    1-D k-means (Lloyd's iteration) makes it.
+
+    ``weights`` are the faces' areas (default equal). It starts from equal widths in ``ln K``;
+    every step lowers the error, so it ends at most at that start's, ``ln(K_max / K_min) / (2 n)``
+    in root mean square (each face within half a width of its bin's middle). Each set's value is
+    the area-weighted geometric mean of its faces' K1 (the mean of ``ln K``, which the mean square
+    of the log error asks for). A start from area quantiles reaches the same mean square on braids
+    (their K1 is a narrow band with a tail of edge faces) but leaves tail faces 18 times off, not 4.
+    """
+    n_sets = settings.sets if n_sets is None else int(n_sets)
     values = np.asarray(values, dtype=float)
+    weights = np.ones_like(values) if weights is None else np.asarray(weights, dtype=float)
     logs = np.log(values)
     lo, hi = float(logs.min()), float(logs.max())
-    if hi - lo <= 0:
-        return np.zeros(len(values), dtype=np.int64), np.array([values[0]]), 0.0
-    edges = np.linspace(lo, hi, n_sets + 1)
-    index = np.clip(np.searchsorted(edges, logs, side="right") - 1, 0, n_sets - 1)
-    used = np.unique(index)
-    remap = np.full(n_sets, -1)
-    remap[used] = np.arange(len(used))
-    index = remap[index]
-    rep = np.array([math.exp(0.5 * (logs[index == k].min() + logs[index == k].max()))
-                    for k in range(len(used))])
-    error = float(np.max(np.abs(values / rep[index] - 1.0)))
-    return index.astype(np.int64), rep, error
+    if hi - lo <= 0 or n_sets <= 1:
+        centre = np.array([float(np.sum(weights * logs) / np.sum(weights))])
+        index = np.zeros(len(values), dtype=np.int64)
+    else:
+        width = (hi - lo) / n_sets
+        index, centre = _lloyd(logs, weights, lo + width * (np.arange(n_sets) + 0.5), settings.max_iterations)
+    dev = np.abs(logs - centre[index])
+    rms = math.sqrt(float(np.sum(weights * dev ** 2) / np.sum(weights)))
+    return Binning(index=index.astype(np.int64), values=np.exp(centre), rms_factor=math.exp(rms),
+                   max_factor=math.exp(float(dev.max())))
+
+
+#: the fibre volume fraction beyond which a cavity cannot be closed on a dry preform: fibres in a
+#: square array touch at pi / 4, where Gutowski's compaction law (Gutowski, Morigaki and Cai
+#: 1987, "The consolidation of laminate composites", J. Compos. Mater. 21) needs an unbounded
+#: pressure (its available fibre volume fraction V_a) and Gebart's quadratic packing lets no
+#: resin across the fibres (K_perp = 0)
+MAX_COMPACTED_VF = math.pi / 4.0
+
+
+def compression(vf, thickness, area, cavity_thickness=None) -> dict:
+    """What the cavity does to the preform, for the summary: the fibre volume fraction of the
+    preform faces (area-weighted mean, min, max), with a cavity the compression (the preform's
+    area-weighted mean thickness as braided over the cavity's), and ``warnings`` (lines for
+    people) where faces are packed beyond :data:`MAX_COMPACTED_VF`.
+
+    vf, thickness, area : (f,) of the preform faces (rtm_valid), -, m, m^2."""
+    vf, thickness, area = (np.asarray(x, dtype=float) for x in (vf, thickness, area))
+    total = float(np.sum(area))
+    out = {"fibre_volume_fraction": {"mean": float(np.sum(area * vf) / total), "min": float(vf.min()),
+                                     "max": float(vf.max())},
+           "compression": None, "warnings": []}
+    mean_t = float(np.sum(area * thickness) / total)
+    if cavity_thickness:
+        out["compression"] = mean_t / float(cavity_thickness)
+    over = vf > MAX_COMPACTED_VF
+    if np.any(over):
+        share = float(np.sum(area[over]) / total)
+        where = (f"[rtm] cavity_thickness = {cavity_thickness:g} m compresses the preform "
+                 f"{out['compression']:.1f} times (from {mean_t * 1e3:.2f} mm as braided)"
+                 if cavity_thickness else f"the preform's own thickness ({mean_t * 1e3:.2f} mm)")
+        out["warnings"].append(
+            f"{where} to a fibre volume fraction up to {vf.max():.2f}, above {MAX_COMPACTED_VF:.3f} "
+            f"(fibres touching: no pressure closes the cavity, no resin flows across them) on "
+            f"{100 * share:.1f} % of the preform's area: give a thicker cavity (docs/guide/results.md, rtm/)")
+    return out
 
 
 # ------------------------------------------------------------------------------ solver cells
-
-#: the property sets of RTMsim's patch table (``rtmsim.bdf``): the solver takes few
-RTMSIM_SETS = 4
-
 
 @dataclass(frozen=True)
 class SolverProperties:
@@ -169,8 +254,7 @@ class SolverProperties:
     vertices (nv, 3) float64 m, cells (nf, 3) int64: the field mesh; per cell thickness (m),
     porosity, k1 (m^2, along ``direction``), alpha (K2 / K1) and direction (nf, 3); set_index
     (nf,) int64 and set_values (one (thickness, porosity, K1, alpha, direction) per set): the
-    binning for RTMsim; binning_error: the largest relative K1 error of a preform cell's set;
-    preform_faces: the cells that carry preform (``rtm_valid``).
+    binning for RTMsim; summary: what summary.json says of the files.
     """
 
     vertices: np.ndarray
@@ -182,24 +266,29 @@ class SolverProperties:
     direction: np.ndarray
     set_index: np.ndarray
     set_values: tuple
-    binning_error: float
-    preform_faces: int
+    summary: dict
 
     def said(self) -> dict:
         """What summary.json says of the files."""
-        return {"written": True, "sets": len(self.set_values), "binning_error_k1": self.binning_error,
-                "preform_faces": self.preform_faces, "faces": int(len(self.k1))}
+        return dict(self.summary)
 
 
-def solver_properties(config, fields, n_sets=RTMSIM_SETS) -> tuple[SolverProperties | None, str]:
+def solver_properties(config, fields, settings: BinningSettings | None = None,
+                      n_sets=None) -> tuple[SolverProperties | None, str]:
     """(the solver files' properties, "") of fields with the RTM arrays, or (None, why not).
 
     Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
     Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (``[rtm] cavity_thickness``; without
     it, the largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set
     of their own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every
-    cell is preform), binned by :func:`bin_cells`.
+    cell is preform), grouped by K1 so that the area-weighted binning error is small
+    (:func:`bin_cells`). The summary gives that error (``k1_binning``), the preform's fibre
+    volume fraction and, with a cavity, its compression (:func:`compression`); a cavity that
+    packs fibres beyond :data:`MAX_COMPACTED_VF` is warned about. ``settings``: the binning's
+    (None: :data:`BINNING`), whose ``sets`` ``n_sets`` overrides where given.
     """
+    import warnings
+
     reason = missing_material(config)
     if reason:
         return None, reason
@@ -210,28 +299,44 @@ def solver_properties(config, fields, n_sets=RTMSIM_SETS) -> tuple[SolverPropert
     if not np.any(valid):
         return None, "no face carries preform (no yarn reached the mandrel)"
     cavity_thickness = config.rtm.cavity_thickness
+    V, F = np.asarray(fields.vertices, dtype=float), np.asarray(fields.faces)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
     channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
     k1 = np.where(valid, cd["permeability_k1_m2"], channel)
     alpha = np.where(valid, np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0), 1.0)
     direction = cd["permeability_direction"]
+    settings = BINNING if settings is None else settings
+    n_sets = settings.sets if n_sets is None else int(n_sets)
     sets = n_sets - 1 if np.any(~valid) else n_sets
-    index_valid, rep, error = bin_cells(k1[valid], sets)
-    index = np.full(len(k1), len(rep), dtype=np.int64)
-    index[valid] = index_valid
+    binning = bin_cells(k1[valid], sets, weights=area[valid], settings=settings)
+    index = np.full(len(k1), len(binning.values), dtype=np.int64)
+    index[valid] = binning.index
     values = []
-    for k in range(len(rep)):
+    for k in range(len(binning.values)):
         members = index == k
         values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
-                       float(rep[k]), float(np.mean(alpha[members])),
+                       float(binning.values[k]), float(np.mean(alpha[members])),
                        _mean_direction(direction[members])))
     if np.any(~valid):
         values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
                        channel, 1.0, (1.0, 0.0, 0.0)))
+    # faces packed to V_f 1 or more are no preform to the fields (rtm_valid 0), but the most
+    # compressed: they count here
+    packed = valid | (cd["fibre_volume_fraction"] >= MAX_COMPACTED_VF)
+    squeeze = compression(cd["fibre_volume_fraction"][packed], cd["thickness_m"][packed], area[packed],
+                          cavity_thickness)
+    for text in squeeze.pop("warnings"):
+        warnings.warn(text, UserWarning, stacklevel=3)
+    said = {"written": True, "sets": len(values), "preform_faces": int(np.count_nonzero(valid)),
+            "faces": int(len(k1)),
+            "faces_per_set": [int(n) for n in np.bincount(index, minlength=len(values))],
+            "k1_binning": {"rms_factor": binning.rms_factor, "max_factor": binning.max_factor,
+                           "sets_k1_m2": [float(v) for v in binning.values]},
+            **squeeze}
     return SolverProperties(vertices=fields.vertices, cells=fields.faces, thickness=thickness,
                             porosity=cd["porosity"], k1=k1, alpha=alpha, direction=direction,
-                            set_index=index, set_values=tuple(values), binning_error=error,
-                            preform_faces=int(np.count_nonzero(valid))), ""
+                            set_index=index, set_values=tuple(values), summary=said), ""
 
 
 def _mean_direction(d):

@@ -11,6 +11,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import report
 from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_folder
 from .fe_files import write_structural
 from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
@@ -26,11 +27,11 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None):
+def plot_history(result, plots_dir, refs=None, steady_settings=None):
     """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs)
+    return plot(result, plots_dir, refs, steady_settings)
 
 
 def plot_yarns_3d(result, path):
@@ -40,12 +41,15 @@ def plot_yarns_3d(result, path):
     return plot(result, path)
 
 
-def _picture_jobs(result, fields, out_dir):
+def _picture_jobs(result, fields, out_dir, settings=None):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
-    the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped."""
+    the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped.
+    ``settings``: ``preform.Settings`` (None: the defaults), the steady state the history
+    plots mark."""
     plots = out_dir / PLOTS
+    steady = None if settings is None else settings.steady
     drawn, rendered = [], []
     output = getattr(result.config, "output", None)
     if output is not None and not output.pictures:    # [output] pictures = false
@@ -63,7 +67,7 @@ def _picture_jobs(result, fields, out_dir):
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots)))
+                                lambda: plot_history(result, plots, steady_settings=steady)))
 
     def surface_pictures(shown):
         from .plots import run_label
@@ -166,7 +170,7 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
     result, fields = analysed.result, analysed.fields
     try:
         out_dir = _prepare_folder(out_dir)
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir)
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []
             pictures.send(fields_arrays(fields) if fields is not None else None)
@@ -232,7 +236,9 @@ def write_summary_last(analysed, writing: Writing, extra=None) -> list[Path]:
     if analysed.layers is not None:
         said["layers"] = analysed.layers
     said.update(extra or {})
-    return [*writing.written, write_summary({**analysed.summary, **said}, summary)]
+    written = [*writing.written, write_summary({**analysed.summary, **said}, summary)]
+    report.report_hook(writing.out_dir)   # report.html, the page of the finished folder
+    return written
 
 
 def write_results(analysed, out_dir, *, background=False, pictures=None, extra=None) -> list[Path]:

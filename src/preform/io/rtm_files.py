@@ -5,11 +5,13 @@
   ``permeability`` (K1, m^2, along the reference direction), ``alpha`` (K2 / K1, the in-plane
   anisotropy) and ``reference_direction`` (nf, 3) unit tangent, global frame.
 * ``rtmsim.bdf`` (RTMsim style, Nastran bulk data): ``GRID*`` nodes in large-field format (16
-  characters a coordinate, so a metre-sized part keeps micrometres), ``CTRIA3`` cells with the
-  set as their property id, and one ``SET1`` per property set listing its cells; the sets'
-  values (thickness, porosity, K1, alpha, reference direction) are in ``rtmsim_sets.csv`` beside
-  it, for RTMsim's patch table. The cells are binned into at most four sets
-  (``preform.analysis.rtm.solver_properties``), and the binning error is reported.
+  characters a coordinate, so a metre-sized part keeps micrometres), ``CTRIA3`` cells whose
+  property id is their set's id, and one ``SET1`` per property set, with that same id, listing
+  its cells; the sets' values (thickness, porosity, K1, alpha, reference direction) are in
+  ``rtmsim_sets.csv`` beside it, one row per set under the same id (column ``pid``), for
+  RTMsim's patch table. The cells are binned into at most four sets by K1
+  (``preform.analysis.rtm.solver_properties``), and the binning error is reported
+  (docs/guide/results.md).
 """
 
 from __future__ import annotations
@@ -57,9 +59,12 @@ def _small(value) -> str:
 
 
 def bdf_text(vertices, cells, set_index) -> str:
-    """The bulk data of the mesh with ``set_index`` (nf,) 0-based sets; ids are 1-based."""
+    """The bulk data of the mesh with ``set_index`` (nf,) 0-based sets; the cards' ids are
+    1-based: set ``k`` is ``SET1`` id and ``CTRIA3`` property id ``k + 1``, the ``pid`` of
+    ``rtmsim_sets.csv``."""
     out = io.StringIO()
-    out.write("$ preform: RTM mesh, metres; property id = set + 1\nBEGIN BULK\n")
+    out.write("$ preform: RTM mesh, metres; a CTRIA3's property id is the id of the SET1 that\n"
+              "$ lists it and the pid of its row in rtmsim_sets.csv\nBEGIN BULK\n")
     for i, (x, y, z) in enumerate(np.asarray(vertices, dtype=float), start=1):
         out.write(f"{'GRID*':<8}{_large(i)}{_large('')}{_large(float(x))}{_large(float(y))}*\n")
         out.write(f"{'*':<8}{_large(float(z))}\n")
@@ -80,14 +85,22 @@ def bdf_text(vertices, cells, set_index) -> str:
     return out.getvalue()
 
 
+#: the columns of ``rtmsim_sets.csv``
+SETS_COLUMNS = ("pid", "faces", "thickness_m", "porosity", "permeability_k1_m2", "alpha", "ref_x", "ref_y",
+                "ref_z")
+
+
 def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]:
-    """Write ``rtmsim.bdf`` and ``rtmsim_sets.csv`` (one row per set: set, thickness_m, porosity,
-    k1_m2, alpha, reference direction x, y, z); return both paths."""
+    """Write ``rtmsim.bdf`` and ``rtmsim_sets.csv`` (one row per set: its pid, the bdf's property
+    and SET1 id, its number of faces, thickness_m, porosity, k1_m2, alpha, reference direction x,
+    y, z); return both paths. ``set_values[k]`` are set ``k``'s (0-based) values."""
     path = Path(path)
-    atomic_write_text(path, bdf_text(vertices, cells, np.asarray(set_index, dtype=np.int64)))
-    rows = ["set,thickness_m,porosity,permeability_k1_m2,alpha,ref_x,ref_y,ref_z"]
-    for k, (t, phi, k1, a, d) in enumerate(set_values, start=1):
-        rows.append(",".join([str(k), *(repr(float(v)) for v in (t, phi, k1, a, *d))]))
+    set_index = np.asarray(set_index, dtype=np.int64)
+    atomic_write_text(path, bdf_text(vertices, cells, set_index))
+    counts = np.bincount(set_index, minlength=len(set_values))
+    rows = [",".join(SETS_COLUMNS)]
+    for k, (t, phi, k1, a, d) in enumerate(set_values):
+        rows.append(",".join([str(k + 1), str(int(counts[k])), *(repr(float(v)) for v in (t, phi, k1, a, *d))]))
     sets = atomic_write_text(path.with_name("rtmsim_sets.csv"), "\n".join(rows) + "\n")
     return [path, sets]
 

@@ -45,6 +45,7 @@ from ..checkpoint import inputs_sha256
 from ..config import config_from_dict
 from ..errors import ConfigError, PreformError
 from ..io.atomic import atomic_write_text, safe_folder
+from ..io.report import report_hook
 
 SWEEP_CSV = "sweep.csv"
 POINT_JSON = "point.json"
@@ -325,6 +326,7 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
                        progress=progress, cluster=cluster)
     write_sweep_csv(spec, ordered)
     plot_sweep(spec, ordered)
+    report_hook(spec.out_dir, sweep=True)   # report.html of the sweep's folder
     return ordered
 
 
