@@ -55,10 +55,10 @@ class Settings:
     #: the work estimate's limits, refused beyond unless ``--force`` (``budget.check_work``)
     limits: WorkLimits = field(default_factory=WorkLimits)
     #: how the RTM solver files group the faces' K1 into property sets
-    #: (``io.rtm_files.write_rtm``)
+    #: (``analysis.rtm.solver_properties``)
     rtm: BinningSettings = field(default_factory=BinningSettings)
     #: how finely the shell deck's plies are binned into element groups
-    #: (``structural.write_structural``)
+    #: (``structural.layup.structural_layup``)
     binning: BinSettings = field(default_factory=BinSettings)
 
 
