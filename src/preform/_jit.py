@@ -100,9 +100,9 @@ def small_map_case(config):
 
 
 def job_projector(config):
-    """The stepper's arc-length projector (``analysis.CenterlineProjector``: its sample tree and
+    """The stepper's arc-length projector (``laid.CenterlineProjector``: its sample tree and
     the projection on it) on :func:`_cylinder`'s centerline."""
-    from .analysis import CenterlineProjector
+    from .laid import CenterlineProjector
     from .tolerances import tol
 
     _, V, _, centerline = _cylinder(config)
@@ -111,7 +111,7 @@ def job_projector(config):
 
 def job_pool(config):
     """The neighbourhood sums of the map (``fields.pool``) on :func:`small_map_case`'s faces."""
-    from .fields import face_geometry, pool
+    from .analysis.fields import face_geometry, pool
 
     _, (V, F, _, h) = small_map_case(config)
     normals, areas, centroids = face_geometry(V, F)
@@ -120,7 +120,7 @@ def job_pool(config):
 
 def job_clip(config):
     """The yarns clipped to the faces (``fields.clip_yarns`` as the map calls it)."""
-    from .fields import clip_yarns, face_geometry
+    from .analysis.fields import clip_yarns, face_geometry
 
     result, (V, F, _, _) = small_map_case(config)
     normals, _, centroids = face_geometry(V, F)
@@ -141,8 +141,8 @@ def _analysis_case(config):
 
 
 def job_laid(config):
-    """The laid yarn's braid angles (``analysis.laid_braid_angles``) on two points."""
-    from .analysis import laid_braid_angles, mandrel_friction
+    """The laid yarn's braid angles (``laid.laid_braid_angles``) on two points."""
+    from .laid import laid_braid_angles, mandrel_friction
     from .tolerances import tol
 
     small, arrays, centerline, points, faces, s, _ = _analysis_case(config)
@@ -151,8 +151,8 @@ def job_laid(config):
 
 
 def job_angles(config):
-    """The history's braid angles (``analysis.braid_angles_at``) on two points."""
-    from .analysis import braid_angles_at
+    """The history's braid angles (``laid.braid_angles_at``) on two points."""
+    from .laid import braid_angles_at
 
     _, arrays, centerline, points, faces, s, directions = _analysis_case(config)
     braid_angles_at(arrays, centerline, points, faces, s, directions)

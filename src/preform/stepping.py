@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import plain
-from .analysis import CenterlineProjector, mandrel_friction
+from .laid import CenterlineProjector, mandrel_friction
 from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
 from .kinematic import Depositor

@@ -171,8 +171,8 @@ def test_example_mandrel_files_exist_or_are_being_built():
 
 @pytest.fixture
 def stubbed_run(small_result, tmp_path, monkeypatch):
-    """A valid case file, with preform.simulation / checks / fields replaced by stubs that return
-    the synthetic Result: tests the command's plumbing, not the physics."""
+    """A valid case file, with the pipeline's geometry, checks, simulation and map replaced by
+    stubs that return the synthetic Result: tests the command's plumbing, not the physics."""
     import dataclasses
     import types
 
@@ -192,18 +192,16 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
         state["preflight"].append((mandrel, centerline))
         return ["guide ring is tight"]
 
-    monkeypatch.setitem(sys.modules, "preform.simulation", types.SimpleNamespace(
-        simulate=simulate, load_geometry=lambda cfg: (state["mandrel"], "centerline")))
-    monkeypatch.setitem(sys.modules, "preform.checks", types.SimpleNamespace(preflight=preflight))
-    monkeypatch.setitem(sys.modules, "preform.fields",
-                        types.SimpleNamespace(map_to_surface=lambda r, mesh=None: None))
-    import preform.io.cache
     import preform.pipeline
     from preform.budget import WorkEstimate
 
-    # the pipeline loads the geometry and the field mesh through the cache (io.cache)
+    # the pipeline's stages call these through its own names: the geometry and the field mesh
+    # (through the cache), the checks, the simulation and the map
     monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
-    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result, remesh=None: None)
+    monkeypatch.setattr(preform.pipeline, "cached_field_mesh", lambda result, remesh=None: None)
+    monkeypatch.setattr(preform.pipeline, "preflight", preflight)
+    monkeypatch.setattr(preform.pipeline, "_simulate", simulate)
+    monkeypatch.setattr(preform.pipeline, "map_to_surface", lambda r, mesh=None: None)
 
     # the placeholder mandrel has no geometry to estimate the work or the references from
     monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))
@@ -264,10 +262,10 @@ def test_run_partial_results_and_exit_code(stubbed_run, tmp_path, capsys, status
 
 @pytest.fixture
 def stubbed_geometry(tmp_path, monkeypatch):
-    """preform.geometry.info / write_centerline_csv replaced by stubs recording their calls."""
+    """preform.geometry.info / io.centerline_csv.write_centerline_csv replaced by stubs recording their calls."""
     import types
 
-    import preform.geometry
+    import preform.io.centerline_csv
 
     calls = {}
 
@@ -281,7 +279,7 @@ def stubbed_geometry(tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "preform.geometry.info", types.SimpleNamespace(
         mandrel_info=mandrel_info, format_mandrel_info=lambda info: "watertight: yes"))
-    monkeypatch.setattr(preform.geometry, "write_centerline_csv", write_centerline_csv, raising=False)
+    monkeypatch.setattr(preform.io.centerline_csv, "write_centerline_csv", write_centerline_csv)
     stl = tmp_path / "case_b.stl"
     stl.write_text("solid placeholder\nendsolid placeholder\n")
     shipped = tmp_path / "case_b_centerline.csv"

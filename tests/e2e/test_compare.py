@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from preform.cli import main
-from preform.compare import read_measurements
+from preform.studies.compare import read_measurements
 from support.simcase import write_cylinder_case
 
 
@@ -37,7 +37,7 @@ def test_a_run_without_pictures_writes_its_data_files_alone(run):
 def test_every_braided_face_is_found_at_its_own_centroid(run):
     """locate_faces: the centroid of each face's unrolled triangle lies in that face, also on
     the seam at +-180 deg where the azimuth wraps."""
-    from preform.compare import load_run, locate_faces
+    from preform.studies.compare import load_run, locate_faces
 
     r = load_run(run, {"angle"})
     polys = r.unrolled()
@@ -57,7 +57,7 @@ def _write(path, header, rows):
 
 
 def _sampled(run, d):
-    """Measurements taken from the run's own files, independently of preform.compare: angles at
+    """Measurements taken from the run's own files, independently of preform.studies.compare: angles at
     the braided faces' centroids (arc length and azimuth from the centerline's frame), H at
     the history rows of a braided length met once, every point of the first and last
     snapshots with their times."""
@@ -173,7 +173,7 @@ def test_a_layer_is_compared_with_its_own_fields_and_history(layered, tmp_path):
     sees), with it the layer named; H of layer 2 from ``layer2/history.csv``."""
     import meshio
 
-    from preform.compare import compare_run, load_run
+    from preform.studies.compare import compare_run, load_run
 
     r = load_run(layered, {"angle"})
     assert r.n_layers == 2

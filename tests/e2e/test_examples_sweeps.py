@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from preform.sweeps import load_sweep
+from preform.studies.sweeps import load_sweep
 
 SWEEPS = Path(__file__).resolve().parents[2] / "examples" / "sweeps"
 

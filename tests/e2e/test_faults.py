@@ -117,17 +117,17 @@ def test_a_failure_while_writing_keeps_the_checkpoint_and_resume_writes_without_
         tmp_path, capsys, monkeypatch):
     config = case(tmp_path / "case")
     out = tmp_path / "out"
-    real = preform.io.write_results
+    real = preform.io.write_data
 
     def broken(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(preform.io, "write_results", broken)
+    monkeypatch.setattr(preform.io, "write_data", broken)
     code, _, err = run(capsys, config, "--out", out)
     assert code == 1
     assert "the simulation is kept in" in err and "--resume` writes the results without simulating again" in err
     assert (out / CHECKPOINT).exists()
-    monkeypatch.setattr(preform.io, "write_results", real)
+    monkeypatch.setattr(preform.io, "write_data", real)
 
     from preform import stepping
 
@@ -179,7 +179,7 @@ def test_the_summary_wall_time_is_the_commands_with_its_stages(reference):
     _, out, _ = reference
     summary = json.loads((out / "summary.json").read_text())
     stages = summary["stages_s"]
-    assert set(stages) == {"load_and_check", "simulate", "map", "write", "pictures"}
+    assert set(stages) == {"load_and_check", "simulate", "analyse", "write", "pictures"}
     assert summary["wall_time_s"] == pytest.approx(sum(stages.values()))
     assert summary["wall_time_s"] > summary["simulation_wall_time_s"]
 

@@ -84,7 +84,7 @@ def test_the_worker_field_mesh_is_the_one_the_run_builds(tmp_path, monkeypatch):
     mesh the run's map would build itself, byte for byte, under the key the map looks up."""
     from types import SimpleNamespace
 
-    from preform.fields import field_mesh
+    from preform.analysis.fields import field_mesh
     from preform.geometry.mandrel import load_mandrel
     from preform.io.cache import cached_field_mesh, cached_mandrel
 

@@ -12,7 +12,9 @@ import signal
 import numpy as np
 import pytest
 
-from preform.io import fields_arrays, fields_from_arrays, start_pictures, write_results
+from preform import pipeline
+from preform.analysis.derived import analyse_run
+from preform.io import fields_arrays, fields_from_arrays, start_pictures
 from preform.io.pictures import LaterJob, PictureJob, PictureWorker, can_fork, run_jobs
 
 needs_fork = pytest.mark.skipif(not can_fork(), reason="the picture worker forks (Linux)")
@@ -90,6 +92,11 @@ def _names(paths, out):
     return [p.relative_to(out).as_posix() for p in paths]
 
 
+def write_results(result, fields, out, **kwargs):
+    """The pipeline's write stage (``pipeline.write``) of ``result`` and ``fields`` analysed."""
+    return pipeline.write(analyse_run(result, fields), out, **kwargs)
+
+
 @needs_fork
 def test_background_writes_the_same_files_as_inline(small_result, tmp_path):
     inline = write_results(small_result, None, tmp_path / "inline")
@@ -129,7 +136,7 @@ def test_a_failing_render_in_the_worker_keeps_the_data_files(small_result, tmp_p
 
 @pytest.fixture(scope="module")
 def fields():
-    from preform.fields import map_to_surface
+    from preform.analysis.fields import map_to_surface
     from support.field_standins import cylinder, helices, make_result
 
     return map_to_surface(make_result(cylinder(height=0.2), helices(np.radians(30.0), 16, z1=0.14)),
@@ -271,7 +278,7 @@ def test_the_data_files_do_not_wait_for_the_early_worker(small_result, fields, t
     assert json.loads((out / "summary.json").read_text())["pictures"] == {"failed": []}
 
 
-def test_without_fork_the_early_worker_draws_in_write_results(small_result, fields, tmp_path, monkeypatch):
+def test_without_fork_the_early_worker_draws_in_the_write_stage(small_result, fields, tmp_path, monkeypatch):
     import preform.io.pictures as pictures
 
     monkeypatch.setattr(pictures, "can_fork", lambda: False)

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 import preform as pf
-from preform import quality
+from preform.analysis import quality
+from preform.analysis.derived import summary_dict
 from preform._kernels import kinematic as K
 from preform.errors import SimulationError
 from preform.geometry import shapes
 from preform.interaction import relax
 from preform.interaction.model import InteractionZone
 from preform.interaction.settings import DEFAULT
-from preform.io.tables import summary_dict
 from preform.machine import Machine
 from preform.reference import resolve_pose_lead
 from preform.result import FLAG_SLIP
@@ -275,7 +275,7 @@ def test_the_interaction_note_gives_this_runs_steps(tmp_path):
 def test_interlacing_reasons():
     """Warp and weft crossing below half the pattern's count separate; a band where the pattern
     gives less than half a crossing per pair is not judged."""
-    from preform.interlacing import Interlacing
+    from preform.analysis.interlacing import Interlacing
 
     il = dict(s_start=0.0, s_end=0.1, area_m2=0.01, pairs=100)
     assert quality.interlacing_reasons(Interlacing(measured=60, pattern=100.0, **il)) == []

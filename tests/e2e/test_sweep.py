@@ -14,7 +14,7 @@ import pytest
 
 from preform.cli import main
 from preform.errors import ConfigError, PreformError
-from preform.sweeps import ClusterSettings, load_sweep, read_sweep_csv, sweep
+from preform.studies.sweeps import ClusterSettings, load_sweep, read_sweep_csv, sweep
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = f"""
@@ -83,7 +83,7 @@ def test_a_point_equals_a_separate_preform_run(local_sweep, tmp_path):
 
 def test_pf_sweep_is_the_function_and_stays_so():
     import preform as pf
-    import preform.sweeps  # noqa: F401 - importing the module must not replace pf.sweep
+    import preform.studies.sweeps  # noqa: F401 - importing the module must not replace pf.sweep
 
     assert pf.sweep is sweep and callable(pf.sweep)
 

@@ -8,7 +8,7 @@ from types import SimpleNamespace as NS
 import numpy as np
 import trimesh
 
-from preform.fields import face_geometry
+from preform.analysis.fields import face_geometry
 from preform.result import YarnPaths
 
 R, HEIGHT, WIDTH, THICKNESS = 0.05, 0.2, 4e-3, 2.5e-4

@@ -1,5 +1,5 @@
 """The braid-angle kernels of laid yarn (``_kernels.kinematic.braid_cosines_batch``,
-``laid_yarn_angles`` through ``preform.analysis``) against their slow NumPy reference
+``laid_yarn_angles`` through ``preform.laid``) against their slow NumPy reference
 (``support.naive_analysis``, whole-array NumPy), on a curved mandrel."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from support import naive_analysis as naive
-from preform import analysis
-from preform.analysis import CenterlineProjector
+from preform import laid
+from preform.laid import CenterlineProjector
 from preform.geometry import centerline_from_points, mandrel_from_arrays, shapes
 from preform.kinematic import SurfaceArrays
 
@@ -52,7 +52,7 @@ def test_laid_braid_angles_match_the_numpy_reference(setup, seed):
     points, faces, offsets = _yarns(mandrel, np.random.default_rng(seed))
     mu, tol_k = 0.2, 0.5
     ref_angles, ref_slip = naive.laid_braid_angles(surface, project, cl, points, faces, offsets, mu, tol_k)
-    angles, slip = analysis.laid_braid_angles(surface, project, cl, points, faces, offsets, mu, tol_k)
+    angles, slip = laid.laid_braid_angles(surface, project, cl, points, faces, offsets, mu, tol_k)
     # the same operations, but NumPy's einsum sums the three products of a dot in another order
     # (SIMD pairs): the cosines differ by ~1e-16, the angles by ~1e-16 / sin(alpha) rad; the
     # 1e-11 deg bounds it with a margin of 100 above 1 deg; below, the cosines are compared
@@ -76,12 +76,12 @@ def test_braid_angles_at_match_the_numpy_reference(setup):
     T = cl.frames_at(s)[1]
     n = naive.smooth_normals(surface, faces, points)
     ref = naive.braid_angle(directions, T, n)
-    got = analysis.braid_angles_at(surface, cl, points, faces, s, directions)
+    got = laid.braid_angles_at(surface, cl, points, faces, s, directions)
     keep = ref > np.radians(1.0)                            # as above: 1e-16 / sin(alpha) rad
     np.testing.assert_allclose(got[keep], ref[keep], rtol=0, atol=1e-13)
     np.testing.assert_allclose(np.cos(got), np.cos(ref), rtol=0, atol=1e-15)
     # beyond the centerline's ends the tangent is the end tangent (frames_at's straight extension)
     s_out = np.where(np.arange(len(s)) % 2 == 0, -0.1, 0.7)
     ref = naive.braid_angle(directions, cl.frames_at(s_out)[1], n)
-    got = analysis.braid_angles_at(surface, cl, points, faces, s_out, directions)
+    got = laid.braid_angles_at(surface, cl, points, faces, s_out, directions)
     np.testing.assert_allclose(np.cos(got), np.cos(ref), rtol=0, atol=1e-15)

@@ -177,7 +177,7 @@ def test_orient_bodies_is_the_double_cover_components(seed):
 
 
 def test_field_mesh_weld_returns_welded_arrays_as_they_are():
-    from preform.fields import _merge_exact_duplicates
+    from preform.analysis.fields import _merge_exact_duplicates
 
     V, F = arrays(trimesh.creation.icosphere(subdivisions=2))
     U, G = _merge_exact_duplicates(V, F)

@@ -107,7 +107,7 @@ def _result():
 
 
 def test_field_mesh_the_same_bytes_from_the_cache(folder):
-    from preform.fields import field_mesh, map_to_surface
+    from preform.analysis.fields import field_mesh, map_to_surface
 
     result = _result()
     fresh = field_mesh(result, 0.015)

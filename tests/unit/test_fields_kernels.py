@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from preform import fields as F
+from preform.analysis import fields as F
 from preform._kernels import fields as K
 from support.naive_geometry import point_triangle_distance
 from support.field_standins import cylinder, helices

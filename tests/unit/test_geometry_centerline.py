@@ -14,7 +14,8 @@ import pytest
 
 from preform.errors import MandrelError
 from preform.geometry import (auto_centerline, centerline_from_points, load_mandrel, mandrel_from_arrays,
-                              read_centerline_csv, section_perimeters, shapes, write_centerline_csv)
+                              read_centerline_csv, section_perimeters, shapes)
+from preform.io.centerline_csv import write_centerline_csv
 
 MANDRELS = Path(__file__).resolve().parents[2] / "mandrels"
 SHIPPED = ["case_a", "case_b", "bent_tube", "cone", "waist", "bulge"]

@@ -12,7 +12,8 @@ import pytest
 import trimesh
 
 from preform.geometry import (auto_centerline, centerline_from_points, format_mandrel_info, mandrel_from_arrays,
-                              mandrel_info, read_centerline_csv, shapes, write_centerline_csv)
+                              mandrel_info, read_centerline_csv, shapes)
+from preform.io.centerline_csv import write_centerline_csv
 
 
 def _write_stl(path, V, F, scale=1.0):

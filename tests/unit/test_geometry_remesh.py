@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from preform.fields import face_geometry
+from preform.analysis.fields import face_geometry
 from preform.geometry import shapes
 from preform.geometry.remesh import feature_edges, isotropic_remesh, locate_faces, subdivide_long_edges
 

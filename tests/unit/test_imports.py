@@ -121,11 +121,13 @@ def test_no_import_cycle_in_the_package():
     assert not found, "import cycles in src/preform: " + "; ".join(" <-> ".join(c) for c in found)
 
 
+@pytest.mark.parametrize("module", ["preform", "preform.cli"])
 @pytest.mark.parametrize("heavy", ["numba", "scipy", "trimesh", "pyvista", "matplotlib"])
-def test_import_preform_is_light(heavy):
-    """``import preform`` (and reading a config) loads none of the heavy packages: they load on
-    first use of what needs them (a fresh interpreter, so nothing of this test run is loaded)."""
-    code = ("import sys, preform\n"
+def test_import_preform_is_light(heavy, module):
+    """``import preform`` (and reading a config) and the command's module load none of the heavy
+    packages: they load on first use of what needs them (a fresh interpreter, so nothing of this
+    test run is loaded)."""
+    code = (f"import sys, preform, {module}\n"
             "preform.load_config\n"
             f"print({heavy!r} in sys.modules)\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
@@ -140,7 +142,7 @@ def test_lazy_public_names_resolve_to_the_real_objects():
     import inspect
 
     import preform
-    from preform.fields import SurfaceFields, map_to_surface
+    from preform.analysis.fields import SurfaceFields, map_to_surface
 
     assert preform.map_to_surface is map_to_surface
     assert preform.SurfaceFields is SurfaceFields

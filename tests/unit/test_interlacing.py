@@ -1,11 +1,11 @@
-"""The interlacing measure (``preform.interlacing``) against closed forms: helices on a cylinder,
+"""The interlacing measure (``preform.analysis.interlacing``) against closed forms: helices on a cylinder,
 and warp and weft laid in separate bands."""
 
 import numpy as np
 import pytest
 
 from preform.geometry.centerline import centerline_from_points
-from preform.interlacing import interlacing
+from preform.analysis.interlacing import interlacing
 from preform.result import YarnPaths
 
 R = 0.05          # m, cylinder radius

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from preform.fields import SurfaceFields
+from preform.analysis.fields import SurfaceFields
 from preform.geometry import centerline_from_points
 from preform.io.maps import surface_map_figure, unrolled_coordinates, write_surface_map
 

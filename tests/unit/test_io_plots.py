@@ -62,7 +62,7 @@ def _history_result(small_result, n=200, status="done"):
 
 
 def test_history_plot_range_leaves_out_the_wind_up_and_marks_steady_state(small_result):
-    from preform.steady import steady_state
+    from preform.analysis.steady import steady_state
 
     result = _history_result(small_result)
     steady = steady_state(result.history)

@@ -7,7 +7,7 @@ import numpy as np
 import trimesh
 
 from preform.io.rtm_files import write_lcmsim_h5, write_rtmsim_bdf
-from preform.rtm import bin_cells
+from preform.analysis.rtm import bin_cells
 
 
 def mesh():

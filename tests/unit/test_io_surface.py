@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from vtkmodules.util.numpy_support import vtk_to_numpy
 
-from preform.fields import map_to_surface
+from preform.analysis.fields import map_to_surface
 from preform.io.surface import H5, PICTURES, VTU, WINDOW_SIZE, XDMF, write_surface
 from support.field_standins import cylinder, helices, make_result
 

@@ -11,6 +11,7 @@ import pytest
 
 import preform
 from preform.errors import SimulationError
+from preform.analysis.derived import summary_dict
 from preform.io.tables import write_history, write_summary
 from preform.result import HISTORY_COLUMNS
 
@@ -48,7 +49,7 @@ def test_history_refuses_missing_column(small_result, tmp_path):
 
 
 def test_summary_content(small_result, tmp_path):
-    path = write_summary(small_result, tmp_path / "summary.json", extra={"files": ["a", "b"]})
+    path = write_summary(summary_dict(small_result, {"files": ["a", "b"]}), tmp_path / "summary.json")
     summary = json.loads(path.read_text())
     h = small_result.history
     assert summary["preform_version"] == preform.__version__
@@ -80,7 +81,7 @@ def test_summary_content(small_result, tmp_path):
 def test_summary_of_run_without_steps_is_valid_json(small_result, tmp_path):
     empty = dataclasses.replace(small_result, history={c: np.empty(0) for c in HISTORY_COLUMNS},
                                 status="failed", message="diverged at step 0")
-    summary = json.loads(write_summary(empty, tmp_path / "summary.json").read_text())
+    summary = json.loads(write_summary(summary_dict(empty), tmp_path / "summary.json").read_text())
     assert summary["steps"] == 0
     assert summary["braid_angle_deg"]["final"]["warp"] is None
     assert summary["message"] == "diverged at step 0"

@@ -1,6 +1,6 @@
 """The closest-point searches on a polyline against their NumPy references (``naive_kinematic``):
 ``_kernels.mesh.project_to_polyline`` (``Centerline.project``) and ``project_sampled``
-(``analysis.CenterlineProjector``)."""
+(``laid.CenterlineProjector``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from preform._kernels.mesh import project_to_polyline, sample_tree
-from preform.analysis import CenterlineProjector
+from preform.laid import CenterlineProjector
 from preform.geometry.centerline import centerline_from_points
 from support import naive_kinematic as naive
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from preform.quality import (QualitySettings, field_reasons, history_reasons, verdict,
+from preform.analysis.quality import (QualitySettings, field_reasons, history_reasons, verdict,
                              yarn_reasons)
 from preform.result import FLAG_BRIDGE, FLAG_CATCH
-from preform.steady import SteadySettings, steady_state
+from preform.analysis.steady import SteadySettings, steady_state
 
 
 def du_popper_history(n=400, L_end=1.0, H_inf=0.6, H0=0.2, decay=5.0, alpha_inf=60.0):

@@ -4,7 +4,7 @@ and the figure; balanced crossings inside the cone and the kinematic zone's snap
 
 import numpy as np
 
-from preform.quality import QUALITY, snapshot_checks, snapshot_reasons
+from preform.analysis.quality import QUALITY, snapshot_checks, snapshot_reasons
 from preform.result import Snapshot
 
 

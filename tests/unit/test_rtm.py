@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from preform import rtm
+from preform.analysis import rtm
 
 
 def test_areal_weight_and_vf_on_a_cylinder_closed_form():

@@ -11,8 +11,20 @@ import numpy as np
 import pytest
 import trimesh
 
-from preform import rtm
-from preform.io.rtm_files import SETS_COLUMNS, write_rtm
+from preform.analysis import rtm
+from preform.io import rtm_files
+from preform.io.rtm_files import SETS_COLUMNS
+
+
+def write_rtm(fields, out_dir, cavity_thickness=None):
+    """The RTM solver files as a run makes them: the cells' properties and sets
+    (``analysis.rtm.solver_properties``) written by ``io.rtm_files.write_rtm``; (paths, what the
+    summary says)."""
+    config = SimpleNamespace(yarn=SimpleNamespace(has_material=True),
+                             rtm=SimpleNamespace(cavity_thickness=cavity_thickness))
+    properties, reason = rtm.solver_properties(config, fields)
+    assert properties is not None, reason
+    return rtm_files.write_rtm(properties, out_dir), properties.said()
 
 
 def rms_log(values, weights, index, centres_log):

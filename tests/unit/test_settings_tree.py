@@ -23,20 +23,19 @@ import pytest
 import preform as pf
 from preform.budget import LIMITS, check_work
 from preform.errors import ConfigError
-from preform.fields import default_edge_length, field_mesh, map_to_surface
+from preform.analysis.fields import default_edge_length, field_mesh, map_to_surface
 from preform.geometry.offset import offset_surface
 from preform.geometry.remesh import RemeshSettings, isotropic_remesh
 from preform.interaction import relax
 from preform.interaction.mandrel_distance import NEAR, MandrelDistance, NearSettings
 from preform.interaction.settings import DEFAULT as INTERACTION
-from preform.interlacing import INTERLACING, interlacing
+from preform.analysis.interlacing import INTERLACING, interlacing
 from preform.machine import Machine
-from preform.io.rtm_files import write_rtm
-from preform.quality import QUALITY, assess, surface_reasons
-from preform.rtm import BINNING, bin_cells
+from preform.analysis.quality import QUALITY, assess, surface_reasons
+from preform.analysis.rtm import BINNING, bin_cells, solver_properties
 from preform.settings import DEFAULT, Settings
 from preform.simulation import load_geometry, make_stepper, make_zone
-from preform.steady import STEADY, steady_state
+from preform.analysis.steady import STEADY, steady_state
 from preform.structural.layup import BinSettings, bin_plies
 from preform.tolerances import tol
 from support.simcase import write_cylinder_case
@@ -65,7 +64,7 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.limits == LIMITS == _default(check_work, "limits")
     assert s.binning == BinSettings() == _default(bin_plies, "settings")
     assert s.rtm == BINNING == _default(bin_cells, "settings")
-    assert _default(write_rtm, "settings") is None and _default(write_rtm, "n_sets") is None
+    assert _default(solver_properties, "settings") is None and _default(solver_properties, "n_sets") is None
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.interaction.relax.tol = 1.0

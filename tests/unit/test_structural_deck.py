@@ -12,17 +12,26 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from preform import rtm
-from preform.fields import map_to_surface, stack_layers
-from preform.structural import write_structural
-from preform.structural.deck import curved_midpoint
-from preform.structural.layup import BinSettings
-from preform.structural.materials import PRESETS
+from preform.analysis import rtm
+from preform.analysis.fields import map_to_surface, stack_layers
+from preform.materials import PRESETS
+from preform.io import fe_files
+from preform.io.fe_files import curved_midpoint
+from preform.structural.layup import BinSettings, structural_layup
 from preform.structural.micromechanics import chamis
 from support.field_standins import R, cylinder, helices, make_result
 
 TEX, RHO, CAVITY, N_GROUP = 800.0, 1780.0, 1.0e-3, 24
 FM = PRESETS["AS4/3501-6"][0]
+
+
+def write_structural(result, fields, folder, layer_results=(), settings=None):
+    """The structural files of a run as the pipeline makes them: its layup (the analysis,
+    ``layup.structural_layup``) written by ``io.fe_files.write_structural``; (paths, what the summary
+    says)."""
+    layup, reason = structural_layup(result, fields, layer_results, settings or BinSettings())
+    paths, said = fe_files.write_structural(layup, folder)
+    return paths, (said if layup is not None else {"written": False, "reason": reason})
 
 
 def read_deck(path):

@@ -10,7 +10,7 @@ import pytest
 
 from preform.config import config_from_dict
 from preform.errors import ConfigError
-from preform.structural.materials import GPA, PRESETS, FibreMatrix
+from preform.materials import GPA, PRESETS, FibreMatrix
 from preform.structural.micromechanics import chamis
 
 BASE = {"mandrel": {"stl": "c.stl"}, "machine": {"carriers": 16, "spool_radius": 0.3, "angular_speed": 10.0},

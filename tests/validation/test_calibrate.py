@@ -10,7 +10,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from preform.calibrate import CalibrationSettings, calibrate, parse_noise, parse_param
+from preform.studies.calibrate import CalibrationSettings, calibrate, parse_noise, parse_param
 from preform.cli import main
 from preform.errors import ConfigError
 from support.simcase import write_cylinder_case
@@ -38,8 +38,8 @@ def case(tmp_path_factory):
 
 
 def _measurements(run, d):
-    from preform.compare import history_curve, load_run
-    from preform.interlacing import azimuths
+    from preform.studies.compare import history_curve, load_run
+    from preform.analysis.interlacing import azimuths
 
     rng = np.random.default_rng(7)
     r = load_run(run)
@@ -151,7 +151,7 @@ def test_a_key_that_is_no_config_value_is_refused_before_any_run(case, tmp_path,
 def test_with_noise_given_too_small_the_intervals_widen_by_birges_ratio():
     """calibrate's Delta chi2: 1 where the noise explains the best fit, chi2_min / (N - p)
     where it does not."""
-    from preform.calibrate import SETTINGS, Evaluation, _delta, chi2
+    from preform.studies.calibrate import SETTINGS, Evaluation, _delta, chi2
 
     e = Evaluation("coarse", 0, {}, "done", "", n={"angle": 10}, ss={"angle": 10 * 0.5 ** 2},
                    off={"angle": 2}, residuals={"angle": np.zeros(12)})

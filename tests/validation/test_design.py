@@ -12,7 +12,7 @@ import pytest
 import preform as pf
 from preform import analytic
 from preform.cli import main
-from preform.design import DESIGN, design_speed
+from preform.studies.design import DESIGN, design_speed
 
 ROOT = Path(__file__).resolve().parents[2]
 

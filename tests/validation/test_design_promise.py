@@ -12,7 +12,7 @@ import pytest
 
 import preform as pf
 from preform.cli import main
-from preform.design import DESIGN_CSV_COLUMNS
+from preform.studies.design import DESIGN_CSV_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -116,7 +116,7 @@ def test_the_designed_toml_is_one_pair_a_line_and_reruns_into_its_own_folder(unm
 def synthetic_design(worst_at, radius):
     """A Design whose largest judged error (0.5 deg) sits at ``worst_at`` m: H_inf 0.1 m, judged
     from 0.2 m, 2 m long."""
-    from preform.design import Design
+    from preform.studies.design import Design
 
     length = np.linspace(0.0, 2.0, 201)
     error = 0.05 + 0.45 * np.exp(-((length - worst_at) / 0.02) ** 2)
@@ -132,7 +132,7 @@ def synthetic_design(worst_at, radius):
     (1.05, lambda s: np.full_like(s, 0.05), "stopped improving after pass 3"),
 ])
 def test_the_shortfall_names_its_cause(worst_at, radius, cause):
-    from preform.design import shortfall
+    from preform.studies.design import shortfall
 
     design = synthetic_design(worst_at, radius)
     assert not design.met and design.max_error_deg() == pytest.approx(0.5, abs=1e-3)

@@ -10,7 +10,7 @@ import pytest
 
 import preform as pf
 from preform import analytic
-from preform.steady import steady_state
+from preform.analysis.steady import steady_state
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

@@ -8,7 +8,7 @@ non-axisymmetric zone forces on interlaced yarns, ``docs/decisions.md``). The pa
 family's S-bend (two 35 deg bends of 300 mm, a 50 mm circle), eccentric by 10 mm, on a well-shaped
 triangulation in metres and on a CAD-sliver one in millimetres: the two meshes are one surface, so
 the interaction runs on them must agree too. With friction the braid must stay interlaced: its
-warp-weft crossings per unit area (``preform.interlacing``) those of the pattern.
+warp-weft crossings per unit area (``preform.analysis.interlacing``) those of the pattern.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from preform.geometry import shapes
-from preform.interlacing import interlacing
+from preform.analysis.interlacing import interlacing
 from preform.simulation import load_geometry, simulate
 
 from support.simcase import make_config, write_stl
@@ -104,7 +104,7 @@ def test_interaction_run_is_the_same_on_a_sliver_triangulation(runs):
 def test_braid_with_friction_stays_interlaced(runs, parts):
     """With yarn friction 0.25 and ring friction 0.17 the laid warp and weft cross each other as
     the pattern has them: over the braided band, the measured crossings are those of the
-    pattern (``preform.interlacing``, ratio 1 for an interlaced braid, towards 0 for warp and
+    pattern (``preform.analysis.interlacing``, ratio 1 for an interlaced braid, towards 0 for warp and
     weft in separate bands), and their density that of two families of n yarns at the laid
     braid angle, ``2 n^2 tan(alpha) / P^2``."""
     res = runs["even", "interaction", 0.25]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from preform.fields import face_geometry, fields_on_input, map_to_surface
+from preform.analysis.fields import face_geometry, fields_on_input, map_to_surface
 from preform.geometry import shapes
 from preform.geometry.remesh import feature_edges
 from support.field_standins import THICKNESS, WIDTH, ZCenterline, make_result, pack_yarns

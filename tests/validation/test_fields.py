@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from preform.fields import SurfaceFields, face_geometry, map_to_surface, refine_to_edge_length
+from preform.analysis.fields import SurfaceFields, face_geometry, map_to_surface, refine_to_edge_length
 from preform.result import YarnPaths
 
 from support.field_standins import (HEIGHT, R, THICKNESS, WIDTH, ZCenterline, area_mean,  # noqa: E402

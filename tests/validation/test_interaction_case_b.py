@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from preform import simulate
-from preform.fields import map_to_surface
+from preform.analysis.fields import map_to_surface
 from preform.geometry import shapes
 from support.simcase import make_config, write_centerline, write_stl
 from support.snapshot_checks import checked_snapshot_files

@@ -14,7 +14,7 @@ import pytest
 import trimesh
 
 from preform import analytic
-from preform.fields import face_geometry, map_to_surface
+from preform.analysis.fields import face_geometry, map_to_surface
 from preform.geometry import shapes
 from preform.simulation import simulate
 from support.simcase import make_config, write_stl

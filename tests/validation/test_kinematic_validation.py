@@ -85,7 +85,7 @@ def test_warp_and_weft_mirror_on_centred_mandrel(cylinder_run):
 
 
 def test_steady_state_is_detected_where_du_popper_puts_it(cylinder_run):
-    from preform.steady import steady_state
+    from preform.analysis.steady import steady_state
 
     st = steady_state(cylinder_run.history)
     assert st["reached"]

@@ -481,8 +481,8 @@ def test_stacked_permeability_is_the_layered_medium_of_the_layers():
     cavity), and through the thickness as layers in series, ``t / K3 = sum t_k / K3_k``."""
     from types import SimpleNamespace as NS
 
-    from preform import rtm
-    from preform.fields import map_to_surface, stack_layers
+    from preform.analysis import rtm
+    from preform.analysis.fields import map_to_surface, stack_layers
     from support.field_standins import cylinder, helices, make_result, side_faces
 
     tow = NS(yarn=NS(linear_density_tex=800.0, fibre_density=1780.0, fibre_radius=3.5e-6,

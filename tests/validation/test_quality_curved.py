@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 import preform as pf
 from preform.geometry import centerline_from_points, shapes
-from preform.quality import assess
+from preform.analysis.quality import assess
 
 TOML = """
 [mandrel]

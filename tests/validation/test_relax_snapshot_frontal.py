@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import preform as pf
-from preform import quality
+from preform.analysis import quality
 from preform.interaction import relax as R
 from preform.interaction.settings import DEFAULT
 from support.simcase import advanced_stepper, capture_step, snapshot_solves

@@ -10,8 +10,8 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from preform import rtm
-from preform.fields import face_geometry, map_to_surface
+from preform.analysis import rtm
+from preform.analysis.fields import face_geometry, map_to_surface
 from support.field_standins import cylinder, helices, make_result, side_faces
 
 R, N_GROUP, TEX, RHO, FIBRE_R, CAVITY = 0.05, 24, 800.0, 1780.0, 3.5e-6, 1.0e-3

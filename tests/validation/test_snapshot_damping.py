@@ -15,7 +15,7 @@ import numpy as np
 
 import preform as pf
 from preform.interaction.settings import DEFAULT
-from preform.quality import snapshot_checks
+from preform.analysis.quality import snapshot_checks
 from support.simcase import advanced_stepper
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from preform.structural.micromechanics import chamis
-from preform.structural.materials import PRESETS
+from preform.materials import PRESETS
 from preform.structural.results import displacements
 
 CCX = shutil.which("ccx")

@@ -220,7 +220,7 @@ def closest_on_candidates(points, V, F, ptr, cand, out_point, out_face, out_d2):
 
 
 # ------------------------------------------------- arc length through a dense resampling
-# ``analysis.CenterlineProjector``: the centerline resampled at a fine spacing, the nearest sample
+# ``laid.CenterlineProjector``: the centerline resampled at a fine spacing, the nearest sample
 # found exactly through a box tree over runs of consecutive samples, then the two resampled
 # segments at that sample projected. Dot products are summed as (x0 y0 + x2 y2) + x1 y1, the
 # order NumPy's einsum("ij,ij->i") takes on this code's reference machine, and norms as

@@ -240,27 +240,6 @@ def _header_columns(names, default):
     return default
 
 
-def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
-    """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv.
-
-    The file is written atomically with the user's umask (``preform.io.atomic``): an interrupted
-    write never leaves a half file, and a symlink planted at ``path`` is replaced, never followed. ``write_centerline_csv(centerline, path)`` (the older argument
-    order) is accepted too. perimeter is ``nan`` when the centerline has none.
-    """
-    if isinstance(path, Centerline):
-        path, centerline = centerline, path
-    _check_unit(unit, "centerline unit")
-    path = Path(path)
-    scale = 1.0 / UNITS[unit]
-    per = centerline.perimeter if centerline.perimeter is not None else np.full(len(centerline.s), np.nan)
-    lines = ["x,y,z,s,perimeter"]
-    for p, s, q in zip(centerline.points * scale, centerline.s * scale, per * scale):
-        lines.append(f"{p[0]:.9g},{p[1]:.9g},{p[2]:.9g},{s:.9g},{q:.9g}")
-    from ..io.atomic import atomic_write_text   # imported here: preform.io loads matplotlib
-
-    return atomic_write_text(path, "\n".join(lines) + "\n")
-
-
 def _slab_index(mesh):
     """Face centroids (nf, 3) and each face's largest centroid-to-corner distance (nf,) m, cached
     in the mesh's ``metadata``: a plane farther than that from a centroid cannot cut the face

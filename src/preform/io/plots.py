@@ -167,7 +167,7 @@ def plot_history(result, plots_dir, refs=None, steady_settings=None) -> list[Pat
     refs : preform.reference.References, or None to compute them from the result's geometry.
     steady_settings : the steady-state reading's (``steady.SteadySettings``; None: the defaults)
     """
-    from ..steady import STEADY, steady_state
+    from ..analysis.steady import STEADY, steady_state
 
     plots_dir = Path(plots_dir)
     refs = refs if refs is not None else history_references(result)

@@ -56,7 +56,7 @@ def surface_mesh(fields):
 def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> list[Path]:
     """Write ``surface.vtu``, ``surface.xdmf`` + ``surface.h5`` and the pictures into ``out_dir``.
 
-    fields : preform.fields.SurfaceFields
+    fields : preform.analysis.fields.SurfaceFields
     out_dir : str or Path, created if missing
     pictures : also render the pictures (:func:`write_surface_pictures`) into ``out_dir/plots``
     returns : the paths written (pictures only if rendering worked)
@@ -81,17 +81,14 @@ def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> li
     return written + (write_surface_pictures(fields, out_dir / PLOTS, title) if pictures else [])
 
 
-def write_input_mesh_fields(fields, mandrel, out_dir) -> Path:
-    """``surface_input.vtu``: the fields carried over to the mandrel's own triangles (the STL's,
-    after repair; ``fields.fields_on_input``, area-weighted), written atomically."""
+def write_input_mesh_fields(input_fields, out_dir) -> Path:
+    """``surface_input.vtu``: the fields on the mandrel's own triangles (the STL's, after repair;
+    ``analysis.fields.fields_on_input``, area-weighted), written atomically."""
     import meshio
-
-    from ..fields import fields_on_input
 
     path = Path(out_dir) / INPUT_VTU
     with atomic_path(path) as tmp:
-        meshio.write(tmp, surface_mesh(fields_on_input(fields, mandrel)), file_format="vtu",
-                     compression=None)
+        meshio.write(tmp, surface_mesh(input_fields), file_format="vtu", compression=None)
     return path
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .materials import FibreMatrix
+from ..materials import FibreMatrix
 
 
 @dataclass(frozen=True)

@@ -5,10 +5,10 @@ of the parameters the measurements determine: Levenberg-Marquardt rounds from th
 each running the slopes of the residuals (a forward difference per parameter, a tenth of the
 coarse spacing) and then damped least-squares steps from them (several dampings at once, in
 parallel), until a round lowers chi2 by less than half a unit. Every point is an ordinary run
-through ``preform sweep``'s machinery (:func:`preform.sweeps.run_spec`: Dask, a LocalCluster
+through ``preform sweep``'s machinery (:func:`preform.studies.sweeps.run_spec`: Dask, a LocalCluster
 or ``--scheduler``, ``--resume``) without pictures; each stage has its own folder
 (``coarse/``, ``refine1_slopes/``, ``refine1_steps/``, ...). Every run is compared with the
-measurements (:mod:`preform.compare`).
+measurements (:mod:`preform.studies.compare`).
 
 The misfit. Per measurement kind ``k`` (angle, convergence, yarn) the residuals ``d`` of
 ``compare`` (simulated minus measured; the yarn's distance) are scaled by the kind's noise
@@ -50,9 +50,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
-from .compare import KINDS, QUANTITY, MeasurementError, compare_run, read_measurements
-from .errors import ConfigError, PreformError
+from ..errors import ConfigError, PreformError
+from ..io.atomic import atomic_path, atomic_write_text, safe_folder
+from .compare import KINDS, QUANTITY, MeasurementError, compare, compare_run, read_measurements
+from .sweeps import _read_toml, _set, finished, open_client, run_spec, spec_of_points
 
 CALIBRATE_CSV = "calibrate.csv"
 CALIBRATE_JSON = "calibrate.json"
@@ -294,22 +297,16 @@ def interval(p: Param, value: float, sigma: float, how: str) -> Estimate:
 # ------------------------------------------------------------------------------ the command
 
 def _base_data(config_path: Path) -> dict:
-    from .sweeps import _read_toml
-
     return _read_toml(config_path, "config file")
 
 
 def _stage_spec(config_path, base_data, combos, out_dir):
-    from .sweeps import spec_of_points
-
     return spec_of_points(config_path, config_path, base_data, combos, out_dir)
 
 
 def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=None, workers=None,
               resume=False, progress=True, settings: CalibrationSettings = SETTINGS) -> dict:
     """Run the calibration (module docstring); returns what calibrate.json holds."""
-    from .sweeps import _set
-
     config_path = Path(config).expanduser().resolve()
     measurements = [read_measurements(m) for m in measured]
     if not measurements:
@@ -332,7 +329,6 @@ def calibrate(config, measured, params, *, out_dir=None, noise=None, scheduler=N
     _set(run_data, "output.pictures", False, "calibrate")
     out = (Path(out_dir).expanduser().resolve() if out_dir is not None
            else config_path.parent / "results" / f"{config_path.stem}_calibration")
-    from .io.atomic import safe_folder
 
     safe_folder(out)
     evaluations: list[Evaluation] = []
@@ -357,17 +353,11 @@ def _search(config_path, base, run_data, measurements, params, kinds, noise, out
         todo = [c for c in combos if _key(c) not in seen]
         if todo:
             spec = _stage_spec(config_path, run_data, todo, out / name)
-            from .sweeps import run_spec
-
             if resume:   # the points finished before: no cluster needed for them
-                from .sweeps import finished
-
                 done = [finished(spec, p) for p in spec.points]
             else:
                 done = [None]
             if any(d is None for d in done) and not cluster:
-                from .sweeps import open_client
-
                 cluster["client"], cluster["local"] = open_client(scheduler, workers)
             rows = run_spec(spec, scheduler=scheduler, workers=workers, resume=resume,
                             progress=progress, label=f"calibrate {name}",
@@ -498,12 +488,6 @@ def _key(values: dict) -> tuple:
 
 def _write_outputs(out, config_path, base, params, evaluations, chis, n_points, report, estimates,
                    measurements, delta, c_min):
-    import tomli_w
-
-    from .compare import compare
-    from .io.atomic import atomic_write_text, safe_folder
-    from .sweeps import _set
-
     kinds = list(report["noise"])
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -547,8 +531,6 @@ def plot_misfit(out, params, evaluations, chis, n_points, estimates, delta, c_mi
     refinement's runs where it is not determined)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from .io.atomic import atomic_path, safe_folder
 
     plots = safe_folder(out, "plots")
     written = []

@@ -245,6 +245,108 @@ def compression(vf, thickness, area, cavity_thickness=None) -> dict:
     return out
 
 
+# ------------------------------------------------------------------------------ solver cells
+
+@dataclass(frozen=True)
+class SolverProperties:
+    """The per-cell properties of the RTM solver files (``io.rtm_files.write_rtm`` writes them).
+
+    vertices (nv, 3) float64 m, cells (nf, 3) int64: the field mesh; per cell thickness (m),
+    porosity, k1 (m^2, along ``direction``), alpha (K2 / K1) and direction (nf, 3); set_index
+    (nf,) int64 and set_values (one (thickness, porosity, K1, alpha, direction) per set): the
+    binning for RTMsim; summary: what summary.json says of the files.
+    """
+
+    vertices: np.ndarray
+    cells: np.ndarray
+    thickness: np.ndarray
+    porosity: np.ndarray
+    k1: np.ndarray
+    alpha: np.ndarray
+    direction: np.ndarray
+    set_index: np.ndarray
+    set_values: tuple
+    summary: dict
+
+    def said(self) -> dict:
+        """What summary.json says of the files."""
+        return dict(self.summary)
+
+
+def solver_properties(config, fields, settings: BinningSettings | None = None,
+                      n_sets=None) -> tuple[SolverProperties | None, str]:
+    """(the solver files' properties, "") of fields with the RTM arrays, or (None, why not).
+
+    Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
+    Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (``[rtm] cavity_thickness``; without
+    it, the largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set
+    of their own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every
+    cell is preform), grouped by K1 so that the area-weighted binning error is small
+    (:func:`bin_cells`). The summary gives that error (``k1_binning``), the preform's fibre
+    volume fraction and, with a cavity, its compression (:func:`compression`); a cavity that
+    packs fibres beyond :data:`MAX_COMPACTED_VF` is warned about. ``settings``: the binning's
+    (None: :data:`BINNING`), whose ``sets`` ``n_sets`` overrides where given.
+    """
+    import warnings
+
+    reason = missing_material(config)
+    if reason:
+        return None, reason
+    if fields is None or "fibre_volume_fraction" not in fields.cell_data:
+        return None, "no surface fields"
+    cd = fields.cell_data
+    valid = cd["rtm_valid"] > 0
+    if not np.any(valid):
+        return None, "no face carries preform (no yarn reached the mandrel)"
+    cavity_thickness = config.rtm.cavity_thickness
+    V, F = np.asarray(fields.vertices, dtype=float), np.asarray(fields.faces)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
+    channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
+    k1 = np.where(valid, cd["permeability_k1_m2"], channel)
+    alpha = np.where(valid, np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0), 1.0)
+    direction = cd["permeability_direction"]
+    settings = BINNING if settings is None else settings
+    n_sets = settings.sets if n_sets is None else int(n_sets)
+    sets = n_sets - 1 if np.any(~valid) else n_sets
+    binning = bin_cells(k1[valid], sets, weights=area[valid], settings=settings)
+    index = np.full(len(k1), len(binning.values), dtype=np.int64)
+    index[valid] = binning.index
+    values = []
+    for k in range(len(binning.values)):
+        members = index == k
+        values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
+                       float(binning.values[k]), float(np.mean(alpha[members])),
+                       _mean_direction(direction[members])))
+    if np.any(~valid):
+        values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
+                       channel, 1.0, (1.0, 0.0, 0.0)))
+    # faces packed to V_f 1 or more are no preform to the fields (rtm_valid 0), but the most
+    # compressed: they count here
+    packed = valid | (cd["fibre_volume_fraction"] >= MAX_COMPACTED_VF)
+    squeeze = compression(cd["fibre_volume_fraction"][packed], cd["thickness_m"][packed], area[packed],
+                          cavity_thickness)
+    for text in squeeze.pop("warnings"):
+        warnings.warn(text, UserWarning, stacklevel=3)
+    said = {"written": True, "sets": len(values), "preform_faces": int(np.count_nonzero(valid)),
+            "faces": int(len(k1)),
+            "faces_per_set": [int(n) for n in np.bincount(index, minlength=len(values))],
+            "k1_binning": {"rms_factor": binning.rms_factor, "max_factor": binning.max_factor,
+                           "sets_k1_m2": [float(v) for v in binning.values]},
+            **squeeze}
+    return SolverProperties(vertices=fields.vertices, cells=fields.faces, thickness=thickness,
+                            porosity=cd["porosity"], k1=k1, alpha=alpha, direction=direction,
+                            set_index=index, set_values=tuple(values), summary=said), ""
+
+
+def _mean_direction(d):
+    """A sign-free mean of unit directions (principal axis of sum d d^T)."""
+    if len(d) == 0:
+        return (1.0, 0.0, 0.0)
+    w, v = np.linalg.eigh(d.T @ d)
+    return tuple(float(x) for x in v[:, -1])
+
+
 # ------------------------------------------------------------------------------ per face
 
 #: where no yarn lies, or so little that the face is a resin channel rather than preform (fibre
@@ -278,7 +380,7 @@ def _principal_values(config, vf, angle_deg):
 
 def read_permeability_table(path) -> PermeabilityTable:
     """A CSV of braid_angle_deg, fibre_volume_fraction, k1_m2, k2_m2 rows on a full grid."""
-    from .errors import ConfigError
+    from ..errors import ConfigError
 
     try:
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
@@ -297,7 +399,7 @@ def read_permeability_table(path) -> PermeabilityTable:
 def rtm_fields(fields, config, tangents, thickness=None) -> dict:
     """The RTM cell arrays of :data:`RTM_ARRAYS` on the field mesh (see module docstring).
 
-    fields : preform.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
+    fields : preform.analysis.fields.SurfaceFields (with ``yarn_length_{group}_m_per_m2``)
     tangents : (nf, 3), the centerline tangent at each face (fixes the in-plane reference)
     thickness : (nf,) m, the thickness the fibres fill, or None: ``[rtm] cavity_thickness``,
         else the preform's own ``thickness_m`` (a layer of a stack: its share of the cavity)

@@ -48,7 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PreformError
+from ..config import MandrelConfig
+from ..errors import PreformError
+from ..io.atomic import atomic_path, atomic_write_text, safe_folder
 
 COMPARE_CSV = "compare.csv"
 COMPARE_JSON = "compare.json"
@@ -298,7 +300,7 @@ class RunData:
     def unrolled(self) -> np.ndarray:
         """(nf, 3, 2) the field faces' corners in the unrolled (s, azimuth) plane."""
         if self._polys is None:
-            from .io.maps import unrolled_coordinates
+            from ..io.maps import unrolled_coordinates
 
             self._polys = unrolled_coordinates(self.vertices, self.faces, self.centerline)
         return self._polys
@@ -320,8 +322,6 @@ def _need(path: Path, what: str, kind: str) -> Path:
 def _run_centerline(folder: Path, summary: dict):
     """The centerline of the run (the mandrel's, as the fields were mapped on), rebuilt from the
     inputs echoed in summary.json."""
-    from .config import MandrelConfig
-
     m = (summary.get("inputs") or {}).get("mandrel") or {}
     if not m.get("stl"):
         raise MeasurementError(f"{folder / 'summary.json'}: no mandrel in its inputs: cannot place "
@@ -331,11 +331,11 @@ def _run_centerline(folder: Path, summary: dict):
     unit = m.get("stl_unit") or "m"
     try:
         if centerline != "auto":
-            from .geometry import read_centerline_csv
+            from ..geometry import read_centerline_csv
 
             return read_centerline_csv(Path(centerline), unit=unit,
                                        roll_reference=None if roll is None else tuple(roll))
-        from .pipeline import load_geometry
+        from ..pipeline import load_geometry
 
         config = type("MandrelOnly", (), {"mandrel": MandrelConfig(
             stl=Path(m["stl"]), stl_unit=unit, centerline="auto",
@@ -716,8 +716,6 @@ def comparison_rows(comparisons):
 
 def write_compare(comparisons, out_dir, title: str = "", plot: bool = True) -> list[Path]:
     """compare.csv, compare.json and (``plot``) compare.png into ``out_dir``; their paths."""
-    from .io.atomic import atomic_write_text, safe_folder
-
     out_dir = safe_folder(out_dir)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -749,8 +747,6 @@ def plot_compare(comparisons, path, title: str = "", run: RunData | None = None)
     against the braided length; the yarn deviations against the axial position."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from .io.atomic import atomic_path
 
     kinds = [k for k in KINDS if any(c.meas.kind == k for c in comparisons)]
     fig = Figure(figsize=(8.0, 3.2 * len(kinds) + 0.6), layout="constrained")

@@ -32,6 +32,7 @@ import io
 import itertools
 import json
 import math
+import os
 import sys
 import time
 import tomllib
@@ -40,7 +41,11 @@ from pathlib import Path
 
 import tomli_w
 
-from .errors import ConfigError, PreformError
+from ..checkpoint import inputs_sha256
+from ..config import config_from_dict
+from ..errors import ConfigError, PreformError
+from ..io.atomic import atomic_write_text, safe_folder
+from ..io.report import report_hook
 
 SWEEP_CSV = "sweep.csv"
 POINT_JSON = "point.json"
@@ -196,8 +201,6 @@ def spec_of_points(source: Path, base: Path, base_data: dict, combos: list, out_
     """The sweep of the points ``combos`` (dotted key -> value each) over the base config's TOML
     data ``base_data`` (from the file ``base``), results under ``out_dir``; every point's config
     is validated here, before any run (errors name ``source``)."""
-    from .config import config_from_dict
-
     keys = list(dict.fromkeys(k for c in combos for k in c))
     path = source
     spec = SweepSpec(source=path, base=base, base_data=base_data, keys=keys, points=[], out_dir=out_dir)
@@ -234,8 +237,6 @@ def point_config_data(spec: SweepSpec, point: Point) -> dict:
 def inputs_hash(config) -> str:
     """The checkpoint's inputs hash: the config (less [output]) and the contents of its STL and
     centerline (``preform.checkpoint.input_record``)."""
-    from .checkpoint import inputs_sha256
-
     return inputs_sha256(config)
 
 
@@ -243,7 +244,7 @@ def inputs_hash(config) -> str:
 
 def run_point(config, out_dir: str, index: int, values: dict, digest: str) -> dict:
     """Run one point in a worker; return its sweep.csv row. Never raises for a failed run."""
-    from .pipeline import run_case
+    from ..pipeline import run_case   # here: the workers simulate, the scheduling process does not
 
     row = {"point": index, **values, "results": str(out_dir)}
     t0 = time.perf_counter()
@@ -259,8 +260,6 @@ def run_point(config, out_dir: str, index: int, values: dict, digest: str) -> di
 
 
 def _write_point_json(out_dir: Path, index, values, digest, status) -> None:
-    from .io.atomic import atomic_write_text
-
     atomic_write_text(out_dir / POINT_JSON, json.dumps(
         {"point": index, "values": values, "inputs_hash": digest, "status": status}, indent=2) + "\n")
 
@@ -307,7 +306,6 @@ def _client(scheduler, workers, settings: ClusterSettings):
             raise PreformError(f"--scheduler {scheduler}: no Dask scheduler answers there ({err}); "
                                "start one (dask scheduler) or leave --scheduler out to use this "
                                "machine") from None
-    import os
 
     n = workers or max(1, (os.cpu_count() or 1))
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -328,7 +326,7 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
                        progress=progress, cluster=cluster)
     write_sweep_csv(spec, ordered)
     plot_sweep(spec, ordered)
-    from .io.report import report_hook; report_hook(spec.out_dir, sweep=True)  # noqa: E702
+    report_hook(spec.out_dir, sweep=True)   # report.html of the sweep's folder
     return ordered
 
 
@@ -338,10 +336,6 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
     inputs); return their rows in the points' order. ``label`` starts the progress lines;
     ``client``: a ``distributed.Client`` to use (and leave open), else one is made for the run
     (:func:`open_client`) and closed after it."""
-    from .io.atomic import safe_folder
-
-    from .io.atomic import atomic_write_text
-
     safe_folder(spec.out_dir)
     rows, todo = {}, []
     for point in spec.points:   # each point runnable on its own: preform run <point>/config.toml
@@ -386,8 +380,6 @@ def run_spec(spec: SweepSpec, *, scheduler=None, workers=None, resume=False, pro
 
 
 def write_sweep_csv(spec: SweepSpec, rows) -> Path:
-    from .io.atomic import atomic_write_text
-
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["point", *spec.keys, *COLUMNS])
@@ -416,8 +408,8 @@ def plot_sweep(spec: SweepSpec, rows) -> list[Path]:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .io.atomic import atomic_path, safe_folder
-    from .io.plots import start_rows
+    from ..io.atomic import atomic_path, safe_folder
+    from ..io.plots import start_rows
 
     histories = {}
     for row in rows:

@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._kernels import fields as _k
-from .errors import PreformError
-from .geometry.remesh import RemeshSettings, isotropic_remesh, locate_faces, subdivide_long_edges
-from .tolerances import tol
+from .._kernels import fields as _k
+from ..errors import PreformError
+from ..geometry.remesh import (RemeshSettings, isotropic_remesh, locate_faces, refine_to_edge_length,
+                               subdivide_long_edges)
+from ..tolerances import tol
 
 #: default field-mesh edge length, in yarn widths ("a few yarn widths")
 DEFAULT_EDGE_WIDTHS = 3.0
@@ -38,8 +39,6 @@ JAM_RTOL = 1e-6
 TANGENT_MIN = 1e-6
 #: walk guard: at most this many face hops per yarn segment
 MAX_HOPS = 100_000
-#: refinement guard: at most this many edge-splitting passes (each halves the longest edges)
-MAX_REFINE_PASSES = 60
 #: fields_on_input samples each input face with pieces of at most this many field edge lengths:
 #: the midpoint rule over pieces of h / 2 puts a piece in the wrong field face only along field
 #: face edges, within h / 4 of them
@@ -87,79 +86,13 @@ class SurfaceFields:
 
 # ---------------------------------------------------------------------------------------- mesh
 
-def refine_to_edge_length(vertices, faces, max_edge):
-    """A conforming refinement of a triangle mesh with no edge longer than ``max_edge``.
-
-    Longest-edge bisection (Rivara): each pass bisects the longest edge of every face that has an
-    edge above ``max_edge``, plus, for conformity, the longest edge of every face sharing a split
-    edge (repeated until closed). Bisection keeps a face's shape (a needle of length L and width
-    w becomes needles of L / 2 and w / 2), so it suits faces that are already about as wide as
-    long: :func:`fields_on_input` uses it after cutting long edges into pieces
-    (:func:`preform.geometry.remesh.subdivide_long_edges`); the field mesh itself is remeshed.
-
-    vertices : (nv, 3) float64, m;  faces : (nf, 3) int64;  max_edge : float, m (> 0)
-    returns : (vertices (nv', 3) float64, faces (nf', 3) int64, source_faces (nf',) int64), the
-        first nv vertices unchanged, winding kept, each new face inside input face source_faces.
-    Raises PreformError if ``max_edge`` is not positive and finite.
-    """
-    if not (np.isfinite(max_edge) and max_edge > 0):
-        raise PreformError(f"[output] field_edge_length = {max_edge!r}: expected a positive length in m")
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces, dtype=np.int64)
-    source = np.arange(len(F), dtype=np.int64)
-    for _ in range(MAX_REFINE_PASSES):
-        edges = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1, 3)
-        edge_len = np.linalg.norm(V[unique[:, 0]] - V[unique[:, 1]], axis=1)
-        face_len = edge_len[inverse]
-        longest = inverse[np.arange(len(F)), np.argmax(face_len, axis=1)]
-        marked = np.zeros(len(unique), bool)
-        marked[longest[face_len.max(axis=1) > max_edge]] = True
-        if not marked.any():
-            break
-        while True:  # closure: a face with a split edge also splits its longest edge
-            need = marked[inverse].any(axis=1) & ~marked[longest]
-            if not need.any():
-                break
-            marked[longest[need]] = True
-        mid_index = np.full(len(unique), -1, dtype=np.int64)
-        mid_index[marked] = len(V) + np.arange(marked.sum())
-        V = np.vstack([V, 0.5 * (V[unique[marked, 0]] + V[unique[marked, 1]])])
-        F, source = _bisect_faces(F, source, mid_index[inverse], np.argmax(face_len, axis=1))
-    return V, F, source
-
-
-def _bisect_faces(F, source, mids, longest_local):
-    """Split faces whose edges are marked (mids (nf, 3): midpoint of edge j or -1); the longest
-    edge (local index longest_local) of a split face is always marked and bisected first."""
-    marked = mids >= 0
-    untouched = ~marked.any(axis=1)
-    out_f, out_s = [F[untouched]], [source[untouched]]
-    for shift in range(3):  # rotate so the longest edge is (a, b), with midpoint m0
-        rot = [(shift + i) % 3 for i in range(3)]
-        sel = ~untouched & (longest_local == shift)
-        a, b, c = (F[sel, r] for r in rot)
-        m0, m1, m2 = (mids[sel, r] for r in rot)
-        k1, k2 = marked[sel, rot[1]], marked[sel, rot[2]]
-        src = source[sel]
-        pieces = (  # (condition, triangles): left half (a, m0, c), right half (m0, b, c)
-            (~k2, [a, m0, c]), (k2, [a, m0, m2]), (k2, [m2, m0, c]),
-            (~k1, [m0, b, c]), (k1, [m0, b, m1]), (k1, [m0, m1, c]),
-        )
-        for cond, tri in pieces:
-            out_f.append(np.column_stack(tri)[cond])
-            out_s.append(src[cond])
-    return np.vstack(out_f).astype(np.int64), np.concatenate(out_s).astype(np.int64)
-
-
 def _merge_exact_duplicates(vertices, faces):
     """Weld vertices with identical coordinates (an STL triangle soup) so faces share edges.
 
     A mandrel's vertices are welded already: the hash-table test (``_kernels.mesh.weld_exact``,
     0.05 s on 500 k vertices) returns them as they are; only when it finds equal rows does
     ``np.unique`` (a lexicographic sort, 1.2 s there) weld and reorder them."""
-    from ._kernels.mesh import weld_exact
+    from .._kernels.mesh import weld_exact
 
     V = np.ascontiguousarray(vertices, dtype=np.float64)
     distinct = len(weld_exact(V, np.empty(len(V), dtype=np.int64)))
@@ -236,7 +169,7 @@ def field_mesh(result, edge_length=None, remesh: RemeshSettings = RemeshSettings
         raise PreformError(f"[output] field_edge_length = {h!r}: expected a positive length in m")
     U, G = isotropic_remesh(V, F, h, remesh)
     normals, _, centroids = face_geometry(U, G)
-    from .geometry.mandrel import Mandrel
+    from ..geometry.mandrel import Mandrel
 
     mandrel = result.mandrel
     # a Mandrel's own trimesh (and its embree scene, 1 s to build on 1 M faces) when the arrays
@@ -317,7 +250,7 @@ def centroid_normals(vertices, faces, normals):
     measured in the frame of this normal (docs/architecture.md §2: the angle to the projection of the
     tangent onto the surface's tangent plane).
     """
-    from .geometry.mandrel import _corner_normals
+    from ..geometry.mandrel import _corner_normals
 
     cn = _corner_normals(vertices, faces, normals).sum(axis=1)
     norm = np.linalg.norm(cn, axis=1)

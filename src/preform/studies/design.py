@@ -37,8 +37,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
-from .errors import ConfigError, PreformError
+from ..config import dump_config
+from ..errors import ConfigError, PreformError
+from ..geometry.centerline import section_perimeters
+from ..io.atomic import atomic_path, atomic_write_text
+from ..reference import references
+from ..simulation import load_geometry, simulate
 
 
 @dataclass(frozen=True)
@@ -205,10 +211,6 @@ def with_speed_table(config, length, speed):
 def design_speed(config, target, *, model=None, settings: DesignSettings = DESIGN,
                  mandrel=None, centerline=None, progress=None) -> Design:
     """The take-up speed table for ``target`` (deg, or an (n, 2) table of s_m, deg)."""
-    from .geometry.centerline import section_perimeters
-    from .reference import references
-    from .simulation import load_geometry, simulate
-
     if model is not None:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
     if mandrel is None or centerline is None:
@@ -299,12 +301,6 @@ def write_design_config(config, design: Design, out) -> Path:
     Input paths become absolute, so the file runs from wherever it is written; ``[output] dir``
     is its own results folder beside it (:func:`designed_output_dir`). The table is one
     ``[L, v]`` pair a line, rounded to what changes the angle (:data:`SPEED_DIGITS`)."""
-    from .config import dump_config
-    import tomli_w
-
-    from .errors import ConfigError
-    from .io.atomic import atomic_write_text
-
     if config.layers:
         raise ConfigError(f"design: {config.source}: a config with [[layer]] tables: design the "
                           "speed of one layer at a time (a config without [[layer]])")
@@ -342,8 +338,6 @@ DESIGN_CSV_COLUMNS = ("braided_length_m", "take_up_speed_m_s", "target_deg", "ac
 def write_design_table(design: Design, path) -> Path:
     """Every row of the design: length, speed, target, achieved angle, their difference, and
     whether the row is judged (past the start-up transient), as a CSV."""
-    from .io.atomic import atomic_write_text
-
     lines = [",".join(DESIGN_CSV_COLUMNS)]
     for L, v, t, a in zip(design.length, design.speed, design.target_deg, design.achieved_deg):
         lines.append(f"{L:.6g},{v:.{SPEED_DIGITS}g},{t:.4f},{a:.4f},{a - t:.4f},"
@@ -354,8 +348,6 @@ def write_design_table(design: Design, path) -> Path:
 def write_design_runs(design: Design, path) -> Path:
     """One row per forward run: its number, its largest error where judged (deg), and whether its
     speed is the answer (the best run), as a CSV."""
-    from .io.atomic import atomic_write_text
-
     lines = ["run,largest_error_deg,best"]
     lines += [f"{k},{e:.4f},{int(k == design.best_pass)}" for k, e in enumerate(design.errors_deg, start=1)]
     return atomic_write_text(path, "\n".join(lines) + "\n")
@@ -365,8 +357,6 @@ def plot_design(design: Design, path, title: str) -> Path:
     """Target against achieved braid angle, the error, and the speed, along the braided length."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from .io.atomic import atomic_path
 
     fig = Figure(figsize=(7.2, 8.0), layout="constrained")
     ax_a, ax_e, ax_v = fig.subplots(3, 1, sharex=True)

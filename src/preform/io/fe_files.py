@@ -27,13 +27,16 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..io.atomic import atomic_write_text
-from .layup import Groups, Plies
-from .materials import FibreMatrix
-from .micromechanics import chamis
+from ..materials import FibreMatrix
+from ..structural.micromechanics import chamis
+from .atomic import atomic_write_text, safe_folder
+
+if TYPE_CHECKING:   # the types of the plies only: the writer imports no analysis
+    from ..structural.layup import Groups, Plies
 
 ELEMENT_TYPE = "S6"
 #: Simpson integration points through each ply (Abaqus reads it; CalculiX ignores the field)
@@ -108,24 +111,6 @@ def boundary_loops(connectivity) -> list[np.ndarray]:
     _, label = connected_components(graph, directed=False)
     on = np.unique(free)
     return [on[label[on] == c] for c in np.unique(label[on])]
-
-
-def largest_component(faces) -> np.ndarray:
-    """(nf,) bool: the faces of the largest edge-connected piece of the triangles ``faces``."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    F = np.asarray(faces, dtype=np.int64)
-    if len(F) == 0:
-        return np.zeros(0, dtype=bool)
-    edges = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, edge_id = np.unique(edges, axis=0, return_inverse=True)
-    owner = np.repeat(np.arange(len(F)), 3)
-    graph = coo_matrix((np.ones(len(owner)), (owner, edge_id.ravel() + len(F))),
-                       shape=(len(F) + edge_id.max() + 1,) * 2)
-    _, label = connected_components(graph, directed=False)
-    biggest = np.bincount(label[:len(F)]).argmax()
-    return label[:len(F)] == biggest
 
 
 def material_name(vf: float) -> str:
@@ -302,3 +287,39 @@ def write_deck(folder, fields, plies: Plies, groups: Groups, fm: FibreMatrix, ar
             "binning_error": groups.errors, "tip_nodes": int(len(tip)), "end_nodes": int(len(end)),
             "boundary_loops": len(loops)}
     return [deck, layup], said
+
+
+FE_DIR = "fe"
+
+
+def write_structural(layup, out_dir) -> tuple[list[Path], dict]:
+    """``<out_dir>/fe/preform.inp`` and ``layup.csv`` of ``layup``
+    (``preform.structural.layup.StructuralLayup``); (paths, what the summary says). With no
+    layup (None) an earlier run's deck in this folder, which is not this run's, is removed."""
+    if layup is None:
+        _remove_earlier(out_dir)
+        return [], {}
+    centerline = layup.centerline
+
+    def arc_length(points):
+        return np.asarray(centerline.project(np.asarray(points, dtype=float))[0], dtype=float)
+
+    def axis_at(s):
+        return np.asarray(centerline.frames_at(np.array([float(s)]))[1], dtype=float)[0]
+
+    folder = safe_folder(out_dir, FE_DIR)
+    paths, said = write_deck(folder, layup.fields, layup.plies, layup.groups, layup.constituents,
+                             arc_length, axis_at, title=layup.title)
+    said["left_out_faces"] = layup.left_out_faces
+    said["left_out"] = ("faces that are no preform (no yarn, or a fibre fraction below "
+                        "preform.analysis.rtm.MIN_VF at the braid's fringe) and pieces apart from the braided part")
+    return paths, said
+
+
+def _remove_earlier(out_dir) -> None:
+    """Removes ``preform.inp`` and ``layup.csv`` from ``<out_dir>/fe`` (a symlinked ``fe`` is
+    left alone, as is anything else in it)."""
+    folder = Path(out_dir) / FE_DIR
+    if folder.is_dir() and not folder.is_symlink():
+        for name in ("preform.inp", "layup.csv"):
+            (folder / name).unlink(missing_ok=True)

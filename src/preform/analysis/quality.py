@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
 from .interlacing import INTERLACING, InterlacingSettings
-from .result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ class QualitySettings:
     #: case A up to 1.6x), not in jumps
     max_fell_jump: float = 5.0
     #: warp-weft crossings of the laid yarns below this fraction of the pattern's
-    #: (``preform.interlacing``): an interlaced braid gives 1 to within one crossing per pair
+    #: (``preform.analysis.interlacing``): an interlaced braid gives 1 to within one crossing per pair
     #: (case A 16 carriers: 0.985; the kinematic S-tube 0.988); warp and weft in bands that do
     #: not meet give 0
     min_interlacing: float = 0.5
