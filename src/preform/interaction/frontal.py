@@ -622,6 +622,7 @@ class PosedIteration:
         out = bound.copy()
         # a combination may reach below zero where a yarn runs straight (bound 0): no bound is
         out[self.posed] = np.maximum(new[:k], 0.0)
+        # nor a top tension below a thousandth of Capstan's (a yarn over the ring is pulled)
         return out, np.maximum(new[k:], 1e-3 * np.asarray(f_top1, float))
 
 
