@@ -225,6 +225,12 @@ class ZoneSettings:
     #: stay below 1e-2 (case A's lag, 9.4e-3 at most) and behind a ring below 1e-3 (the
     #: posed iteration's fixed point, docs/decisions.md)
     max_step_residual: float = 0.1
+    #: a step whose residual exceeds max_step_residual is first solved again with this many
+    #: frontal iterations of its bounds (``FrontalSettings.max_iterations``), and fails only
+    #: if it still does: without a ring the one-step lag spikes where crossings slide far in a
+    #: step (a 16-carrier cylinder at friction 0.5 and a quarter of the default step: 3 of 520
+    #: steps above 0.1, up to 0.50)
+    lag_iterations: int = 5
     #: a yarn segment of the zone at or below this fraction of the spool tension is slack, which
     #: the model does not admit (every free yarn is pulled by its carrier's tensioner): the run
     #: stops as failed at that step
