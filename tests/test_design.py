@@ -77,7 +77,11 @@ def test_a_constant_angle_on_the_case_b_like_mandrel(tmp_path):
 def test_the_design_on_a_cylinder_is_kos_speed(tmp_path, capsys):
     cfg = case(tmp_path, "cyl", "case_a", spool=0.3, braid=1.6, initial_position=0.168)
     out = tmp_path / "designed.toml"
-    assert main(["design", str(cfg.source), "--target-angle", "60", "--out", str(out)]) == 0
+    # the tail of the start-up transient leaves about 0.3 deg just past where judging starts
+    # (test_design_promise.py: below 0.2 deg is not met, and says so); this test is about the
+    # steady speed, so it asks for 0.5 deg and expects the design to be met
+    assert main(["design", str(cfg.source), "--target-angle", "60", "--tolerance", "0.5",
+                 "--out", str(out)]) == 0
     written = tomllib.loads(out.read_text())
     table = np.array(written["process"]["take_up_speed"])
     ko = analytic.ko_braid_angle  # tan(alpha) = omega r / v  ->  v = omega r / tan(60 deg)

@@ -51,7 +51,8 @@ def read_bdf(path):
 def test_bdf_round_trip_and_binning(tmp_path):
     V, F = mesh()
     k1 = np.exp(np.linspace(np.log(1e-12), np.log(8e-11), len(F)))
-    index, rep, error = bin_cells(k1, 4)
+    binning = bin_cells(k1, 4)
+    index, rep = binning.index, binning.values
     values = [(1e-3, 0.45, r, 0.3, (1.0, 0.0, 0.0)) for r in rep]
     bdf, sets_csv = write_rtmsim_bdf(tmp_path / "rtmsim.bdf", V, F, index, values)
     grids, trias, sets = read_bdf(bdf)
@@ -61,11 +62,13 @@ def test_bdf_round_trip_and_binning(tmp_path):
     for sid, members in sets.items():
         assert all(trias[e][0] == sid for e in members)
         cells = np.array(members) - 1
-        # every cell's K within the reported binning error of its set's value
-        assert np.all(np.abs(k1[cells] / rep[sid - 1] - 1.0) <= error + 1e-12)
+        # every cell's K within the reported largest factor of its set's value
+        assert np.all(np.abs(np.log(k1[cells] / rep[sid - 1])) <= np.log(binning.max_factor) + 1e-12)
     assert sum(len(m) for m in sets.values()) == len(F)
     table = np.loadtxt(sets_csv, delimiter=",", skiprows=1)
-    np.testing.assert_allclose(table[:, 3], rep, rtol=1e-15)
+    np.testing.assert_allclose(table[:, 4], rep, rtol=1e-15)
+    np.testing.assert_array_equal(table[:, 0], [1, 2, 3, 4])
+    np.testing.assert_array_equal(table[:, 1], [len(sets[k]) for k in (1, 2, 3, 4)])
 
 
 def test_lcmsim_h5_round_trip(tmp_path):

@@ -86,9 +86,9 @@ def test_rotating_the_mandrel_rotates_the_tensor():
 
 def test_binning_keeps_each_cell_within_the_reported_error():
     values = np.exp(np.random.default_rng(3).normal(-25.0, 0.4, 500))
-    index, rep, error = rtm.bin_cells(values, 4)
+    binning = rtm.bin_cells(values, 4)
+    index, rep = binning.index, binning.values
     assert len(rep) == 4 and set(index) == {0, 1, 2, 3}
-    assert np.all(np.abs(values / rep[index] - 1.0) <= error + 1e-15)
-    # equal log widths: no cell further than exp(width / 2) - 1 from its set (+-3 sigma: 0.35)
-    width = np.ptp(np.log(values)) / 4
-    assert error <= np.exp(width / 2) - 1 + 1e-12
+    ratio = np.abs(np.log(values / rep[index]))
+    assert np.all(ratio <= np.log(binning.max_factor) + 1e-12)
+    assert np.sqrt(np.mean(ratio ** 2)) == pytest.approx(np.log(binning.rms_factor), rel=1e-12)

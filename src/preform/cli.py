@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from ._version import __version__
-from .errors import MandrelError, PreformError
+from .errors import ConfigError, MandrelError, PreformError
 from .pipeline import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -306,33 +306,50 @@ def cmd_design(args) -> int:
     import dataclasses
 
     from .config import load_config
-    from .design import design_speed, plot_design, read_target_table, write_design_config
+    from .design import (DESIGN, design_speed, plot_design, read_target_table, shortfall,
+                         write_design_config, write_design_runs, write_design_table)
 
     config = load_config(args.config)
     if args.model:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=args.model))
+    settings = DESIGN
+    if args.tolerance is not None:
+        if not 0.0 < args.tolerance < 90.0:
+            raise ConfigError(f"--tolerance {args.tolerance:g}: expected a braid angle error in (0, 90) deg")
+        settings = dataclasses.replace(DESIGN, tolerance_deg=args.tolerance)
     target = args.target_angle if args.target_table is None else read_target_table(args.target_table)
+    source = Path(config.source) if config.source else Path.cwd() / "case.toml"
+    out = Path(args.out).expanduser() if args.out else source.with_name(f"{source.stem}_designed.toml")
+    out = out.resolve()
+    if out.suffix != ".toml":
+        raise ConfigError(f"--out {args.out}: expected a .toml file for the designed config")
+    if config.source and out == Path(config.source).resolve():
+        raise ConfigError(f"--out {args.out}: is the source config; give another file")
     from .pipeline import checked_geometry
 
     mandrel, centerline, notes = checked_geometry(config)
     _print_notes(notes)
-    design = design_speed(config, target, mandrel=mandrel, centerline=centerline,
+    design = design_speed(config, target, mandrel=mandrel, centerline=centerline, settings=settings,
                           progress=lambda k, e: print(f"design: forward run {k}: largest error "
                                                       f"{e:.2f} deg beyond the start-up transient",
                                                       file=sys.stderr, flush=True))
-    print("braided_length_m,take_up_speed_m_s,target_deg,achieved_deg")
-    for row in zip(design.length, design.speed, design.target_deg, design.achieved_deg):
-        print(",".join(f"{x:.6g}" for x in row))
-    print(f"design: achieved within {design.max_error_deg():.2f} deg of the target beyond "
-          f"{2 * design.h_inf:.2f} m of braid (the start-up transient before it is set by the initial "
-          "position, not by the speed)", file=sys.stderr)
-    if args.out:
-        out = Path(args.out).expanduser().resolve()
-        write_design_config(config, design, out)
-        title = f"Designed take-up speed: {Path(config.source).stem if config.source else 'case'} · " \
-                f"{config.model.kind} model"
-        png = plot_design(design, out.with_name(f"{out.stem}_design.png"), title)
-        print(f"design: runnable config {out}; plot {png}", file=sys.stderr)
+    toml = write_design_config(config, design, out)
+    csv = write_design_table(design, out.with_name(f"{out.stem}_design.csv"))
+    runs = write_design_runs(design, out.with_name(f"{out.stem}_design_runs.csv"))
+    title = f"Designed take-up speed: {source.stem} · {config.model.kind} model"
+    png = plot_design(design, out.with_name(f"{out.stem}_design.png"), title)
+    v = design.speed * 1e3
+    print(f"design: {design.passes} forward runs ({config.model.kind} model), the best is run "
+          f"{design.best_pass}: largest error {design.max_error_deg():.2f} deg beyond "
+          f"{design.judged_from:.2f} m of braid (tolerance {settings.tolerance_deg:g} deg); "
+          f"take-up speed {v.min():.2f}-{v.max():.2f} mm/s in {len(v)} rows")
+    print(f"design: config {toml} (results to {toml.parent / 'results' / toml.stem})")
+    print(f"design: every row in {csv}; each forward run in {runs}; plot {png}")
+    if not design.met:
+        print(f"error: design: the achieved braid angle is {design.max_error_deg():.2f} deg from the "
+              f"target, above the tolerance {settings.tolerance_deg:g} deg, {shortfall(design)}; the "
+              "best speed table is written all the same", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_DONE
 
 
@@ -449,7 +466,11 @@ def build_parser() -> argparse.ArgumentParser:
     des.add_argument("--model", choices=("kinematic", "interaction"),
                      help="the forward model, in place of the config's [model] kind")
     des.add_argument("--out", metavar="FILE.toml",
-                     help="write the config with the designed take_up_speed table (and a plot beside it)")
+                     help="the designed config (default CONFIG's folder, <name>_designed.toml), with "
+                          "the table <name>_design.csv and the plot <name>_design.png beside it")
+    des.add_argument("--tolerance", type=float, metavar="DEG",
+                     help="largest error of the achieved braid angle beyond the start-up transient "
+                          "(default 0.2 deg); exit code 1 when it is not met")
     des.set_defaults(func=cmd_design)
 
     mandrel = sub.add_parser("mandrel", help="mandrel tools")

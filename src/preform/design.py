@@ -16,7 +16,11 @@ find the take-up speed table ``[[L, v], ...]`` (braided length -> speed) that la
    ``u = omega r / tan(alpha)`` read from the run and ``gain = 1/2`` (the immediate response), and
    lets the next run show what the lag leaves. The part the lag leaves halves each pass. It stops
    when the achieved angle is within ``tolerance_deg`` of the target beyond ``judged_after``
-   convergence lengths, or after ``max_passes``.
+   convergence lengths, after ``stall_passes`` passes that did not improve on the best, or after
+   ``max_passes``; the best pass is the answer.
+3. **Say whether the promise is kept**: :attr:`Design.met` tells whether the best pass is within
+   the tolerance, and :func:`shortfall` says where the largest error is and why it stays (the tail
+   of the start-up transient, a change of section, or the forward model's own scatter).
 
 What is achievable: the start-up transient (the first convergence length or two, while the yarns
 wind from their tie points to their steady convergence zone) cannot be removed by the speed
@@ -43,6 +47,9 @@ class DesignSettings:
 
     #: forward runs at most: what the lag leaves of the error halves each pass
     max_passes: int = 8
+    #: stop after this many passes in a row that do not improve on the best: the lag's part of the
+    #: error halves each pass, so passes that do not shrink it mean what is left is not the speed's
+    stall_passes: int = 2
     #: stop when the achieved angle is this close to the target (deg) where it is judged
     tolerance_deg: float = 0.2
     #: the angle is judged beyond this many convergence lengths of braid (the start-up transient)
@@ -57,6 +64,10 @@ class DesignSettings:
     #: rows of the designed speed table per convergence length (and at least 20 in all): the
     #: angle responds over one convergence length, so finer rows resolve nothing more
     rows_per_convergence_length: float = 16.0
+    #: a relative change of the section's perimeter-equivalent radius larger than this within one
+    #: convergence length of the largest error names the section change as its cause: the zone
+    #: follows a new section over about one convergence length, which no speed removes
+    section_change: float = 0.02
 
 
 DESIGN = DesignSettings()
@@ -65,7 +76,10 @@ DESIGN = DesignSettings()
 @dataclass
 class Design:
     """length: (n,) m braided; speed: (n,) m/s; target_deg, achieved_deg: (n,) deg; passes: runs;
-    h_inf: float, m, the kinematic steady convergence length used for the judged region."""
+    h_inf: float, m, the kinematic steady convergence length used for the judged region;
+    errors_deg: the largest judged error of each pass; best_pass: the pass whose speed is the
+    answer; radius: (n,) m, the sections' perimeter-equivalent radius on ``length``; settings:
+    the DesignSettings used."""
 
     length: np.ndarray
     speed: np.ndarray
@@ -74,11 +88,62 @@ class Design:
     passes: int
     h_inf: float
     result: object = None
+    errors_deg: tuple = ()
+    best_pass: int = 0
+    radius: np.ndarray | None = None
+    settings: DesignSettings = DESIGN
+
+    @property
+    def judged_from(self) -> float:
+        """The braided length (m) from which the angle is judged: past the start-up transient."""
+        return self.settings.judged_after * self.h_inf
 
     def max_error_deg(self, judged_after=None) -> float:
-        after = DESIGN.judged_after if judged_after is None else judged_after
+        after = self.settings.judged_after if judged_after is None else judged_after
         sel = self.length >= after * self.h_inf
         return float(np.max(np.abs(self.achieved_deg[sel] - self.target_deg[sel]), initial=0.0))
+
+    @property
+    def met(self) -> bool:
+        """Whether the achieved angle is within the tolerance wherever it is judged."""
+        return self.max_error_deg() <= self.settings.tolerance_deg
+
+    def worst_length(self) -> float:
+        """The braided length (m) of the largest judged error."""
+        sel = self.length >= self.judged_from
+        if not np.any(sel):
+            return float(self.length[-1])
+        err = np.abs(self.achieved_deg - self.target_deg)
+        return float(self.length[sel][np.argmax(err[sel])])
+
+
+def shortfall(design: Design) -> str:
+    """Why the largest judged error stays above the tolerance, where it is (one sentence).
+
+    The tail of the start-up transient when the error sits within one convergence length of
+    where judging starts; a change of the section (a relative change of the perimeter-equivalent
+    radius above ``section_change`` within one convergence length of it) when there is one;
+    otherwise the forward model's response, which the passes stopped improving."""
+    s = design.settings
+    L = design.worst_length()
+    h = design.h_inf
+    where = f"at L = {L:.2f} m"
+    if L <= design.judged_from + h:
+        return (f"{where}, within one convergence length ({h:.2f} m) of where judging starts "
+                f"({design.judged_from:.2f} m): the tail of the start-up transient, which is set by "
+                f"the initial position, not by the speed (a start nearer the steady convergence "
+                f"length, or a larger --tolerance, is what helps)")
+    if design.radius is not None:
+        near = np.abs(design.length - L) <= h
+        r = design.radius[near]
+        change = float((r.max() - r.min()) / max(r.mean(), 1e-300))
+        if change > s.section_change:
+            return (f"{where}, where the section changes (its perimeter-equivalent radius by "
+                    f"{100 * change:.0f} % within one convergence length, {h:.2f} m): the zone "
+                    f"follows a new section over about one convergence length, whatever the speed")
+    return (f"{where}: the forward runs stopped improving after pass {design.best_pass} "
+            f"(errors per pass {', '.join(f'{e:.2f}' for e in design.errors_deg)} deg); what is left "
+            f"is the model's response, not the speed's to fix")
 
 
 def read_target_table(path) -> np.ndarray:
@@ -167,7 +232,8 @@ def design_speed(config, target, *, model=None, settings: DesignSettings = DESIG
     result = None
     passes = 0
     judged = grid >= settings.judged_after * h_inf
-    best = None   # (error, speed, achieved, result): the best pass is the answer
+    best = None   # (error, speed, achieved, result, pass): the best pass is the answer
+    errors = []
     for passes in range(1, settings.max_passes + 1):
         result = simulate(with_speed_table(config, grid, speed), progress=False, mandrel=mandrel,
                           centerline=centerline)
@@ -176,13 +242,14 @@ def design_speed(config, target, *, model=None, settings: DesignSettings = DESIG
         achieved, reached = _achieved(result, grid)
         error = np.abs(achieved - target_deg)[judged & reached]
         worst = float(np.max(error, initial=0.0))
+        errors.append(worst)
         if progress is not None:
             progress(passes, worst)
         if best is None or worst < best[0]:
-            best = (worst, speed.copy(), achieved.copy(), result)
+            best = (worst, speed.copy(), achieved.copy(), result, passes)
         if worst <= settings.tolerance_deg:
             break
-        if passes == settings.max_passes:
+        if passes == settings.max_passes or passes - best[4] >= settings.stall_passes:
             break
         correct = reached & (grid > settings.correct_after * h_inf) & (achieved > 0) & (achieved < 90)
         r = np.interp(grid, fine, radius)
@@ -196,31 +263,102 @@ def design_speed(config, target, *, model=None, settings: DesignSettings = DESIG
         weight = np.clip((grid - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
         new = speed + settings.gain * weight * (u_target - u_achieved)
         speed = np.clip(new, speed / settings.max_factor, speed * settings.max_factor)
-    _, speed, achieved, result = best
+    _, speed, achieved, result, best_pass = best
     return Design(length=grid, speed=speed, target_deg=target_deg, achieved_deg=achieved,
-                  passes=passes, h_inf=h_inf, result=result)
+                  passes=passes, h_inf=h_inf, result=result, errors_deg=tuple(errors),
+                  best_pass=best_pass, radius=np.interp(grid, fine, radius), settings=settings)
+
+
+#: significant digits of the designed speeds: ``d(alpha) = -sin(alpha) cos(alpha) dv / v``, so a
+#: relative rounding of 5e-6 moves the angle by at most 2.5e-6 rad (1.4e-4 deg), far below any
+#: tolerance of the design
+SPEED_DIGITS = 6
+#: decimals (m) of the designed table's braided lengths: 0.1 mm, a thousandth of the shortest
+#: convergence length the table is made for, or more where rows are closer than that
+LENGTH_DECIMALS = 4
+
+
+def _speed_rows(design: Design) -> list[tuple[str, str]]:
+    """The table's (length, speed) as rounded text, lengths strictly increasing."""
+    decimals = LENGTH_DECIMALS
+    while len({round(float(a), decimals) for a in design.length}) < len(design.length) and decimals < 12:
+        decimals += 1
+    return [(f"{float(a):.{decimals}f}", f"{float(v):.{SPEED_DIGITS}g}")
+            for a, v in zip(design.length, design.speed)]
+
+
+def designed_output_dir(out) -> str:
+    """The results folder of a designed config written to ``out``: ``results/<stem>`` beside it
+    (relative to the file, so running the designed config never overwrites the source's)."""
+    return f"results/{Path(out).stem}"
 
 
 def write_design_config(config, design: Design, out) -> Path:
     """The input config with ``take_up_speed`` = the designed table, as a runnable TOML file.
 
-    Paths become absolute, so the file runs from wherever it is written."""
+    Input paths become absolute, so the file runs from wherever it is written; ``[output] dir``
+    is its own results folder beside it (:func:`designed_output_dir`). The table is one
+    ``[L, v]`` pair a line, rounded to what changes the angle (:data:`SPEED_DIGITS`)."""
     from .config import dump_config
     import tomli_w
 
+    from .errors import ConfigError
     from .io.atomic import atomic_write_text
 
+    if config.layers:
+        raise ConfigError(f"design: {config.source}: a config with [[layer]] tables: design the "
+                          "speed of one layer at a time (a config without [[layer]])")
     data = dump_config(config)
-    data["process"]["take_up_speed"] = [[float(a), float(b)] for a, b in zip(design.length, design.speed)]
+    data["process"].pop("take_up_speed", None)
     data = {section: {k: v for k, v in table.items() if v is not None}
             for section, table in data.items() if isinstance(table, dict)}
     if data.get("machine", {}).get("guide_ring") is None:
         data.get("machine", {}).pop("guide_ring", None)
+    data.setdefault("output", {})["dir"] = designed_output_dir(out)
+    verdict = "within" if design.met else "NOT within"
     header = (f"# Designed by preform design: take-up speed for the target braid angle "
-              f"({design.passes} forward runs, {config.model.kind} model); achieved within "
-              f"{design.max_error_deg():.2f} deg beyond {DESIGN.judged_after:g} convergence lengths "
-              f"({DESIGN.judged_after * design.h_inf:.2f} m)\n")
-    return atomic_write_text(out, header + tomli_w.dumps(data))
+              f"({design.passes} forward runs, {config.model.kind} model, the best is run "
+              f"{design.best_pass}).\n# Achieved {verdict} the tolerance "
+              f"{design.settings.tolerance_deg:g} deg: largest error {design.max_error_deg():.2f} deg "
+              f"beyond {design.judged_from:.2f} m ({design.settings.judged_after:g} convergence lengths); "
+              f"every row in {Path(out).stem}_design.csv\n")
+    rows = _speed_rows(design)
+    width = max(len(a) for a, _ in rows)
+    table = ("take_up_speed = [   # [braided length m, take-up speed m/s]\n"
+             + "".join(f"    [{a.rjust(width)}, {v}],\n" for a, v in rows) + "]\n")
+    text = tomli_w.dumps(data)
+    marker = "[process]\n"
+    if marker not in text:
+        text += "\n" + marker
+    at = text.index(marker) + len(marker)
+    return atomic_write_text(out, header + text[:at] + table + text[at:])
+
+
+#: the columns of the designed table's CSV
+DESIGN_CSV_COLUMNS = ("braided_length_m", "take_up_speed_m_s", "target_deg", "achieved_deg", "error_deg",
+                      "judged")
+
+
+def write_design_table(design: Design, path) -> Path:
+    """Every row of the design: length, speed, target, achieved angle, their difference, and
+    whether the row is judged (past the start-up transient), as a CSV."""
+    from .io.atomic import atomic_write_text
+
+    lines = [",".join(DESIGN_CSV_COLUMNS)]
+    for L, v, t, a in zip(design.length, design.speed, design.target_deg, design.achieved_deg):
+        lines.append(f"{L:.6g},{v:.{SPEED_DIGITS}g},{t:.4f},{a:.4f},{a - t:.4f},"
+                     f"{int(L >= design.judged_from)}")
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def write_design_runs(design: Design, path) -> Path:
+    """One row per forward run: its number, its largest error where judged (deg), and whether its
+    speed is the answer (the best run), as a CSV."""
+    from .io.atomic import atomic_write_text
+
+    lines = ["run,largest_error_deg,best"]
+    lines += [f"{k},{e:.4f},{int(k == design.best_pass)}" for k, e in enumerate(design.errors_deg, start=1)]
+    return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 def plot_design(design: Design, path, title: str) -> Path:
@@ -239,7 +377,7 @@ def plot_design(design: Design, path, title: str) -> Path:
     ax_a.legend()
     ax_a.set_title(title)
     ax_e.plot(L, design.achieved_deg - design.target_deg, color="tab:red")
-    ax_e.axvspan(0.0, DESIGN.judged_after * design.h_inf, color="0.9",
+    ax_e.axvspan(0.0, design.judged_from, color="0.9",
                  label="start-up transient (not judged)")
     ax_e.axhline(0.0, color="0.5", linewidth=0.8)
     ax_e.set_ylim(-3.0, 3.0)

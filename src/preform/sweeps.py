@@ -328,6 +328,7 @@ def sweep(path, *, scheduler=None, workers=None, resume=False, progress=True,
                        progress=progress, cluster=cluster)
     write_sweep_csv(spec, ordered)
     plot_sweep(spec, ordered)
+    from .io.report import report_hook; report_hook(spec.out_dir, sweep=True)  # noqa: E702
     return ordered
 
 

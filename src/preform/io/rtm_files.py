@@ -5,11 +5,12 @@
   ``permeability`` (K1, m^2, along the reference direction), ``alpha`` (K2 / K1, the in-plane
   anisotropy) and ``reference_direction`` (nf, 3) unit tangent, global frame.
 * ``rtmsim.bdf`` (RTMsim style, Nastran bulk data): ``GRID*`` nodes in large-field format (16
-  characters a coordinate, so a metre-sized part keeps micrometres), ``CTRIA3`` cells with the
-  set as their property id, and one ``SET1`` per property set listing its cells; the sets'
-  values (thickness, porosity, K1, alpha, reference direction) are in ``rtmsim_sets.csv`` beside
-  it, for RTMsim's patch table. The cells are binned into at most four sets
-  (:func:`preform.rtm.bin_cells`), and the binning error is reported.
+  characters a coordinate, so a metre-sized part keeps micrometres), ``CTRIA3`` cells whose
+  property id is their set's id, and one ``SET1`` per property set, with that same id, listing
+  its cells; the sets' values (thickness, porosity, K1, alpha, reference direction) are in
+  ``rtmsim_sets.csv`` beside it, one row per set under the same id (column ``pid``), for
+  RTMsim's patch table. The cells are binned into at most four sets by K1
+  (:func:`preform.rtm.bin_cells`), and the binning error is reported (docs/guide/results.md).
 """
 
 from __future__ import annotations
@@ -57,9 +58,12 @@ def _small(value) -> str:
 
 
 def bdf_text(vertices, cells, set_index) -> str:
-    """The bulk data of the mesh with ``set_index`` (nf,) 0-based sets; ids are 1-based."""
+    """The bulk data of the mesh with ``set_index`` (nf,) 0-based sets; the cards' ids are
+    1-based: set ``k`` is ``SET1`` id and ``CTRIA3`` property id ``k + 1``, the ``pid`` of
+    ``rtmsim_sets.csv``."""
     out = io.StringIO()
-    out.write("$ preform: RTM mesh, metres; property id = set + 1\nBEGIN BULK\n")
+    out.write("$ preform: RTM mesh, metres; a CTRIA3's property id is the id of the SET1 that\n"
+              "$ lists it and the pid of its row in rtmsim_sets.csv\nBEGIN BULK\n")
     for i, (x, y, z) in enumerate(np.asarray(vertices, dtype=float), start=1):
         out.write(f"{'GRID*':<8}{_large(i)}{_large('')}{_large(float(x))}{_large(float(y))}*\n")
         out.write(f"{'*':<8}{_large(float(z))}\n")
@@ -80,14 +84,22 @@ def bdf_text(vertices, cells, set_index) -> str:
     return out.getvalue()
 
 
+#: the columns of ``rtmsim_sets.csv``
+SETS_COLUMNS = ("pid", "faces", "thickness_m", "porosity", "permeability_k1_m2", "alpha", "ref_x", "ref_y",
+                "ref_z")
+
+
 def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]:
-    """Write ``rtmsim.bdf`` and ``rtmsim_sets.csv`` (one row per set: set, thickness_m, porosity,
-    k1_m2, alpha, reference direction x, y, z); return both paths."""
+    """Write ``rtmsim.bdf`` and ``rtmsim_sets.csv`` (one row per set: its pid, the bdf's property
+    and SET1 id, its number of faces, thickness_m, porosity, k1_m2, alpha, reference direction x,
+    y, z); return both paths. ``set_values[k]`` are set ``k``'s (0-based) values."""
     path = Path(path)
-    atomic_write_text(path, bdf_text(vertices, cells, np.asarray(set_index, dtype=np.int64)))
-    rows = ["set,thickness_m,porosity,permeability_k1_m2,alpha,ref_x,ref_y,ref_z"]
-    for k, (t, phi, k1, a, d) in enumerate(set_values, start=1):
-        rows.append(",".join([str(k), *(repr(float(v)) for v in (t, phi, k1, a, *d))]))
+    set_index = np.asarray(set_index, dtype=np.int64)
+    atomic_write_text(path, bdf_text(vertices, cells, set_index))
+    counts = np.bincount(set_index, minlength=len(set_values))
+    rows = [",".join(SETS_COLUMNS)]
+    for k, (t, phi, k1, a, d) in enumerate(set_values):
+        rows.append(",".join([str(k + 1), str(int(counts[k])), *(repr(float(v)) for v in (t, phi, k1, a, *d))]))
     sets = atomic_write_text(path.with_name("rtmsim_sets.csv"), "\n".join(rows) + "\n")
     return [path, sets]
 
@@ -95,16 +107,24 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
 RTM_DIR = "rtm"
 
 
-def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Path], dict]:
+def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None,
+              settings=None) -> tuple[list[Path], dict]:
     """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
 
     Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
     Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (or, without a cavity thickness, the
     largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set of their
     own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is
-    preform).
+    preform), grouped by K1 so that the area-weighted binning error is small
+    (:func:`preform.rtm.bin_cells`). The summary gives that error (``k1_binning``), the preform's
+    fibre volume fraction and, with a cavity, its compression (:func:`preform.rtm.compression`);
+    a cavity that packs fibres beyond :data:`preform.rtm.MAX_COMPACTED_VF` is warned about.
+    ``settings``: the binning's (``preform.rtm.BinningSettings``; None: ``rtm.BINNING``), whose
+    ``sets`` ``n_sets`` overrides where given.
     """
-    from ..rtm import bin_cells
+    import warnings
+
+    from ..rtm import BINNING, MAX_COMPACTED_VF, bin_cells, compression
     from .atomic import safe_folder
 
     folder = safe_folder(out_dir, RTM_DIR)
@@ -112,6 +132,8 @@ def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Pa
     valid = cd["rtm_valid"] > 0
     if not np.any(valid):
         return [], {"written": False, "reason": "no face carries preform (no yarn reached the mandrel)"}
+    V, F = np.asarray(fields.vertices, dtype=float), np.asarray(fields.faces)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
     channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
     k1 = np.where(valid, cd["permeability_k1_m2"], channel)
@@ -119,22 +141,36 @@ def write_rtm(fields, out_dir, n_sets=4, cavity_thickness=None) -> tuple[list[Pa
     direction = cd["permeability_direction"]
     written = [write_lcmsim_h5(folder / "lcmsim.h5", fields.vertices, fields.faces, thickness,
                                cd["porosity"], k1, alpha, direction)]
+    settings = BINNING if settings is None else settings
+    n_sets = settings.sets if n_sets is None else int(n_sets)
     sets = n_sets - 1 if np.any(~valid) else n_sets
-    index_valid, rep, error = bin_cells(k1[valid], sets)
-    index = np.full(len(k1), len(rep), dtype=np.int64)
-    index[valid] = index_valid
+    binning = bin_cells(k1[valid], sets, weights=area[valid], settings=settings)
+    index = np.full(len(k1), len(binning.values), dtype=np.int64)
+    index[valid] = binning.index
     values = []
-    for k in range(len(rep)):
+    for k in range(len(binning.values)):
         members = index == k
         values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
-                       float(rep[k]), float(np.mean(alpha[members])),
+                       float(binning.values[k]), float(np.mean(alpha[members])),
                        _mean_direction(direction[members])))
     if np.any(~valid):
         values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
                        channel, 1.0, (1.0, 0.0, 0.0)))
     written += write_rtmsim_bdf(folder / "rtmsim.bdf", fields.vertices, fields.faces, index, values)
-    return written, {"written": True, "sets": len(values), "binning_error_k1": error,
-                     "preform_faces": int(np.count_nonzero(valid)), "faces": int(len(k1))}
+    # faces packed to V_f 1 or more are no preform to the fields (rtm_valid 0), but the most
+    # compressed: they count here
+    packed = valid | (cd["fibre_volume_fraction"] >= MAX_COMPACTED_VF)
+    squeeze = compression(cd["fibre_volume_fraction"][packed], cd["thickness_m"][packed], area[packed],
+                          cavity_thickness)
+    for text in squeeze.pop("warnings"):
+        warnings.warn(text, UserWarning, stacklevel=3)
+    said = {"written": True, "sets": len(values), "preform_faces": int(np.count_nonzero(valid)),
+            "faces": int(len(k1)),
+            "faces_per_set": [int(n) for n in np.bincount(index, minlength=len(values))],
+            "k1_binning": {"rms_factor": binning.rms_factor, "max_factor": binning.max_factor,
+                           "sets_k1_m2": [float(v) for v in binning.values]},
+            **squeeze}
+    return written, said
 
 
 def _mean_direction(d):
