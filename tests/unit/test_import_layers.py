@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-SRC = Path(__file__).resolve().parents[1] / "src"
+SRC = Path(__file__).resolve().parents[2] / "src"
 
 #: the layers, lowest first: (name, the modules and packages in it). A module belongs to the layer
 #: of the longest entry that is it or a package holding it; ``preform`` stands for the package's

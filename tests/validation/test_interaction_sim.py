@@ -114,6 +114,11 @@ def test_default_step_within_one_percent_of_a_quarter_step(run):
     """The interaction model's default step (``stepping.default_time_step``) against a step four
     times shorter."""
     coarse, fine = run(mu=0.5), run(mu=0.5, step_factor=0.25)
+    # every step within the run's limit (``ZoneSettings.max_step_residual``): the quarter step's
+    # lag spikes to 0.5 on 3 of 520 steps, which are solved again with their bounds iterated
+    # (``ZoneSettings.lag_iterations``; measured max 4.7e-2 after)
+    for res in (coarse, fine):
+        assert res.history["residual"].max() <= 0.1
     # a step is a quasi-static solve with the friction history of the last: first order in the
     # step. On this set-up the mean convergence length moves by 0.6 % from the default step to a
     # quarter of it and by 0.3 % more to an eighth; 1 % bounds the default step's error (twice

@@ -24,10 +24,18 @@ from support.simcase import advanced_stepper, capture_step, case_b_like_config, 
 TIGHT = 1e-10
 
 
+#: the run whose step the tests capture: its time steps iterate only the new crossings' bounds
+#: to their converged geometry's (``FrontalSettings.posed_all_bounds`` off), the step these
+#: figures were measured on; on the default run's step 150 at mu 0.25 the plain frontal
+#: iteration of both solvers contracts more slowly (the relaxation's at 2.4e-7 after 400)
+NEW_ONLY = dataclasses.replace(DEFAULT, frontal=dataclasses.replace(DEFAULT.frontal,
+                                                                    posed_all_bounds=False))
+
+
 @pytest.fixture(scope="module")
 def ring_step(tmp_path_factory):
     """``ring_step(mu)``: (state, boundary with wall planes, friction centres) of the step
-    after 150 steps of the case-B-like run, on copies."""
+    after 150 steps of the case-B-like run (``NEW_ONLY``), on copies."""
     folder = tmp_path_factory.mktemp("ring_frontal")
     runs = {}
 
@@ -35,7 +43,7 @@ def ring_step(tmp_path_factory):
         if mu not in runs:
             cfg = case_b_like_config(folder, 0.17)
             cfg = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=mu))
-            runs[mu] = advanced_stepper(cfg, 150)
+            runs[mu] = advanced_stepper(cfg, 150, settings=NEW_ONLY)
         st, bc, _, centres = capture_step(*runs[mu])
         return st, bc, centres[: st.m]
 

@@ -1,11 +1,13 @@
 """Every time step behind a guide ring converged in the paper's sense: balance, the tension
-below the ring Capstan of the step's own converged geometry (eq. 9), the new crossings' friction
-bounds those of their converged geometry, no yarn slack.
+below the ring Capstan of the step's own converged geometry (eq. 9), every crossing's friction
+bound that of its converged geometry, no yarn slack; and the relaxation and Newton landing on
+the same state from every step's posed state.
 
 A case-B-like run (``simcase.case_b_like_config``: case B's ring 0.17 m and spool 0.85 m, 16
-carriers, ring friction 0.17, yarn friction 0.25, 20 mm eccentricity) stepped through its
-start-up, each time step's solve recorded (the zone's ``solve_zone`` hook), by the relaxation
-(the default solver) and by the Newton reference.
+carriers, ring friction 0.17, yarn friction 0, 0.25 and 0.5, 20 mm eccentricity) stepped
+through its start-up by the relaxation (the default solver) under default settings, each time
+step's solve recorded (the zone's ``solve_zone`` hook); with yarn friction, each step's posed
+state is also solved by the Newton reference, on a copy.
 """
 
 from __future__ import annotations
@@ -30,13 +32,15 @@ MU_R = 0.17
 #: from step ~250 (the start-up, where runs behind a ring had failed to converge)
 STEPS = 420
 #: the history's residual on 99 % of the steps, and its largest value (the target the run's
-#: verdict uses: a lag of the held friction bounds below 1 % of the tensions)
+#: verdict uses)
 TARGET, CEILING = 1e-2, 0.1
-#: steps of the Newton run (twice the relaxation's time a step): through the first rows
-NEWTON_STEPS = 250
+#: a step whose posed iteration stopped at ``posed_iterations`` ends within this of its fixed
+#: point (measured: 1.1e-4 to 3.2e-4 on 0-4 of ~390 steps at yarn friction 0.25 and 0.5); every
+#: other step within ``posed_tolerance``
+LIMIT = 1e-3
 
 
-def _run(folder, mu, solver, n_steps=None):
+def _run(folder, mu, newton_too):
     cfg = case_b_like_config(folder, MU_R)
     cfg = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=mu))
     mandrel, cl = load_geometry(cfg)
@@ -45,16 +49,20 @@ def _run(folder, mu, solver, n_steps=None):
     steps = []
 
     def solve(st, bc, **kw):
-        time_step = kw.get("max_iter") is None and kw.get("friction_tol") is None
+        time_step = kw.get("mode", "step") == "step"
         fresh = set(st.uid[: st.m][~np.isfinite(st.bound[: st.m]).any(axis=1)].tolist())
-        report = solver(st, bc, **kw)
+        posed = st.copy() if time_step and newton_too else None
+        report = R.solve_zone(st, bc, **kw)
         if time_step:
-            steps.append((report, st.copy(), bc, fresh))
+            newton = None
+            if posed is not None:
+                newton = (frontal.solve_zone_inplace(posed, bc, **kw), posed)
+            steps.append((report, st.copy(), bc, fresh, newton))
         return report
 
     zone = InteractionZone(cfg, machine, mandrel, solve_zone=solve)
     s = Stepper(cfg, machine, mandrel, cl, zone)
-    for _ in range(STEPS if n_steps is None else n_steps):
+    for _ in range(STEPS):
         s.advance(take_up_speed(cfg.process.take_up_speed, s.braided))
     return steps
 
@@ -63,12 +71,10 @@ def _run(folder, mu, solver, n_steps=None):
 def runs(tmp_path_factory):
     cache = {}
 
-    def get(mu, solver="relax"):
-        if (mu, solver) not in cache:
-            fn = R.solve_zone if solver == "relax" else frontal.solve_zone_inplace
-            cache[mu, solver] = _run(tmp_path_factory.mktemp(f"ring{mu}{solver}"), mu, fn,
-                                     None if solver == "relax" else NEWTON_STEPS)
-        return cache[mu, solver]
+    def get(mu):
+        if mu not in cache:
+            cache[mu] = _run(tmp_path_factory.mktemp(f"ring{mu}"), mu, newton_too=mu > 0.0)
+        return cache[mu]
 
     return get
 
@@ -85,78 +91,108 @@ def _capstan(st, bc, k):
     return bc.f_spool * np.exp(-bc.mu_r * eta)
 
 
-@pytest.mark.parametrize("mu", [0.0, 0.25])
+def _with_crossings(steps):
+    return [(rep, st) for rep, st, _, _, _ in steps if st.m]
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.25, 0.5])
 def test_every_ring_step_is_converged_and_no_yarn_slack(mu, runs):
     steps = runs(mu)
-    with_crossings = [(rep, st) for rep, st, _, _ in steps if st.m]
+    with_crossings = _with_crossings(steps)
     assert len(with_crossings) > STEPS // 2       # the run reached its braiding rows
     residual = np.array([rep.residual for rep, _ in with_crossings])
     assert np.all(np.isfinite(residual))
     assert np.percentile(residual, 99) <= TARGET and residual.max() <= CEILING
+    # the posed iteration's own test: every step at posed_tolerance, but for those at its
+    # limit, and those within LIMIT
+    assert residual.max() < LIMIT
+    assert all(rep.residual < DEFAULT.frontal.posed_tolerance
+               for rep, _ in with_crossings if rep.posed_converged)
     # every yarn under tension: the least segment tension of any step, in spool tensions (a
-    # slack segment has none; Capstan and friction take a yarn down to ~0.7 f_spool here)
+    # slack segment has none; Capstan and friction take a yarn down to ~0.6 f_spool here)
     least = min(float(st.tension[: st.m].min()) for _, st in with_crossings)
     assert least > 0.3 * steps[0][2].f_spool
 
 
-@pytest.mark.parametrize("mu", [0.0, 0.25])
+@pytest.mark.parametrize("mu", [0.0, 0.25, 0.5])
 def test_tension_below_the_ring_is_capstan_of_the_converged_geometry(mu, runs):
     """Eq. 9 on every step's result: the top tension the solve balanced with is f_spool
     exp(-mu_r eta) of the deflection eta at the ring point of the converged crossings, to the
-    iteration's tolerance (``FrontalSettings.posed_tolerance``)."""
+    step's own residual (below ``posed_tolerance`` where the posed iteration converged)."""
     worst = 0.0
-    for rep, st, bc, _ in runs(mu):
+    for rep, st, bc, _, _ in runs(mu):
         expect = np.array([_capstan(st, bc, k) for k in range(st.n_yarns)])
-        worst = max(worst, float(np.max(np.abs(rep.f_top - expect) / expect)))
-    # the iteration stops once the top tensions change by less than posed_tolerance; the
-    # fixed point contracts, so the result is within that of eq. 9 of its own geometry
-    assert worst < DEFAULT.frontal.posed_tolerance
+        off = float(np.max(np.abs(rep.f_top - expect) / expect))
+        # the iteration measures the change in the top tensions relative to the new ones, as
+        # here; the residual is the largest such change of the step's last solve
+        assert off <= max(rep.residual, 1e-12) * (1.0 + 1e-6) + 1e-12
+        worst = max(worst, off)
+    assert worst < LIMIT
     # and the Capstan factor matters here: it is not the spool tension
     assert np.max(np.abs(rep.f_top - bc.f_spool)) > 0.1 * bc.f_spool
 
 
-def test_new_crossings_meet_their_converged_friction_bounds(runs):
-    """A crossing created in the step has no friction state of its own: its bound is that of
-    its converged geometry (``naive_frontal.bounds``), and the tension jump across it stays
-    inside that cone."""
-    worst, seen = -np.inf, 0
-    for rep, st, bc, fresh in runs(0.25):
-        if not fresh:
+@pytest.mark.parametrize("mu", [0.25, 0.5])
+def test_every_crossing_meets_its_converged_friction_bounds(mu, runs):
+    """Every crossing's tension jump stays inside the friction cone of its converged geometry
+    (``naive_frontal.bounds``), old and new crossings alike, to the step's residual."""
+    worst, seen, fresh_seen = -np.inf, 0, 0
+    for rep, st, bc, fresh, _ in runs(mu):
+        if not st.m:
             continue
         g = naive_frontal.bounds(st, bc.fell, bc.top, st.tension[: st.m], rep.f_top, bc.h, bc.mu)
+        step_worst = -np.inf
         for c in range(st.m):
-            if int(st.uid[c]) not in fresh:
-                continue
             seen += 1
+            fresh_seen += int(st.uid[c]) in fresh
             for side in range(2):
                 u = st.up[c, side]
                 above = st.tension[u, side] if u >= 0 else rep.f_top[st.yarn[c, side]]
                 jump = abs(above - st.tension[c, side])
-                scale = above + st.tension[c, side]
-                worst = max(worst, (jump - g[c, side]) / scale)
-    assert seen > 50
-    # the jump exceeds the bound of the converged geometry by at most the iteration's
-    # tolerance on the bounds (relative to f_int + f_ext) and the balance tolerance
-    assert worst < DEFAULT.frontal.posed_tolerance + 1e-6
+                # the scale of the iteration's change (``contact.bound_scale``)
+                scale = max(above + st.tension[c, side],
+                            DEFAULT.frontal.change_scale_floor * rep.f_top[st.yarn[c, side]])
+                step_worst = max(step_worst, (jump - g[c, side]) / scale)
+        # the jump exceeds the bound of the converged geometry by at most the change of the
+        # bounds the step's last solve held (its residual) and the balance tolerance (1e-7 of
+        # the four tensions, to a relative 1e-6 of the two here)
+        assert step_worst <= rep.residual + 1e-6
+        worst = max(worst, step_worst)
+    assert seen > 5000 and fresh_seen > 50
+    assert worst < LIMIT
 
 
-def test_relaxation_and_newton_run_alike_behind_the_ring(runs):
-    """The same run by the relaxation and by Newton: the same crossings on every step, the
-    same positions to the solvers' tolerances, the same residuals (the lag of the held bounds
-    is the model's, not a solver's)."""
-    a, b = runs(0.25)[:NEWTON_STEPS], runs(0.25, "newton")
-    moved, res_a, res_b = [], [], []
-    for (ra, sa, _, _), (rb, sb, _, _) in zip(a, b):
+@pytest.mark.parametrize("mu", [0.25, 0.5])
+def test_relaxation_and_newton_land_on_the_same_state_every_step(mu, runs):
+    """Each step's posed state solved by the relaxation and by Newton: the same crossings,
+    positions and tensions to the solvers' tolerances, the same residuals (the posed
+    iteration's fixed point is the model's, not a solver's)."""
+    moved, dten, res_a, res_b, stopped = [], [], [], [], 0
+    for ra, sa, bc, _, (rb, sb) in runs(mu):
         assert sa.m == sb.m
-        if sa.m:
-            moved.append(np.abs(sa.pos[: sa.m] - sb.pos[: sb.m]).max())
-            res_a.append(ra.residual)
-            res_b.append(rb.residual)
-    assert len(moved) > 150
+        if not sa.m:
+            continue
+        res_a.append(ra.residual)
+        res_b.append(rb.residual)
+        if not (ra.posed_converged and rb.posed_converged):
+            # a step at the posed iteration's limit in either solver: the first rows of the
+            # start-up (16 crossings), on which 1e-4 of the bounds moves crossings by
+            # millimetres (measured 3.5 mm apart at 1.3e-4); held to LIMIT below
+            stopped += 1
+            continue
+        moved.append(np.abs(sa.pos[: sa.m] - sb.pos[: sb.m]).max())
+        dten.append(np.abs(sa.tension[: sa.m] - sb.tension[: sb.m]).max() / bc.f_spool)
+    # measured 0 (mu 0.5) and 6 (mu 0.25) of ~390 steps
+    assert stopped <= 0.02 * len(res_a)
+    assert len(moved) > STEPS // 2
     # each solve stops at the balance tolerance (1e-7: micrometres along soft modes) and its
-    # top tensions at posed_tolerance (1e-4 of a ~0.1 m top segment's pull: ~10 um); the first
-    # rows (a dozen crossings, the softest) differ most, a third of a millimetre
-    assert np.median(moved) < 1e-4 and max(moved) < 1e-3
-    # the residuals are the lag of the held bounds, the same model quantity in both (3 digits)
-    assert np.max(res_a) == pytest.approx(np.max(res_b), rel=0.05)
-    assert np.percentile(res_a, 99) == pytest.approx(np.percentile(res_b, 99), rel=0.05)
+    # posed iteration once the bounds and top tensions change by less than posed_tolerance;
+    # where the map contracts slowly (by rho ~0.93 a solve, the mode the mixing is for) that
+    # leaves a result up to posed_tolerance / (1 - rho) from the fixed point, each solver on
+    # its side of it: tensions within twice that of the spool tension (measured: median
+    # 1.3e-5, max 2.1e-3 at yarn friction 0.5), positions within a millimetre (median 0.4 um,
+    # max 0.64 mm)
+    near = 2.0 * DEFAULT.frontal.posed_tolerance / (1.0 - 0.93)
+    assert np.median(dten) < 0.01 * near and max(dten) < near
+    assert np.median(moved) < 1e-5 and max(moved) < 1e-3
+    assert max(res_b) < LIMIT and max(res_a) < LIMIT

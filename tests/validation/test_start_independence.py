@@ -328,14 +328,20 @@ def test_relaxation_reports_the_lag_of_its_bounds(name, captured):
     """The relaxation's report (history.csv's residual) carries the change from the bounds and
     top tensions a lagged step held to those of its converged geometry, as Newton's one frontal
     iteration does: both solve the same problem to 1e-9, so the two figures agree to the
-    difference of their converged geometries (measured 2e-6 relative at 48 carriers and 1.9e-3
-    behind the ring, where the relaxation's exact wall and Newton's penalty wall differ by about
-    1 um; 1e-2 allowed), and the figure is far above the balance tolerance (the balance residual
-    alone is ~1e-9)."""
+    difference of their converged geometries (measured 2e-6 relative at 48 carriers; 1e-2
+    allowed), and the figure is far above the balance tolerance (the balance residual alone is
+    ~1e-9). Behind the ring, the posed iteration's last change, below its tolerance."""
     st, bc, centre = captured(name)
     _, newton = _solve(st, bc, centre, DEFAULT)
     x = st.copy()
     relaxed = R.solve_zone(x, bc, settings=DEFAULT, centre=centre, tol=TIGHT)
     assert newton.lagged and relaxed.lagged
     assert newton.residual > 1e3 * TIGHT
+    if name == "ring":
+        # behind a ring every bound and top tension is iterated to those of the converged
+        # geometry (``FrontalSettings.posed_all_bounds``): what is left is each solver's last
+        # change of that iteration, below its tolerance (measured 6.3e-5 and 6.5e-5)
+        assert newton.posed_converged and relaxed.posed_converged
+        assert max(newton.residual, relaxed.residual) < DEFAULT.frontal.posed_tolerance
+        return
     assert relaxed.residual == pytest.approx(newton.residual, rel=1e-2)
