@@ -12,11 +12,13 @@ lengths) each of the mean convergence length and the two braid angles is fitted 
 the best refined by a golden-section search). ``y_inf`` is the asymptote: the steady value.
 The run is steady from the braided length on which every recorded value stays within the
 tolerance of its asymptote (``rel_H`` of H, ``angle_deg`` of each angle) to the end of the run;
-the fit must describe the window (root-mean-square residual within half the tolerance). A run
-whose curve is still further than the tolerance from its asymptote at its end (still rising or
-falling), or that the fit does not describe (a changing cross-section), or that is shorter than
-the window, is not steady; what is reported instead is how fast it was still changing at its
-end (the drift: least-squares slopes over the window, per metre braided).
+the fit must describe the window (root-mean-square residual within half the tolerance). Where
+the window does not show steady state it is halved, down to ``tail_convergence_lengths``
+convergence lengths: a section change inside the window is left behind, and the stretch after
+it read alone. A run whose curve is still further than the tolerance from its asymptote at its
+end (still rising or falling) in every window, or that no fit describes, or that is shorter
+than the shortest window, is not steady; what is reported instead (from the longest window) is
+how fast it was still changing at its end (the drift: least-squares slopes, per metre braided).
 """
 
 from __future__ import annotations
@@ -119,7 +121,8 @@ def steady_state(history, settings: SteadySettings = STEADY) -> dict:
     """The steady state of a run's history (``Result.history`` columns).
 
     Returns {"reached": bool, "definition": str, "fits": {"convergence_length_m", "warp",
-    "weft"} (each :func:`fit_asymptote`'s, with "tolerance"; absent for a run too short to fit),
+    "weft"} (each :func:`fit_asymptote`'s, with "tolerance" and "describes_run": whether its
+    residual is within half the tolerance; absent for a run too short to fit),
     and, if reached, "braided_length_m" (where it starts), "convergence_length_m" and
     "braid_angle_deg" {"warp", "weft"} (the asymptotes); if not, "drift":
     {"convergence_length_m_per_m", "braid_angle_warp_deg_per_m", "braid_angle_weft_deg_per_m"}
@@ -136,22 +139,42 @@ def steady_state(history, settings: SteadySettings = STEADY) -> dict:
            "drift": None}
     if len(L) < 3 or L[-1] <= L[0]:
         return out
-    window = max(settings.fit_fraction * (L[-1] - L[0]), settings.tail_convergence_lengths * abs(H[-1]))
+    shortest = settings.tail_convergence_lengths * abs(H[-1])
+    window = max(settings.fit_fraction * (L[-1] - L[0]), shortest)
     if window > L[-1] - L[0]:
         return out   # the run is shorter than the stretch that must be fitted
-    end = L >= L[-1] - window
-    if np.count_nonzero(end) < MIN_TAIL_ROWS or np.ptp(L[end]) <= 0:
-        return out   # too few steps at the end to say
+    first_try = None
+    while window >= shortest * (1 - 1e-9):
+        end = L >= L[-1] - window
+        if np.count_nonzero(end) < MIN_TAIL_ROWS or np.ptp(L[end]) <= 0:
+            break    # too few steps at the end to say
+        tried = _read(L, columns, end, settings)
+        first_try = first_try or tried
+        if tried["reached"]:
+            del out["drift"]
+            return {**out, **tried}
+        window *= 0.5    # a section change inside the window: try the stretch after it
+    if first_try is not None:
+        out.update(first_try)
+    return out
+
+
+def _read(L, columns, end, settings):
+    """The steady-state reading with the asymptotes fitted over the rows ``end``: {"reached",
+    "fits", "fit_window_m", and "braided_length_m" ... or "drift"}."""
+    H = columns["convergence_length_m"]
     fits, ok = {}, np.ones(len(L), dtype=bool)
     described = True
     for name, y in columns.items():
         fit = fit_asymptote(L[end], y[end], settings)
-        tol = rel_H * abs(fit["asymptote"]) if name == "convergence_length_m" else angle_deg
+        tol = settings.rel_H * abs(fit["asymptote"]) if name == "convergence_length_m" else settings.angle_deg
         fit["tolerance"] = tol
+        fit["describes_run"] = bool(fit["rms"] <= 0.5 * tol)
         fits[name] = fit
-        described &= fit["rms"] <= 0.5 * tol
+        described &= fit["describes_run"]
         ok &= np.abs(y - fit["asymptote"]) <= tol
-    out["fits"] = fits
+    rows = np.flatnonzero(end)
+    out = {"reached": False, "fits": fits, "fit_window_m": [float(L[rows[0]]), float(L[rows[-1]])]}
     bad = np.nonzero(~ok)[0]
     first = 0 if len(bad) == 0 else bad[-1] + 1
     if not described or first >= len(L):
@@ -160,7 +183,6 @@ def steady_state(history, settings: SteadySettings = STEADY) -> dict:
                         "braid_angle_warp_deg_per_m": _slope(L[end], columns["warp"][end]),
                         "braid_angle_weft_deg_per_m": _slope(L[end], columns["weft"][end])}
         return out
-    del out["drift"]
     out.update(reached=True, braided_length_m=float(L[first]),
                convergence_length_m=fits["convergence_length_m"]["asymptote"],
                braid_angle_deg={"warp": fits["warp"]["asymptote"], "weft": fits["weft"]["asymptote"]})

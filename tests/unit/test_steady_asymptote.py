@@ -80,3 +80,20 @@ def test_a_curve_the_exponential_does_not_describe_is_not_steady():
     angle = 45.0 + np.sin(2 * np.pi * L / 0.7)
     st = steady_state(history(L, np.full_like(L, 0.8), angle))
     assert not st["reached"]
+
+
+def test_after_a_section_change_the_stretch_beyond_it_is_read_alone():
+    # case B's shape: an approach to 0.26 m and 33 deg, then a section change at 1.0 m and a new
+    # flat level (0.25 m, 32.9 deg) over the last 0.2 m, more than half a convergence length
+    L = np.linspace(0.0, 1.2, 1201)
+    after = L >= 1.0
+    H = np.where(after, 0.25, approach(L, 0.26, 0.04, 0.2))
+    angle = np.where(after, 32.9, approach(L, 33.5, 2.0, 0.2))
+    st = steady_state(history(L, H, angle))
+    assert st["reached"]
+    # the window halved twice (0.6, 0.3, 0.15 m) lies beyond the change: its asymptotes are the
+    # new levels exactly (flat data), and every value from the change on is within tolerance
+    assert st["fit_window_m"][0] >= 1.0
+    assert st["convergence_length_m"] == pytest.approx(0.25, abs=1e-9)
+    assert st["braid_angle_deg"]["warp"] == pytest.approx(32.9, abs=1e-9)
+    assert st["braided_length_m"] == pytest.approx(1.0, abs=1e-3)

@@ -143,20 +143,24 @@ def _steady_mark(ax, steady, length, columns, asymptotes, unit):
         if flat_after(ax, length, columns, start):
             ax.axvline(start, color="0.3", linestyle=":", linewidth=1.2, label=f"steady from {start:.2f} m")
         else:
-            ax.text(0.02, 0.03, f"within the steady tolerances from {start:.2f} m "
-                    "(still changing at this scale)", transform=ax.transAxes, color="0.3",
-                    fontsize=9, ha="left", va="bottom")
+            _note(ax, f"within the steady tolerances from {start:.2f} m (still changing at this scale)")
     else:
         heading = ", ".join(f"{value:.{2 if unit == 'deg' else 3}f}" for value in asymptotes.values())
-        note = "steady state not reached" + (f" (heading for {heading} {unit})" if fits and heading else "")
-        ax.text(0.02, 0.03, note, transform=ax.transAxes, color="0.3", fontsize=9, ha="left", va="bottom")
+        _note(ax, "steady state not reached" + (f": heading for {heading} {unit}" if heading else
+                                                 ": the curve approaches no one value"))
+
+
+def _note(ax, text):
+    ax.text(0.02, 0.97, text, transform=ax.transAxes, color="0.2", fontsize=9, ha="left", va="top",
+            bbox=dict(facecolor="white", edgecolor="none", alpha=0.8))
 
 
 def _asymptotes(steady, names):
     """{label: asymptote} of the fitted quantities ``names`` ({fit name: label}) of ``steady``."""
     fits = (steady or {}).get("fits") or {}
     out = {label: float(fits[name]["asymptote"]) for name, label in names.items()
-           if name in fits and np.isfinite(fits[name].get("asymptote", np.nan))}
+           if name in fits and fits[name].get("describes_run", True)
+           and np.isfinite(fits[name].get("asymptote", np.nan))}
     if len(set(round(v, 2) for v in out.values())) == 1 and len(out) > 1:
         out = {"/".join(out): next(iter(out.values()))}   # warp and weft alike: one line
     return out
@@ -217,7 +221,7 @@ def _finish(ax, result, length, columns, judged, reference, steady, asymptotes, 
     ax.set_ylabel(ylabel)
     ax.set_title(run_title(result, title))
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="best", fontsize=8)
 
 
 #: the deviation panel's floor, as a fraction of the tolerance (exact agreement drawn there)
@@ -233,9 +237,11 @@ def _deviation(fig, ax, length, series, steady, unit):
     ax.tick_params(labelbottom=False)
     dev.set_xlabel("braided length L (m)")
     fits = (steady or {}).get("fits") or {}
-    shown = [name for name in series if name in fits]
+    shown = [name for name in series if name in fits and fits[name].get("describes_run", True)]
     if not shown:
-        dev.text(0.5, 0.5, "no steady value to compare with (the run is too short to fit)",
+        why = ("the run is too short to fit" if not fits else
+               "the curve is no exponential approach to one value: a changing section, a bend")
+        dev.text(0.5, 0.5, f"no steady value to compare with ({why})",
                  transform=dev.transAxes, ha="center", va="center", color="0.3", fontsize=9)
         dev.set_yticks([])
         return
