@@ -60,6 +60,20 @@ def rounded_limits(lo: float, hi: float, zero: bool = False) -> tuple[float, flo
     return float(np.round(lo_r, digits + 1)), float(np.round(hi_r, digits + 1))
 
 
+def layer_panels(cell_data) -> tuple:
+    """The map's panels: PANELS for one layer; for a stack, the braid angle of every layer (a
+    panel each: ``layer<k>_braid_angle_deg``) and the stack's cover factor and thickness."""
+    k, angles = 2, []
+    while f"layer{k}_braid_angle_deg" in cell_data:
+        angles.append((f"layer{k}_braid_angle_deg", f"braid angle of layer {k} (deg)", 1.0))
+        k += 1
+    if not angles:
+        return PANELS
+    return (("braid_angle_deg", "braid angle of layer 1 (deg)", 1.0), *angles,
+            ("cover_factor", "cover factor of the stack (-)", 1.0),
+            ("thickness_m", "thickness of the stack (mm)", 1e3))
+
+
 def unrolled_coordinates(vertices, faces, centerline):
     """Per face, its three corners in the unrolled plane: (nf, 3, 2) (s in m, phi in deg).
 
@@ -160,6 +174,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
 
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
+    if panels is PANELS:
+        panels = layer_panels(data)
     reached = fields.reached()
     n = len(panels)
     fig = Figure(figsize=(WIDTH_IN, PANEL_IN * n), dpi=DPI)
@@ -183,9 +199,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         ax = fig.add_axes(rect, sharex=axes[0] if axes else None)
         axes.append(ax)
         values = np.asarray(data[name], dtype=float) * scale
-        shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
-        if name == "braid_angle_deg" and "layer2_braid_angle_deg" in data:
-            label = "braid angle of layer 1 (deg)"     # the stack's totals in the other panels
+        positive = name in POSITIVE_ONLY or name.endswith("_braid_angle_deg")
+        shown = reached & (values > 0) if positive else reached
         shape = (max(1, round(rect[3] * PANEL_IN * n * DPI)), max(1, round(rect[2] * WIDTH_IN * DPI)))
         if shape not in rasters:                  # panels of one size share one raster
             raster = face_raster(wrapped, extent, shape)

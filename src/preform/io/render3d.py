@@ -36,6 +36,34 @@ def view_axes(points):
     return centre, vt[0], vt[1], vt[2]
 
 
+def part_axes(points, centerline=None):
+    """(centre, long axis, across, third) of the part ``points`` (n, 3) show, for the views.
+
+    With a centerline, its stretch under the points gives the long axis (a short braid on a thick
+    part is wider than long, and a principal-component axis would then look at its end); on a
+    curved stretch ``third`` is the normal of its plane (the bend faces the viewer), on a
+    straight one the section's direction of least spread. Without one: :func:`view_axes`."""
+    centre, axis, across, third = view_axes(points)
+    if centerline is None or len(points) < 3:
+        return centre, axis, across, third
+    s = centerline.project(points)[0]
+    lo, hi = float(np.min(s)), float(np.max(s))
+    if not hi > lo:
+        return centre, axis, across, third
+    path = np.asarray(centerline.frames_at(np.linspace(lo, hi, 64))[0])
+    _, sv, vt = np.linalg.svd(path - path.mean(axis=0), full_matrices=False)
+    axis = vt[0]
+    if sv[1] > 1e-3 * sv[0]:              # curved: the plane of the bend faces the viewer
+        third = vt[2] - np.dot(vt[2], axis) * axis
+    else:                                 # straight: the section's least spread
+        rel = points - centre
+        rel = rel - np.outer(rel @ axis, axis)
+        third = np.linalg.svd(rel, full_matrices=False)[2][1]   # [2]: the axis, no spread left
+        third = third - np.dot(third, axis) * axis
+    third /= np.linalg.norm(third)
+    return centre, axis, np.cross(third, axis), third
+
+
 def _yarn_polylines(yarns, group):
     """The yarns of ``group`` as point blocks (each (k, 3), every ``stride``-th point and the
     last, at most ``MAX_POINTS_PER_YARN``), one per yarn with two points or more."""
@@ -146,7 +174,7 @@ def render_braided_mandrel(result, path, title: str) -> None:
     cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
     surface = pv.PolyData(_sunk(mandrel, result), cells)
     focus = laid if len(laid) >= 3 else np.asarray(mandrel.vertices, dtype=np.float64)
-    centre, axis, across, third = view_axes(focus)
+    centre, axis, across, third = part_axes(focus, result.centerline)
     along = (focus - centre) @ axis
     lo, hi = float(along.min()), float(along.max())
     spread = float(np.max(np.abs((focus - centre) @ across)))
@@ -271,7 +299,7 @@ def add_ruler(plotter, centerline, centre, view, up, half_w, half_h, s_range=Non
     s = np.arange(np.ceil(lo / step - 1e-9) * step, hi + 1e-9, step)
     points = np.asarray(centerline.frames_at(s)[0]) if len(s) else np.zeros((0, 3))
     x = (points - centre) @ right
-    keep = np.abs(x) <= 1.02 * half_w
+    keep = np.abs(x) <= _VIEW_MARGIN * half_w   # what the view shows
     s, x = s[keep], x[keep]
     base = centre - 1.15 * half_h * up
     if len(s) >= 2:

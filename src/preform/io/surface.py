@@ -148,14 +148,14 @@ class _SurfaceScene:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
         import pyvista as pv
 
-        from .render3d import add_ruler, tip_left, view_axes
+        from .render3d import add_ruler, part_axes, tip_left
 
         self.fields = fields
         self.vertices = np.asarray(fields.vertices, dtype=np.float64)
         self.faces = np.asarray(fields.faces, dtype=np.int64)
         reached = fields.reached()
         focus = self.vertices[np.unique(self.faces[reached])] if reached.any() else self.vertices
-        centre, _, across, third = view_axes(focus)
+        centre, _, across, third = part_axes(focus, centerline)
         front = (across + third) / np.sqrt(2.0)
         tip = np.asarray(centerline.frames_at(np.array([0.0]))[0])[0] if centerline is not None else None
         up = tip_left(centre, front, (third - across) / np.sqrt(2.0), tip)
