@@ -121,8 +121,10 @@ def steady_state(history, settings: SteadySettings = STEADY) -> dict:
     """The steady state of a run's history (``Result.history`` columns).
 
     Returns {"reached": bool, "definition": str, "fits": {"convergence_length_m", "warp",
-    "weft"} (each :func:`fit_asymptote`'s, with "tolerance" and "describes_run": whether its
-    residual is within half the tolerance; absent for a run too short to fit),
+    "weft"} (each :func:`fit_asymptote`'s, with "tolerance", "describes_run": whether its
+    residual is within half the tolerance, and "decays_in_window": whether its decay length is
+    within the fit window, so the asymptote is read from the run rather than extrapolated;
+    absent for a run too short to fit),
     and, if reached, "braided_length_m" (where it starts), "convergence_length_m" and
     "braid_angle_deg" {"warp", "weft"} (the asymptotes); if not, "drift":
     {"convergence_length_m_per_m", "braid_angle_warp_deg_per_m", "braid_angle_weft_deg_per_m"}
@@ -170,6 +172,8 @@ def _read(L, columns, end, settings):
         tol = settings.rel_H * abs(fit["asymptote"]) if name == "convergence_length_m" else settings.angle_deg
         fit["tolerance"] = tol
         fit["describes_run"] = bool(fit["rms"] <= 0.5 * tol)
+        # the asymptote is read, not extrapolated, where the transient decays inside the window
+        fit["decays_in_window"] = bool(fit["decay_length_m"] <= float(np.ptp(L[end])))
         fits[name] = fit
         described &= fit["describes_run"]
         ok &= np.abs(y - fit["asymptote"]) <= tol

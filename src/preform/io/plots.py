@@ -147,7 +147,7 @@ def _steady_mark(ax, steady, length, columns, asymptotes, unit):
     else:
         heading = ", ".join(f"{value:.{2 if unit == 'deg' else 3}f}" for value in asymptotes.values())
         _note(ax, "steady state not reached" + (f": heading for {heading} {unit}" if heading else
-                                                 ": the curve approaches no one value"))
+                                                 ": no value it approaches can be read yet"))
 
 
 def _note(ax, text):
@@ -155,12 +155,18 @@ def _note(ax, text):
             bbox=dict(facecolor="white", edgecolor="none", alpha=0.8))
 
 
+def _credible(fit) -> bool:
+    """Whether a steady-state fit names the value the run approaches: it describes the run and
+    its transient decays inside the fit window (else the asymptote is an extrapolation)."""
+    return bool(fit.get("describes_run", True) and fit.get("decays_in_window", True)
+                and np.isfinite(fit.get("asymptote", np.nan)))
+
+
 def _asymptotes(steady, names):
     """{label: asymptote} of the fitted quantities ``names`` ({fit name: label}) of ``steady``."""
     fits = (steady or {}).get("fits") or {}
     out = {label: float(fits[name]["asymptote"]) for name, label in names.items()
-           if name in fits and fits[name].get("describes_run", True)
-           and np.isfinite(fits[name].get("asymptote", np.nan))}
+           if name in fits and _credible(fits[name])}
     if len(set(round(v, 2) for v in out.values())) == 1 and len(out) > 1:
         out = {"/".join(out): next(iter(out.values()))}   # warp and weft alike: one line
     return out
@@ -170,12 +176,33 @@ def _layer_label(k):
     return f"layer {k}"
 
 
+def layer_length(layer):
+    """(x (steps,) m, note): where a layer's fell points are, as arc length from the tip (layer
+    1's braided length): a layer braided ``backward`` counts its braided length from the far
+    end along its reversed centerline, so it is drawn at ``length - L``."""
+    L = _column(layer, "braided_length_m")
+    config = layer.config
+    if (config is not None and getattr(config, "layers", ()) and config.layers[-1].direction == "backward"
+            and layer.centerline is not None):
+        return float(layer.centerline.length) - L, ", braided from the far end"
+    return L, ""
+
+
+def _layer_xlim(ax, layers):
+    """Widen the x axis to the layers' extents (they may lie beyond layer 1's braid)."""
+    ends = [float(np.max(layer_length(layer)[0])) for layer in layers if layer.steps]
+    if ends:
+        lo, hi = ax.get_xlim()
+        ax.set_xlim(lo, max(hi, 1.02 * max(ends)))
+
+
 def braid_angle_figure(result, refs=None, steady=None, layers=()) -> Figure:
     """Warp and weft braid angle (deg) against braided length (m), the spread round the section
     (least to largest angle over the yarns, a band), Ko's angle (``refs``, a
     :class:`preform.reference.References`), the asymptote and start of steady state
     (``steady``), and the mean angle of each layer above the first (``layers``: their Results)."""
     fig = _figure(figsize=HISTORY_SIZE)
+    fig.layered = bool(layers)
     ax = fig.add_axes(HISTORY_MAIN)
     length = _column(result, "braided_length_m")
     warp, weft = _column(result, "braid_angle_warp_deg"), _column(result, "braid_angle_weft_deg")
@@ -192,16 +219,17 @@ def braid_angle_figure(result, refs=None, steady=None, layers=()) -> Figure:
     for k, layer in enumerate(layers, start=2):
         if not layer.steps:
             continue
-        L_k = _column(layer, "braided_length_m")
+        L_k, note = layer_length(layer)
         mean = 0.5 * (_column(layer, "braid_angle_warp_deg") + _column(layer, "braid_angle_weft_deg"))
         ax.plot(L_k, mean, color=LAYER_COLOURS[(k - 2) % len(LAYER_COLOURS)],
-                label=f"{_layer_label(k)} (warp and weft mean)")
+                label=f"{_layer_label(k)} (warp and weft mean{note})")
         columns.append(mean)
     ko = None if refs is None else (refs.ko_deg, refs.s, "Ko (quasi-static)")
     _finish(ax, result, length, columns, [warp, weft], ko, steady,
             _asymptotes(steady, {"warp": "warp", "weft": "weft"}), "deg", "braid angle α (deg)",
             "Braid angle at the fell points")
     _deviation(fig, ax, length, {"warp": warp, "weft": weft}, steady, "deg")
+    _layer_xlim(ax, layers)
     return fig
 
 
@@ -235,13 +263,15 @@ def _deviation(fig, ax, length, series, steady, unit):
     dev = fig.add_axes(HISTORY_DEV, sharex=ax)
     fig.deviation_axes = dev
     ax.tick_params(labelbottom=False)
-    dev.set_xlabel("braided length L (m)")
+    dev.set_xlabel("braided length L (m)" if not fig.layered else
+                   "arc length from the tip (m): layer 1's braided length L")
     fits = (steady or {}).get("fits") or {}
-    shown = [name for name in series if name in fits and fits[name].get("describes_run", True)]
+    shown = [name for name in series if name in fits and _credible(fits[name])]
     if not shown:
         why = ("the run is too short to fit" if not fits else
-               "the curve is no exponential approach to one value: a changing section, a bend")
-        dev.text(0.5, 0.5, f"no steady value to compare with ({why})",
+               "its later half shows no exponential approach to one value\n(still changing "
+               "slowly, a changing section, a bend)")
+        dev.text(0.5, 0.5, f"no steady value to compare with: {why}",
                  transform=dev.transAxes, ha="center", va="center", color="0.3", fontsize=9)
         dev.set_yticks([])
         return
@@ -273,6 +303,7 @@ def convergence_length_figure(result, refs=None, steady=None, layers=()) -> Figu
     with the kinematic steady value H_inf (``refs``), the asymptote and start of steady state,
     and the mean of each layer above the first (``layers``)."""
     fig = _figure(figsize=HISTORY_SIZE)
+    fig.layered = bool(layers)
     ax = fig.add_axes(HISTORY_MAIN)
     length = _column(result, "braided_length_m")
     lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")
@@ -289,14 +320,16 @@ def convergence_length_figure(result, refs=None, steady=None, layers=()) -> Figu
     for k, layer in enumerate(layers, start=2):
         if not layer.steps:
             continue
-        ax.plot(_column(layer, "braided_length_m"), _column(layer, "convergence_length_mean_m"),
-                color=LAYER_COLOURS[(k - 2) % len(LAYER_COLOURS)], label=f"{_layer_label(k)} mean")
+        L_k, note = layer_length(layer)
+        ax.plot(L_k, _column(layer, "convergence_length_mean_m"),
+                color=LAYER_COLOURS[(k - 2) % len(LAYER_COLOURS)], label=f"{_layer_label(k)} mean{note}")
         columns.append(_column(layer, "convergence_length_mean_m"))
     h_inf = None if refs is None else (refs.h_inf, refs.s, "H∞ (kinematic, quasi-static)")
     _finish(ax, result, length, columns, [mean], h_inf, steady,
             _asymptotes(steady, {"convergence_length_m": "H"}), "m", "convergence length H (m)",
             "Convergence zone length")
     _deviation(fig, ax, length, {"convergence_length_m": mean}, steady, "m")
+    _layer_xlim(ax, layers)
     return fig
 
 
