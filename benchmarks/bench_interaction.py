@@ -273,7 +273,7 @@ def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
             T.wrap(stepping.Stepper, "run", "loop"),
             T.wrap(InteractionZone, "step", "step", "step", inside="step"),
             T.wrap(InteractionZone, "snapshot", "snapshot", "snapshot", inside="snapshot")]
-    # the zone takes its solver from ``relax.solve_zone`` when it is built (``solver_of``)
+    # the zone takes its solver from ``relax.solve_zone`` when it is built (``zone.solver_of``)
     relax.solve_zone = solve
     frontal.solve_zone_inplace = newton_timed
     try:

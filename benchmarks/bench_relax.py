@@ -89,7 +89,7 @@ def run_end_to_end(config, out):
         if k.get("mode", "step") == "step":
             reports.append(report)
         return report
-    # the zone takes its solver from ``relax.solve_zone`` when it is built (``make_zone``)
+    # the zone takes its solver from ``relax.solve_zone`` when it is built (``zone.solver_of``)
     R.solve_zone = recorded
     try:
         t0 = time.perf_counter()

@@ -42,7 +42,8 @@ def stepped(cfg, steps):
     from preform.interaction.model import InteractionZone
     from preform.machine import Machine
     from preform.reference import resolve_pose_lead
-    from preform.simulation import load_geometry, solver_of
+    from preform.simulation import load_geometry
+    from preform.zone import solver_of
     from preform.stepping import Stepper, take_up_speed
 
     mandrel, cl = load_geometry(cfg)

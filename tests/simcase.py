@@ -120,12 +120,14 @@ def advanced_stepper(cfg, steps, settings=None):
     """(stepper, take-up speed function) of ``cfg`` (its pose lead resolved) after ``steps``
     steps; ``settings``: the interaction model's (None: its defaults)."""
     from preform.reference import resolve_pose_lead
+    from preform.settings import Settings
     from preform.simulation import load_geometry, make_stepper
     from preform.stepping import take_up_speed
 
     mandrel, cl = load_geometry(cfg)
     cfg = resolve_pose_lead(cfg, mandrel, cl)
-    s = make_stepper(cfg, mandrel, cl, settings=settings)
+    s = make_stepper(cfg, mandrel, cl,
+                     settings=None if settings is None else Settings(interaction=settings))
     return advance(s, cfg, steps)
 
 

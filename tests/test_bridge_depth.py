@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from preform import simulate
+from preform import Settings, simulate
 from preform.geometry import load_mandrel, shapes
 from preform.geometry.offset import offset_surface, refined_surface
 from preform.result import FLAG_BRIDGE
@@ -38,8 +38,8 @@ def offset_runs(tmp_path_factory):
         mandrel=dataclasses.replace(cfg.mandrel, stl=stl, centerline="auto"),
         machine=dataclasses.replace(cfg.machine, carriers=32),
         process=dataclasses.replace(cfg.process, braid_length=0.4))
-    every = simulate(cfg, progress=False,
-                     tolerances=dataclasses.replace(tol, bridge_depth_thickness=0.0))
+    every = simulate(cfg, progress=False, settings=Settings(
+        tolerances=dataclasses.replace(tol, bridge_depth_thickness=0.0)))
     deep = simulate(cfg, progress=False)
     return cfg, every, deep
 

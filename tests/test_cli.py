@@ -183,7 +183,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
              "mandrel": types.SimpleNamespace(repairs=("filled 1 small hole",))}
 
     def simulate(cfg, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
-                 keep_checkpoint=False):
+                 keep_checkpoint=False, settings=None):
         state["progress"] = progress
         return dataclasses.replace(small_result, config=cfg, status=state["status"],
                                    message="" if state["status"] == "done" else "stopped")
@@ -203,7 +203,7 @@ def stubbed_run(small_result, tmp_path, monkeypatch):
 
     # the pipeline loads the geometry and the field mesh through the cache (io.cache)
     monkeypatch.setattr(preform.pipeline, "load_geometry", lambda cfg: (state["mandrel"], "centerline"))
-    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result: None)
+    monkeypatch.setattr(preform.io.cache, "cached_field_mesh", lambda result, remesh=None: None)
 
     # the placeholder mandrel has no geometry to estimate the work or the references from
     monkeypatch.setattr(preform.pipeline, "estimate", lambda *a, **k: WorkEstimate(1, 1, 1))

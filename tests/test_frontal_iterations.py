@@ -9,8 +9,6 @@ the relaxation as for Newton.
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import pytest
 
@@ -29,20 +27,17 @@ def _config(tmp_path, iterations, solver="relax"):
 
 
 def test_make_zone_passes_the_iterations_to_the_solver(tmp_path):
-    """The zone's settings carry the iterations; with more than one the relaxation retries a
-    stalled block step with the "full" preconditioner (``RelaxSettings.full_retry``) before
-    Newton; with one the zone is as before (default settings, the plain solver)."""
+    """The zone's settings carry the iterations, and its solver is the relaxation itself; its
+    retry of a stalled block step with the "full" preconditioner before Newton
+    (``RelaxSettings.full_retry``) is left to the solver (None: on exactly when a step takes
+    more than one frontal iteration)."""
     for iterations in (1, 3):
         cfg = _config(tmp_path, iterations)
         mandrel, _ = load_geometry(cfg)
         zone = make_zone(cfg, Machine.from_config(cfg.machine), mandrel)
         assert zone.settings.frontal.max_iterations == iterations
-        if iterations == 1:
-            assert zone.solve_zone is relax.solve_zone
-        else:
-            assert isinstance(zone.solve_zone, functools.partial)
-            assert zone.solve_zone.func is relax.solve_zone
-            assert zone.solve_zone.keywords["relax_settings"].full_retry
+        assert zone.solve_zone is relax.solve_zone
+        assert zone.settings.relax.full_retry is None
 
 
 @pytest.fixture(scope="module")

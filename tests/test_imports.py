@@ -167,20 +167,24 @@ def test_the_function_simulate_is_not_shadowed_by_a_module():
 
 def test_both_zones_implement_the_zone_protocol():
     """The kinematic and the interaction zone have every method of ``preform.zone.Zone`` with
-    its parameters, and ``simulation.ZONES`` maps both model kinds."""
+    its parameters (the class methods that build a zone and give its time step as class
+    methods), and ``zone.ZONES`` maps both model kinds."""
     import inspect
 
     from preform.config import MODEL_KINDS
-    from preform.simulation import ZONES, zone_class
-    from preform.zone import Zone
+    from preform.zone import ZONES, Zone, zone_class
 
     assert sorted(ZONES) == sorted(MODEL_KINDS)
     methods = [name for name, _ in inspect.getmembers(Zone, inspect.isfunction) if not name.startswith("_")]
     assert sorted(methods) == ["export_state", "import_state", "snapshot", "start", "step"]
+    builders = [name for name, _ in inspect.getmembers(Zone, inspect.ismethod) if not name.startswith("_")]
+    assert sorted(builders) == ["default_time_step", "for_run"]
     for cls in map(zone_class, ZONES):
-        for name in methods:
+        for name in methods + builders:
             want = list(inspect.signature(getattr(Zone, name)).parameters)
             assert list(inspect.signature(getattr(cls, name)).parameters) == want, (cls, name)
+        for name in builders:
+            assert inspect.ismethod(getattr(cls, name)), (cls, name)
 
 
 def test_a_kinematic_run_does_not_load_the_interaction_model(tmp_path):

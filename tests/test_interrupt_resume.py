@@ -112,6 +112,7 @@ def test_a_checkpoint_keeps_its_time_step(tmp_path):
     from preform.checkpoint import Checkpoint
     from preform.config import load_config
     from preform.simulation import load_geometry, make_stepper
+    from preform.settings import Settings
     from preform.tolerances import tol
 
     cfg = load_config(_case(tmp_path, "kept"))
@@ -121,7 +122,7 @@ def test_a_checkpoint_keeps_its_time_step(tmp_path):
     checkpoint = Checkpoint(tmp_path / "checkpoint.npz", cfg)
     checkpoint.save(first.state_arrays())
     finer = dataclasses.replace(tol, max_carrier_rotation=tol.max_carrier_rotation / 3.0)
-    second = make_stepper(cfg, mandrel, centerline, tolerances=finer)
+    second = make_stepper(cfg, mandrel, centerline, settings=Settings(tolerances=finer))
     assert second.dt < 0.5 * first.dt and second.snapshot_stride != first.snapshot_stride
     second.restore(checkpoint.load())
     assert second.dt == first.dt and second.snapshot_stride == first.snapshot_stride

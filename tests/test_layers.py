@@ -459,11 +459,13 @@ def test_a_backward_layer_is_braided_from_the_far_end_at_kos_angle_there(tmp_pat
 def test_a_layer_whose_surface_folds_ends_the_run_with_the_layers_below_written(tmp_path):
     from preform.geometry.offset import OffsetSettings
     from preform.pipeline import run_layers
+    from preform.settings import Settings
 
     # a fold criterion no offset can meet (any turn at all), and no repair
     strict = OffsetSettings(max_turn_deg=1e-6, repair_passes=0)
     out = tmp_path / "out"
-    outcome = run_layers(load_config(write_case(tmp_path, TWO_LAYERS)), out, offset_settings=strict)
+    outcome = run_layers(load_config(write_case(tmp_path, TWO_LAYERS)), out,
+                         settings=Settings(offset=strict))
     summary = json.loads((out / "summary.json").read_text())
     assert outcome.status == summary["status"] == "failed"
     assert summary["message"].startswith("layer 2 cannot be braided on the layers below")

@@ -42,7 +42,7 @@ def test_a_step_that_cannot_converge_fails_the_run_and_keeps_its_results(tmp_pat
     cfg = _cylinder_interaction(tmp_path)
     strict = dataclasses.replace(DEFAULT, zone=dataclasses.replace(DEFAULT.zone,
                                                                    max_step_residual=1e-12))
-    res = pf.simulate(cfg, progress=False, settings=strict)
+    res = pf.simulate(cfg, progress=False, settings=pf.Settings(interaction=strict))
     assert res.status == "failed"
     assert "did not converge at step" in res.message and "residual" in res.message
     assert "likely cause:" in res.message
@@ -63,7 +63,7 @@ def test_a_slack_yarn_fails_the_step(tmp_path):
     tensions fall below it by Capstan friction): the step stops as a slack yarn, named."""
     cfg = _cylinder_interaction(tmp_path)
     slack = dataclasses.replace(DEFAULT, zone=dataclasses.replace(DEFAULT.zone, slack_tension=1.0))
-    res = pf.simulate(cfg, progress=False, settings=slack)
+    res = pf.simulate(cfg, progress=False, settings=pf.Settings(interaction=slack))
     assert res.status == "failed"
     assert "slack yarn" in res.message and "yarn" in res.message and "likely cause:" in res.message
 

@@ -2,8 +2,8 @@
 
 ``import preform`` is light: reading and checking a config needs only the standard library and
 NumPy. The names that need numba, SciPy, trimesh or pyvista (``simulate``, ``map_to_surface``,
-``write_results``, ``SurfaceFields``, ``Mandrel``, ...) load their module on first use (a module
-``__getattr__``, PEP 562) and are the functions and types themselves, with their own signatures.
+``write_results``, ``SurfaceFields``, ``Mandrel``, ``Settings``, ...) load their module on first
+use (a module ``__getattr__``, PEP 562) and are the functions and types themselves, with their own signatures.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from .tolerances import Tolerances, tol
 
 #: the public names imported on first use (``__getattr__``)
 _LAZY = ("simulate", "map_to_surface", "SurfaceFields", "write_results", "load_mandrel", "Mandrel",
-         "Centerline", "CheckpointError", "sweep", "design_speed")
+         "Centerline", "CheckpointError", "sweep", "design_speed", "Settings")
 
 
 def __getattr__(name):
@@ -37,6 +37,8 @@ def __getattr__(name):
         from .sweeps import sweep as value
     elif name == "design_speed":
         from .design import design_speed as value
+    elif name == "Settings":   # the numerical settings' tree: imports every stage's settings
+        from .settings import Settings as value
     else:
         raise AttributeError(f"module 'preform' has no attribute {name!r}")
     globals()[name] = value
@@ -63,6 +65,7 @@ __all__ = [
     "SurfaceFields",
     "Mandrel",
     "Centerline",
+    "Settings",
     "Tolerances",
     "tol",
     "PreformError",

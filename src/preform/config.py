@@ -20,6 +20,8 @@ from pathlib import Path
 
 from .errors import ConfigError
 from .machine import PATTERN_M, carrier_count_problem
+from .zone import SOLVERS as ZONE_SOLVERS
+from .zone import ZONES
 from .structural.materials import CONSTANTS as MATERIAL_CONSTANTS
 from .structural.materials import PRESETS as MATERIAL_PRESETS
 from .structural.materials import FibreMatrix, stiffness_problem
@@ -55,7 +57,7 @@ class MachineConfig:
     @property
     def pattern_m(self) -> int:
         """Crossings over (and under) in a row: 1 diamond, 2 regular, 3 hercules."""
-        return {"diamond": 1, "regular": 2, "hercules": 3}[self.pattern]
+        return PATTERN_M[self.pattern]
 
 
 @dataclass(frozen=True)
@@ -243,9 +245,9 @@ REQUIRED_SECTIONS = ("mandrel", "machine", "yarn", "process")
 
 STL_UNITS = ("m", "mm")
 PATTERNS = tuple(PATTERN_M)  # "diamond", "regular", "hercules"
-MODEL_KINDS = ("kinematic", "interaction")
+MODEL_KINDS = tuple(ZONES)  # "kinematic", "interaction"
 STARTS = ("tip", "random")
-SOLVERS = ("newton", "relax")
+SOLVERS = tuple(ZONE_SOLVERS)  # "newton", "relax"
 
 #: coefficients of friction must lie in [0, MAX_FRICTION)
 MAX_FRICTION = 2.0

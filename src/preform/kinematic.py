@@ -183,6 +183,19 @@ class KinematicZone:
         # Machine.supply_points's factors, formed once: azimuth phase0 + (direction omega) t
         self._rate = machine.direction() * machine.omega
 
+    @classmethod
+    def for_run(cls, config, machine, mandrel, settings=None):
+        """The zone of a run (``Zone.for_run``): the kinematic model has no settings of its own."""
+        return cls(config, machine, mandrel)
+
+    @classmethod
+    def default_time_step(cls, machine, per_width, tolerances):
+        """The fell points' equation of motion is integrated to second order in the step: bound
+        the carrier rotation and the fell-point advance per step,
+        ``min(max_carrier_rotation / omega, max_fell_advance * per_width)``."""
+        return min(tolerances.max_carrier_rotation / machine.omega,
+                   tolerances.max_fell_advance * per_width)
+
     def start(self, t, F_machine, pose):
         """Called once with the tie points (machine frame) and the mandrel pose at time t."""
 

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PreformError
+from .settings import resolved
 
 #: the state of a running simulation, saved periodically and on a stop, removed once the results
 #: are written
@@ -56,11 +57,12 @@ class CaseOutcome:
         return self.result.status
 
 
-def checked_geometry(config):
+def checked_geometry(config, settings=None):
     """(mandrel, centerline, notes): the geometry of ``config`` after the pre-flight checks.
 
     Impossible set-ups raise PreformError; the mandrel's repairs, the doubtful points and the
     quasi-static references (Ko, H_inf, whether the braid can settle) come back as notes.
+    settings : ``preform.Settings`` (None: the defaults), for the work estimate's time step
     """
     from .checks import preflight
 
@@ -71,7 +73,7 @@ def checked_geometry(config):
     if config.model.kind == "interaction" and not config.layers:
         # the model's cost for this run (the work estimate's steps), before it starts; the
         # estimate's limits are checked where the run is set up (``run_case``)
-        line = estimate(config, mandrel, centerline, force=True).model_line()
+        line = estimate(config, mandrel, centerline, force=True, settings=settings).model_line()
         notes += [f"note: {line}"] if line else []
     return mandrel, centerline, notes
 
@@ -99,22 +101,24 @@ def reference_lines(config, mandrel, centerline) -> list[str]:
     return check_lines(config, references(config, s[ok], perimeter[ok]))
 
 
-def estimate(config, mandrel, centerline, *, force=False):
-    """The work estimate of a run (``preform.budget``), refused beyond its limits unless ``force``."""
+def estimate(config, mandrel, centerline, *, force=False, settings=None):
+    """The work estimate of a run (``preform.budget``), refused beyond its limits
+    (``settings.limits``; None: the defaults) unless ``force``."""
     from .budget import check_work, estimate_work
     from .machine import Machine
     from .reference import end_convergence_length, resolve_pose_lead
     from .stepping import default_time_step
 
+    settings = resolved(settings)
     config = resolve_pose_lead(config, mandrel, centerline)
     dt = config.model.time_step or default_time_step(config, Machine.from_config(config.machine),
-                                                     mandrel, centerline)
+                                                     mandrel, centerline, settings.tolerances)
     tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
     area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
     distance = centerline.project(mandrel.vertices)[1]
     work = estimate_work(config, area, dt, end_convergence_length(config, float(np.median(distance))))
     max_radius = float(np.max(distance))
-    check_work(config, work, max_radius, force=force)
+    check_work(config, work, max_radius, force=force, limits=settings.limits)
     return work
 
 
@@ -197,7 +201,8 @@ def with_rtm_fields(result, fields):
 
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None, background_pictures=False, startup_s=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None,
+             settings=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir`` (see module docstring).
 
     geometry : (mandrel, centerline, notes) already checked, or None to load and check here.
@@ -212,6 +217,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         the wait for the worker). Embree is not used in the worker (it only renders).
     startup_s : seconds from the process's start to ``started`` (the interpreter and the imports),
         listed as the stage ``start`` when given
+    settings : the numerical settings of every stage (``preform.Settings``; None: the defaults)
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoint is kept).
     """
@@ -225,13 +231,15 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     import time
 
     t0 = time.perf_counter() if started is None else started
+    settings = resolved(settings)
     if config.layers:
         return run_layers(config, out_dir, progress=progress, resume=resume, force=force,
                           geometry=geometry, started=t0, background_pictures=background_pictures,
-                          startup_s=startup_s)
+                          startup_s=startup_s, settings=settings)
     out_dir = Path(out_dir)
-    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config)
-    work = estimate(config, mandrel, centerline, force=force)
+    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(config,
+                                                                                         settings)
+    work = estimate(config, mandrel, centerline, force=force, settings=settings)
     notes = [*notes, *(f"note: {line}" for line in work.lines())]
     check_results_folder(out_dir, work.result_bytes)
     checkpoint = out_dir / CHECKPOINT
@@ -242,7 +250,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         warmup = start_kernel_warmup(config) if background_pictures else None
         try:
             result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
-                              checkpoint=checkpoint, resume=resume, keep_checkpoint=True)
+                              checkpoint=checkpoint, resume=resume, keep_checkpoint=True,
+                              settings=settings)
         except BaseException:
             if warmup is not None:
                 warmup.stop()
@@ -254,7 +263,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         pictures = start_pictures(result, out_dir) if background_pictures else None
         try:
             # the field mesh depends only on the mandrel and the settings: kept in the cache
-            fields = map_to_surface(result, mesh=cached_field_mesh(result)) if len(result.yarns.points) else None
+            fields = map_to_surface(result, mesh=cached_field_mesh(result, remesh=settings.remesh)) \
+                if len(result.yarns.points) else None
             fields = with_rtm_fields(result, fields)
         except BaseException:
             if pictures is not None:
@@ -263,7 +273,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         stages["map"] = time.perf_counter() - t
         try:
             written = write_results(result, fields, out_dir, stages=stages, background=background_pictures,
-                                    pictures=pictures)
+                                    pictures=pictures, settings=settings)
         except OSError as err:
             raise ResultsWriteError(
                 f"cannot write the results to {out_dir} ({err.strerror or err}); the simulation "
@@ -343,11 +353,12 @@ class LayerStack:
         return mandrel_from_arrays(moved, self.base_faces, source=source), report
 
 
-def check_layers(config, mandrel, centerline, notes=(), *, force=False):
+def check_layers(config, mandrel, centerline, notes=(), *, force=False, settings=None):
     """(notes, estimated result bytes) of every layer of ``config`` against the mandrel, before
     any runs: impossible set-ups raise (PreformError), work beyond the limits is refused unless
     ``force``; ``notes`` are the geometry check's, whose warnings are not repeated. Each layer's
-    Ko / H_inf notes are the mandrel's (the layer lies further out by the layers below it)."""
+    Ko / H_inf notes are the mandrel's (the layer lies further out by the layers below it).
+    ``settings``: ``preform.Settings`` (None: the defaults) for the work estimates."""
     from .checks import preflight
 
     notes = list(notes)
@@ -359,15 +370,15 @@ def check_layers(config, mandrel, centerline, notes=(), *, force=False):
                   if (line := f"warning: layer {k}: {w}") not in notes and f"warning: {w}" not in notes]
         if k > 1:
             notes += [f"note: layer {k}: {line}" for line in reference_lines(cfg, mandrel, cl)]
-        work = estimate(cfg, mandrel, cl, force=force)
+        work = estimate(cfg, mandrel, cl, force=force, settings=settings)
         notes += [f"note: layer {k}: {line}" for line in work.lines()]
         result_bytes += work.result_bytes
     return notes, result_bytes
 
 
 def run_layers(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-               started=None, offset_settings=None, background_pictures=False,
-               startup_s=None) -> CaseOutcome:
+               started=None, background_pictures=False, startup_s=None,
+               settings=None) -> CaseOutcome:
     """:func:`run_case` for a config with ``[[layer]]`` tables: each layer is braided in turn,
     from the mandrel outwards, on the mandrel offset by the thickness of the layers below.
 
@@ -380,7 +391,7 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     those of layer k >= 2; the surface files hold every layer's fields (``layer{k}_*``) and the
     stacked totals (``preform.fields.stack_layers``, ``preform.rtm.stacked_rtm_fields``);
     ``summary.json`` ``layers`` has one entry per layer.
-    offset_settings : preform.geometry.offset.OffsetSettings (None: the defaults)
+    settings : ``preform.Settings`` (None: the defaults); its ``offset`` for the layers' surfaces
     """
     import dataclasses
     import time
@@ -388,21 +399,22 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
     from .checks import preflight
     from .checkpoint import Checkpoint
     from .fields import map_to_surface
-    from .geometry.offset import OffsetSettings
     from .io import write_results
     from .io.cache import cached_field_mesh
     from .io.folder import RunLock, check_results_folder
     from .simulation import simulate
 
     t0 = time.perf_counter() if started is None else started
+    settings = resolved(settings)
     out_dir = Path(out_dir)
     configs = [config.layer_config(k) for k in range(len(config.layers))]
-    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(configs[0])
+    mandrel, centerline, notes = geometry if geometry is not None else checked_geometry(configs[0],
+                                                                                         settings)
     lines = [layer_centerline(centerline, layer.direction, config.mandrel.roll_reference)
              for layer in config.layers]
-    notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force)
+    notes, result_bytes = check_layers(config, mandrel, centerline, notes, force=force,
+                                       settings=settings)
     check_results_folder(out_dir, result_bytes)
-    settings = offset_settings or OffsetSettings()
     stages = {} if startup_s is None else {"start": float(startup_s)}
     stages["load_and_check"] = time.perf_counter() - t0
     with RunLock(out_dir):
@@ -420,7 +432,8 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             t = time.perf_counter()
             ckpt = out_dir / LAYER_CHECKPOINT.format(k=k)
             result = simulate(cfg, progress=progress, mandrel=surface, centerline=cl, checkpoint=ckpt,
-                              resume=resume and ckpt.exists(), keep_checkpoint=True)
+                              resume=resume and ckpt.exists(), keep_checkpoint=True,
+                              settings=settings)
             stages[f"simulate_layer{k}"], t = time.perf_counter() - t, time.perf_counter()
             results.append(result)
             if result.status != "done" or not len(result.yarns.points):
@@ -428,15 +441,16 @@ def run_layers(config, out_dir, *, progress=False, resume=False, force=False, ge
             # every layer's angles are measured against the mandrel's centerline, forwards
             on_mandrel = dataclasses.replace(result, centerline=centerline)
             if stack is None:
-                stack = LayerStack.start(mandrel, cached_field_mesh(on_mandrel), settings)
+                stack = LayerStack.start(mandrel, cached_field_mesh(on_mandrel, remesh=settings.remesh),
+                                         settings.offset)
             layer_fields.append(map_to_surface(on_mandrel, mesh=stack.layer_mesh()))
             stages[f"map_layer{k}"] = time.perf_counter() - t
         fields = _stacked_fields(configs, layer_fields, centerline, config.rtm.cavity_thickness)
         top = _top_result(config, configs, results, refused)
-        entries = [layer_summary(k, cfg.layers[-1], r, f, o) for k, (cfg, r, f, o)
+        entries = [layer_summary(k, cfg.layers[-1], r, f, o, settings) for k, (cfg, r, f, o)
                    in enumerate(zip(configs, results, [*layer_fields, None], offsets), start=1)]
         try:
-            written = write_results(top, fields, out_dir, stages=stages, layers=entries,
+            written = write_results(top, fields, out_dir, stages=stages, layers=entries, settings=settings,
                                     layer_results=results[1:], background=background_pictures)
         except OSError as err:
             raise ResultsWriteError(
@@ -486,14 +500,17 @@ def _top_result(config, configs, results, refused=""):
                                stop_signal=last.stop_signal)
 
 
-def layer_summary(k, layer, result, fields, offset) -> dict:
+def layer_summary(k, layer, result, fields, offset, settings=None) -> dict:
     """summary.json's entry for layer k (from 1): its process figures and quality verdict (its
-    history, yarns and fields, located on its own centerline), its fields' means over the faces
-    it reached, and for k >= 2 the offset surface it was braided on."""
+    history, yarns and fields, located on its own centerline; ``settings``: ``preform.Settings``,
+    None: the defaults), its fields' means over the faces it reached, and for k >= 2 the offset
+    surface it was braided on."""
     from .io.tables import summary_dict
     from .quality import surface_reasons
 
-    s = summary_dict(result, {"quality_reasons": surface_reasons(result, fields)})
+    settings = resolved(settings)
+    s = summary_dict(result, {"quality_reasons": surface_reasons(result, fields, settings.quality)},
+                     settings=settings)
     entry = {"layer": k, "direction": layer.direction, "model": s["model"], "status": s["status"],
              "message": s["message"], "steps": s["steps"], "wall_time_s": s["wall_time_s"],
              "braided_length_m": s["braided_length_m"], "braid_angle_deg": s["braid_angle_deg"],

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .interlacing import INTERLACING, InterlacingSettings
 from .result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
 
 
@@ -153,14 +154,14 @@ def fell_jump_reasons(history, take_up_speed, settings: QualitySettings = QUALIT
             f"in one step ({jump[k]:.3g}x, at t = {t[k + 1]:.4g} s)"]
 
 
-def run_interlacing(result):
+def run_interlacing(result, settings: InterlacingSettings = INTERLACING):
     """``preform.interlacing.interlacing`` of a run's laid yarns (None without yarns or a
     centerline)."""
     from .interlacing import interlacing
 
     if result.centerline is None or not len(result.yarns.points):
         return None
-    return interlacing(result.yarns, result.centerline)
+    return interlacing(result.yarns, result.centerline, settings=settings)
 
 
 def interlacing_reasons(il, settings: QualitySettings = QUALITY) -> list[str]:

@@ -5,13 +5,13 @@ and checkpoints (docs/architecture.md §4).
 steps the process (``preform.stepping``) until ``braid_length`` of centerline is braided. It
 returns a :class:`preform.result.Result`; an interrupted (Ctrl-C) or failed run returns what it
 computed up to the last good step, with ``status`` saying so. The model is chosen here, once:
-``ZONES`` maps ``[model] kind`` to its zone class (``preform.zone.Zone``).
+``zone.ZONES`` maps ``[model] kind`` to its zone class (``preform.zone.Zone``), which builds
+itself from the config and the run's settings (``preform.Settings``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import signal
 import sys
 import threading
@@ -25,39 +25,19 @@ from .machine import Machine
 from .reference import resolve_pose_lead
 from .result import Result
 from .stepping import Stepper
-from .tolerances import Tolerances, tol
-
-#: ``[model] kind`` -> (module, class) of that model's zone, built as ``cls(config, machine,
-#: mandrel)``; imported on first use, so that a kinematic run does not load the interaction model
-ZONES = {"kinematic": ("preform.kinematic", "KinematicZone"),
-         "interaction": ("preform.interaction.model", "InteractionZone")}
-#: ``[model] solver`` -> (module, function) of the interaction zone's solver of a step
-#: (``InteractionZone(solve_zone=)``); None: the zone's default, Newton's
-#: ``frontal.solve_zone_inplace``
-SOLVERS = {"newton": None, "relax": ("preform.interaction.relax", "solve_zone")}
+from .tolerances import tol
+from .zone import zone_class
 
 
-def _named(where):
-    import importlib
-
-    return None if where is None else getattr(importlib.import_module(where[0]), where[1])
-
-
-def zone_class(kind):
-    """The zone class of ``[model] kind`` (``ZONES``)."""
-    try:
-        return _named(ZONES[kind])
-    except KeyError:
-        raise ConfigError(f"[model] kind = {kind!r}: expected one of "
-                          f"{', '.join(map(repr, ZONES))}") from None
-
-
-def solver_of(name):
-    """The step solver of ``[model] solver`` (``SOLVERS``; None: the zone's default)."""
-    if name not in SOLVERS:
-        raise ConfigError(f"[model] solver = {name!r}: expected one of "
-                          f"{', '.join(map(repr, SOLVERS))}")
-    return _named(SOLVERS[name])
+def _checked_settings(settings):
+    """``settings`` if it is a settings tree (``preform.Settings``) or None, else TypeError
+    naming what was given (the tree is read by attribute here: it gathers the classes of the
+    layers above)."""
+    if settings is None or all(hasattr(settings, name) for name in ("tolerances", "interaction")):
+        return settings
+    raise TypeError(f"settings = {type(settings).__name__}(...): expected a preform.Settings, "
+                    "the tree of every numerical setting; give a branch as "
+                    "preform.Settings(interaction=...) or preform.Settings(tolerances=...)")
 
 
 def load_geometry(config, load_mandrel=None):
@@ -76,44 +56,26 @@ def load_geometry(config, load_mandrel=None):
 
 
 def make_zone(config, machine, mandrel, settings=None):
-    """A fresh zone of ``[model] kind`` (``ZONES``), the interaction zone with the solver of
-    ``[model] solver`` (``SOLVERS``) and ``[model] frontal_iterations`` friction-bound updates a
-    step; ``mandrel`` (mandrel frame) for its contact and deposition tests; ``settings``: the
-    interaction model's numerical settings (``interaction.settings.InteractionSettings``;
-    None: its defaults)."""
-    cls = zone_class(config.model.kind)
-    if config.model.kind != "interaction":
-        return cls(config, machine, mandrel)
-    solve = solver_of(config.model.solver)
-    iterations = config.model.frontal_iterations
-    if iterations == 1:
-        return cls(config, machine, mandrel, solve_zone=solve, settings=settings)
-    from .interaction import relax
-    from .interaction.settings import DEFAULT
-
-    base = DEFAULT if settings is None else settings
-    settings = dataclasses.replace(
-        base, frontal=dataclasses.replace(base.frontal, max_iterations=iterations))
-    if solve is relax.solve_zone:
-        # nearly consistent bounds make the top rows stick, where the block preconditioner
-        # stalls: the "full" one (stick stiffness along a stuck yarn) before Newton
-        solve = functools.partial(relax.solve_zone,
-                                  relax_settings=relax.RelaxSettings(full_retry=True))
-    return cls(config, machine, mandrel, settings=settings, solve_zone=solve)
+    """A fresh zone of ``[model] kind`` (``zone.ZONES``), built by its class's ``for_run`` from
+    the config and ``settings`` (``preform.Settings``; None: the defaults); ``mandrel`` (mandrel
+    frame) for its contact and deposition tests."""
+    return zone_class(config.model.kind).for_run(config, machine, mandrel, settings)
 
 
-def make_stepper(config, mandrel, centerline, tolerances: Tolerances = tol,
-                 settings=None) -> Stepper:
+def make_stepper(config, mandrel, centerline, settings=None) -> Stepper:
     """The stepper of a run at its start (yarns tied, nothing braided yet); ``settings``: the
-    interaction model's (``make_zone``)."""
+    run's ``preform.Settings`` (None: the defaults): its ``tolerances`` for the stepper, the
+    rest for the zone (``make_zone``)."""
+    settings = _checked_settings(settings)
     config = resolve_pose_lead(config, mandrel, centerline)   # [process] pose_lead = "auto"
     machine = Machine.from_config(config.machine)
+    tolerances = tol if settings is None else settings.tolerances
     return Stepper(config, machine, mandrel, centerline,
                    make_zone(config, machine, mandrel, settings), tolerances)
 
 
 def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=None, resume=False,
-             tolerances: Tolerances = tol, keep_checkpoint=False, settings=None) -> Result:
+             keep_checkpoint=False, settings=None) -> Result:
     """Run the configured model and return a Result (see module docstring).
 
     config : preform.config.Config
@@ -125,9 +87,9 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
     resume : continue from ``checkpoint``, giving the same results as a run that was never
         stopped; a checkpoint of other inputs, another format or damaged is refused
         (CheckpointError, naming what differs)
-    tolerances : step control and geometry settings (``preform.tolerances``)
-    settings : the interaction model's numerical settings
-        (``interaction.settings.InteractionSettings``; None: its defaults)
+    settings : the numerical settings (``preform.Settings``; None: the defaults): the step
+        control and geometry tolerances (``settings.tolerances``) and the zone's
+        (``settings.interaction`` for the interaction model)
     keep_checkpoint : when the run is done, save its final state instead of removing the
         checkpoint, so that a caller writing results can remove it only once they are complete
         (``--resume`` on a finished checkpoint makes the results without simulating again)
@@ -136,10 +98,11 @@ def simulate(config, progress=True, mandrel=None, centerline=None, checkpoint=No
     the current step, saying so at once; a second one stops at once.
     """
     wall0 = _time.perf_counter()
+    settings = _checked_settings(settings)
     if mandrel is None or centerline is None:
         mandrel, centerline = load_geometry(config)
     ckpt = None if checkpoint is None else Checkpoint(checkpoint, config)
-    stepper = make_stepper(config, mandrel, centerline, tolerances, settings)
+    stepper = make_stepper(config, mandrel, centerline, settings)
     if resume:
         if ckpt is None:
             raise ConfigError("--resume: no checkpoint file given to resume from; run without --resume")

@@ -24,7 +24,7 @@ from .kinematic import Depositor
 from .recording import Recording
 from .result import Result
 from .tolerances import Tolerances, tol
-from .zone import ZoneStep
+from .zone import ZoneStep, zone_class
 
 
 class CheckpointWriteWarning(UserWarning):
@@ -51,28 +51,16 @@ def take_up_speed(table, braided_length):
 
 
 def default_time_step(config, machine, mandrel, centerline, tolerances: Tolerances = tol):
-    """Step control (s): bound the carrier rotation and the fell-point advance per step.
-
-    The kinematic model integrates the fell points' equation of motion (second order in the
-    step): ``dt = min(max_carrier_rotation / omega, max_fell_advance * w / (omega r_max + v_max))``.
-    The interaction model without a guide ring is quasi-static: a step is one solve of the zone
-    with the friction history of the last; what it must resolve is the arrival of new crossings
-    (at most ``interaction_pass_fraction`` of the pass period per step: a yarn meets a new
-    crossing every third step at most) and the mandrel's shape under the fell points
-    (``interaction_fell_advance`` widths per step). Behind a guide ring the interaction model
-    keeps the kinematic step: its ring points slide explicitly once a step
-    (``InteractionZone.slide_rings``), so a longer step moves them further between solves.
-    The measurements behind these bounds are in docs/decisions.md.
+    """Step control (s) where ``[model] time_step`` is not given: the model's own
+    (``Zone.default_time_step`` of the class of ``[model] kind``), from how long the fell points
+    take to advance a yarn width, ``w / (omega r_max + v_max)``. The measurements behind the
+    bounds are in docs/decisions.md.
     """
     omega = machine.omega
     v_max = max(v for _, v in config.process.take_up_speed)
     r_max = float(np.max(centerline.project(mandrel.vertices)[1]))
     per_width = config.yarn.width / (omega * r_max + v_max)   # s for the fell points to advance a width
-    s = tolerances
-    if config.model.kind == "interaction" and not machine.has_ring:
-        return min(s.interaction_pass_fraction * machine.pass_period(),
-                   s.interaction_fell_advance * per_width)
-    return min(s.max_carrier_rotation / omega, s.max_fell_advance * per_width)
+    return zone_class(config.model.kind).default_time_step(machine, per_width, tolerances)
 
 
 def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tolerances = tol):

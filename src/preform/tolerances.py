@@ -1,9 +1,10 @@
 """Numerical tolerances and settings of the geometry and the time stepper, in one place.
 
-One frozen :class:`Tolerances` object, ``tol``, is the default everywhere; the stepper takes its
-settings as a parameter (``preform.simulate(config, tolerances=...)``), so tests and studies run
-with other settings by passing another object (``dataclasses.replace(tol, ...)``), never by
-editing a module. The interaction solver's own constants live in ``preform.interaction``.
+One frozen :class:`Tolerances` object, ``tol``, is the default everywhere; a run takes it as the
+``tolerances`` branch of its settings' tree (``preform.simulate(config,
+settings=preform.Settings(tolerances=...))``), so tests and studies run with other settings by
+passing another object (``dataclasses.replace(tol, ...)``), never by editing a module. The
+interaction solver's own constants live in ``preform.interaction.settings``.
 """
 
 from __future__ import annotations

@@ -6,17 +6,50 @@ for the crossings that reached the mandrel (``deposits``). Two models implement 
 kinematic one (``preform.kinematic.KinematicZone``: the free yarn runs straight to the supply point,
 docs/theory.md §3) and the interaction one (``preform.interaction.model.InteractionZone``: its yarns
 run to their lowest crossing, docs/theory.md §4). The run picks one by ``[model] kind``
-(``preform.simulation.ZONES``). This module is a leaf: it imports nothing of ours but ``result``.
+(:data:`ZONES`) and builds it with :meth:`Zone.for_run`; what differs between the models (their
+numerical settings, the interaction zone's step solver, the default time step) is behind that
+protocol, so the stepper and ``simulate`` never ask which model runs. This module is a leaf: it
+imports nothing of ours but ``result`` and ``errors`` (the models' modules are named by strings
+and imported on first use, so that a kinematic run does not load the interaction model).
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .errors import ConfigError
 from .result import Snapshot
+
+#: ``[model] kind`` -> (module, class) of that model's zone (``config.MODEL_KINDS`` are its keys)
+ZONES = {"kinematic": ("preform.kinematic", "KinematicZone"),
+         "interaction": ("preform.interaction.model", "InteractionZone")}
+#: ``[model] solver`` -> (module, function) of the interaction zone's solver of a step
+#: (``InteractionZone(solve_zone=)``; ``config.SOLVERS`` are its keys): Newton's frontal
+#: iteration or the force-density relaxation
+SOLVERS = {"newton": ("preform.interaction.frontal", "solve_zone_inplace"),
+           "relax": ("preform.interaction.relax", "solve_zone")}
+
+
+def zone_class(kind):
+    """The zone class of ``[model] kind`` (:data:`ZONES`), imported on first use."""
+    if kind not in ZONES:
+        raise ConfigError(f"[model] kind = {kind!r}: expected one of "
+                          f"{', '.join(map(repr, ZONES))}")
+    module, name = ZONES[kind]
+    return getattr(importlib.import_module(module), name)
+
+
+def solver_of(name):
+    """The interaction zone's step solver of ``[model] solver`` (:data:`SOLVERS`)."""
+    if name not in SOLVERS:
+        raise ConfigError(f"[model] solver = {name!r}: expected one of "
+                          f"{', '.join(map(repr, SOLVERS))}")
+    module, function = SOLVERS[name]
+    return getattr(importlib.import_module(module), function)
 
 
 @dataclass(frozen=True)
@@ -43,7 +76,7 @@ class ZoneStep:
 
 @runtime_checkable
 class Zone(Protocol):
-    """A convergence zone: built as ``Zone(config, machine, mandrel)``, then driven by the stepper.
+    """A convergence zone: built by ``for_run``, then driven by the stepper.
 
     Points are (ny, 3) float64, m, machine frame; ``pose`` / ``pose_end`` are the mandrel's
     ``preform.geometry.Pose`` at that time. ``export_state`` / ``import_state`` carry whatever the
@@ -53,6 +86,18 @@ class Zone(Protocol):
     the solved one; ``stage`` (str, optional) names the part of a step under way for the message
     of a fault inside it.
     """
+
+    @classmethod
+    def for_run(cls, config, machine, mandrel, settings=None) -> "Zone":
+        """The zone of a run of ``config``: ``mandrel`` (mandrel frame) for its contact tests;
+        ``settings`` the run's ``preform.Settings`` (None: the defaults), of which the zone
+        takes its own branch."""
+
+    @classmethod
+    def default_time_step(cls, machine, per_width: float, tolerances) -> float:
+        """The model's time step (s) where ``[model] time_step`` is not given (the stepper's
+        step control, ``stepping.default_time_step``): ``per_width`` s for the fell points to
+        advance a yarn width, ``tolerances`` the run's ``preform.tolerances.Tolerances``."""
 
     def start(self, t: float, F_machine: np.ndarray, pose) -> None:
         """Called once with the tie points and the mandrel pose at time t."""

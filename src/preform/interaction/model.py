@@ -74,8 +74,9 @@ from .._kernels import frontal as frontal_kernels
 from .._kernels import ring as ring_kernels
 from ..errors import SimulationError
 from .. import plain
+from ..kinematic import KinematicZone
 from ..result import Snapshot
-from ..zone import ZoneStep
+from ..zone import ZoneStep, solver_of
 from . import frontal, step_check
 from .ring import ring_arguments, ring_point
 from .mandrel_distance import MandrelDistance
@@ -93,7 +94,8 @@ class InteractionZone:
     :class:`~preform.machine.Machine`; mandrel: the mandrel (mandrel frame) whose distance decides
     deposition and whose tangent planes are the wall, or None; distance: instead of the mandrel, a
     :class:`MandrelDistance` or a plain callable ``points (k, 3) -> signed distance (k,)`` (no
-    wall: it has no planes); settings: the numerical settings (default ``settings.DEFAULT``);
+    wall: it has no planes); settings: the numerical settings (default ``settings.DEFAULT``; its
+    ``near`` for the look-ups of ``mandrel``);
     solve_zone: the zone solver, ``frontal.solve_zone_inplace`` or a stand-in with its signature
     (failure-injection tests).
     """
@@ -105,7 +107,7 @@ class InteractionZone:
         self.settings = DEFAULT if settings is None else settings
         self.solve_zone = frontal.solve_zone_inplace if solve_zone is None else solve_zone
         self.distance = distance if distance is not None else (
-            MandrelDistance(mandrel) if mandrel is not None else None)
+            MandrelDistance(mandrel, self.settings.near) if mandrel is not None else None)
         # the tangent planes of the wall: only a mandrel has them
         self.planes = self.distance.planes if isinstance(self.distance, MandrelDistance) else None
         y = config.yarn
@@ -143,6 +145,35 @@ class InteractionZone:
                              f"of {', '.join(map(repr, CAPSTAN_MODES))}")
 
     # -- interface --------------------------------------------------------------------------
+    @classmethod
+    def for_run(cls, config, machine, mandrel, settings=None):
+        """The zone of a run (``Zone.for_run``): ``settings.interaction`` (None: the defaults),
+        the solver of ``[model] solver`` (``zone.SOLVERS``), and ``[model] frontal_iterations``
+        (the user's input for ``FrontalSettings.max_iterations``) friction-bound updates a
+        step where it is not 1."""
+        model = DEFAULT if settings is None else settings.interaction
+        iterations = config.model.frontal_iterations
+        if iterations != 1:
+            model = dataclasses.replace(
+                model, frontal=dataclasses.replace(model.frontal, max_iterations=iterations))
+        return cls(config, machine, mandrel, settings=model,
+                   solve_zone=solver_of(config.model.solver))
+
+    @classmethod
+    def default_time_step(cls, machine, per_width, tolerances):
+        """Without a guide ring the model is quasi-static: a step is one solve of the zone with
+        the friction history of the last; what it must resolve is the arrival of new crossings
+        (at most ``interaction_pass_fraction`` of the pass period per step: a yarn meets a new
+        crossing every third step at most) and the mandrel's shape under the fell points
+        (``interaction_fell_advance`` widths per step). Behind a guide ring it keeps the
+        kinematic step: its ring points slide explicitly once a step (``slide_rings``), so a
+        longer step moves them further between solves. The measurements behind these bounds
+        are in docs/decisions.md."""
+        if machine.has_ring:
+            return KinematicZone.default_time_step(machine, per_width, tolerances)
+        return min(tolerances.interaction_pass_fraction * machine.pass_period(),
+                   tolerances.interaction_fell_advance * per_width)
+
     def start(self, t, F_machine, pose):
         """Tie points (machine frame) at time t; the zone starts without crossings."""
         self.t = float(t)

@@ -8,7 +8,7 @@ pushes and the mandrel wall; along every yarn the friction law at every crossing
 Coulomb term ``g |s - s_old|``, written here with ``s`` the material coordinates (the state's
 ``material``), ``s_old`` the friction centres and ``g`` the friction bounds (``bound``), with the
 bounds and top tensions ``f_top`` held, or, with
-``RelaxSettings.consistent_bounds``, the bounds of the converged geometry itself); segments are
+``relax(consistent=True)``, the bounds of the converged geometry itself); segments are
 stiff tows ``f = EA (l - q) / q`` of material length ``q``; thickness offsets of the yarn points
 (paper eq. 16). Only the wall differs: here it is an exact constraint (no crossing behind its
 tangent plane, a non-negative wall force), where Newton has a penalty of 1e7 N/m (its crossings
@@ -128,155 +128,7 @@ from .._kernels.zone import Lattice
 from ..errors import SimulationError
 from . import preconditioners as PC
 from .contact import bound_change
-from .settings import DEFAULT, InteractionSettings
-
-
-@dataclass(frozen=True)
-class RelaxSettings:
-    """Numerical settings of :func:`relax`. The model's constants (tow strain, friction creep,
-    jamming, ...) are not here: they come from the same
-    :class:`~preform.interaction.settings.InteractionSettings` the Newton reference uses, so that
-    both solve the same equations."""
-
-    #: largest relative imbalance at convergence: Newton's BALANCE_TOLERANCE (1e4 below the 1e-3
-    #: the snapshots must meet)
-    tol: float = 1e-7
-    #: iterations before the step is declared failed (a case A step takes 10-17 with the block
-    #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
-    max_iter: int = 200
-    #: a step the relaxation does not converge on is solved by the Newton reference
-    #: (``solve_zone``; its report says ``fallback``) instead of stopping the run
-    newton_fallback: bool = True
-    #: Anderson history: 10 iterates (more brought no fewer iterations on case A steps)
-    anderson_depth: int = 10
-    #: iterations between factorisations of the Laplacian (scalar preconditioner): in between,
-    #: the last factor preconditions the update C <- C + L^-1 F(C) (same fixed point)
-    refactor_every: int = 3
-    #: block-Jacobi corrections per iteration after the force-density solve (scalar
-    #: preconditioner; 0: none)
-    smoothing: int = 2
-    #: their weight (damping) and the isotropic share of f / l added to each 3 x 3 block
-    smoothing_weight: float = 1.0
-    smoothing_reg: float = 0.05
-    #: iterations without a new lowest residual after which the block-Jacobi corrections stop
-    #: for the rest of the solve (a step converges in 15-45 iterations with them)
-    stall_iterations: int = 30
-    #: longest block-Jacobi move, as a fraction of the crossing's shortest segment
-    smoothing_cap: float = 0.1
-    #: relative change of the bounds between outer iterations below which consistent bounds
-    #: have converged (Newton's FRICTION_TOLERANCE)
-    friction_tol: float = 1e-6
-    #: iterate the friction bounds and ring top tensions to the converged geometry (a step's
-    #: result independent of its start) instead of holding the given ones
-    consistent_bounds: bool = False
-    #: outer (bound) iterations at most with consistent bounds; Newton's frontal loop needs
-    #: 16 on a 48-carrier case A step with friction 0.25
-    bound_iterations: int = 100
-    #: a crossing within this distance (m) of its tangent plane at the start rests on the wall
-    wall_contact: float = 1e-7
-    #: hysteresis of the wall's active set (m): a resting crossing leaves when its own balance
-    #: lies further than this in front of the plane, a free one joins when it is further behind
-    #: (a resting one may keep a pull below this times its stiffness); 10x below the 1 um the
-    #: wall must meet, and it keeps crossings at the threshold from joining and leaving in turn
-    wall_release: float = 1e-7
-    #: relative residual of the per-yarn material problems: 1e3 below the balance tolerance;
-    #: 1e-12 is below what the round-off of stiff tows (EA / q ~ 5e5 N/m) lets Newton reach
-    material_tol: float = 1e-10
-    #: with the block preconditioner, each material sweep starts from the material that keeps
-    #: the segments' strains of the last one at the new lengths (a slipping yarn's material
-    #: follows its lengths), not from the last material itself: 3.4x fewer Newton steps and no
-    #: line search on case A steps (the block update moves crossings by millimetres); not with
-    #: the scalar one, on whose friction-0.5 steps it costs iterations (48 carriers: 322
-    #: against 241)
-    material_predict: bool = True
-    #: Newton steps of one material sweep at most
-    material_newton: int = 60
-    #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
-    floor: float = 1e-3
-    #: the position update's preconditioner: "block", the lattice's geometric stiffness with
-    #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself),
-    #: "full", the Hessian in the positions and materials (5 x 5 blocks), or "scalar", the
-    #: force-density Laplacian shared by x, y, z with ``smoothing`` block-Jacobi
-    #: corrections (``docs/decisions.md``: 10-17 iterations of one material sweep on case A
-    #: steps with "block", 33-44 of three with "scalar")
-    preconditioner: str = "block"
-    #: isotropic share of f / l in the block preconditioner: keeps it definite where the
-    #: geometric stiffness alone is singular (a straight chain across itself); 1e-3: 10-15
-    #: iterations at 144 carriers (1e-2: 12-17; 1e-4 moves soft modes too far at once)
-    block_reg: float = 1e-3
-    #: sets of crossings up to this size keep their order in the nested dissection of the
-    #: block preconditioners (``band_dissection``); 4: 2908 crossings, 11.8 blocks of L a
-    #: column against 12.8 with 8 (docs/decisions.md, "The block order: a band dissection
-    #: within 15 % of the middle")
-    order_leaf: int = 4
-    #: the dissection cuts a set at the smallest separator within this fraction of its size
-    #: from the middle; 0.15: 19 % less fill than the median cut (0), 4 % less than METIS
-    order_window: float = 0.15
-    #: iterations between factorisations of the block preconditioner (0: once per solve, and
-    #: when the wall's active set or the set of jammed segments changes): a preconditioner
-    #: that changes within a solve changes Anderson's map under it (144 carriers: 12-15
-    #: iterations factorising once, 25-35 every 3 iterations)
-    block_refactor_every: int = 0
-    #: iterations without a new lowest residual after which the block preconditioner gives
-    #: the step to the scalar one (from the same start); case A steps converge in 10-17
-    block_stall: int = 20
-    #: a step the block preconditioner stalls on is solved again with the scalar one (off: it
-    #: is not converged, and ``solve_zone`` gives it to Newton, which is cheaper than the
-    #: scalar iteration there: 218-241 iterations on the friction-0.5 steps of 16 and 48
-    #: carriers, and the start-up steps of a case A run it does not converge on at all)
-    scalar_retry: bool = False
-    #: a step the block preconditioner stalls on is solved again with the "full" one (it has
-    #: the stick stiffness along stuck yarns) before it goes to Newton: with 3 frontal
-    #: iterations a step (``FrontalSettings.max_iterations``) a third of the 48-carrier steps
-    #: stall, and this makes them 2.5x the lagged run's time instead of 6x
-    #: (docs/decisions.md, "A time step's problem posed by its posed state"); off, so that
-    #: the default's results stay as they were
-    full_retry: bool = False
-    #: largest move of a crossing in one block update, as a fraction of its shortest segment
-    #: (the whole update is scaled down to it: the stiffness holds for moves small against
-    #: the segments)
-    block_cap: float = 2.0
-    #: the preconditioner of a zone behind a guide ring (``solve_zone``): "full", the Hessian
-    #: in the positions and the materials (``docs/decisions.md``, "Why the block preconditioner
-    #: fails behind a ring": the block one leaves out the axial stiffness of yarns that stick
-    #: at the new crossings below the ring, and stalls on 80-98 % of case B's steps)
-    ring_preconditioner: str = "full"
-    #: ``block_stall`` of the full preconditioner: a step it converges on takes a median 8
-    #: iterations (case B); one without a new lowest residual in 10 goes to Newton sooner
-    #: (case B end to end: CPU 132 s against 180 s with 20, fallbacks 13.8 % against 12.5 %)
-    ring_stall: int = 10
-    #: with the full preconditioner, the line search on the reduced energy (module docstring,
-    #: item 5): without it the iteration cycles on 18 % of the bent tube's steps (those go to
-    #: Newton); with it 400 of 400 sampled steps converge, at the same median of 12 iterations
-    ring_line_search: bool = True
-    #: halvings of that line search at most; the last step is taken as it is (a step shortened
-    #: 256 times moves by millimetres / 256; K is factorised anew after it)
-    ring_halvings: int = 8
-    #: a step the line search shortened was taken with a stale K: K is factorised anew at the
-    #: next iteration (on 48 of the bent tube's steps the plain iteration stalls on, 47
-    #: converge in a median 18 iterations against 45 in 24 without)
-    ring_refactor_damped: bool = True
-    #: iterations without a new lowest residual since the last factorisation after which K is
-    #: factorised anew (0: never): a chord iteration from a stale K converges linearly and
-    #: slowly (a 48-carrier case-B-like step: 55 iterations, stalled at ring_stall; with 3, 18
-    #: iterations and 2 factorisations; neutral on the bent tube's steps)
-    ring_refactor_stall: int = 3
-    #: the full preconditioner's elimination order: "metis" (METIS's nested dissection of the
-    #: lattice, pymetis, ~3 ms at 1230 crossings: 27 % less fill than "band" and half its
-    #: factorisation work; bent tube 0.6 m end to end: 31 s of CPU against 40 s) or "band"
-    #: (``band_dissection``, the block preconditioner's)
-    ring_order: str = "metis"
-    #: behind a guide ring the frontal iterations of the bounds a snapshot asks for (its ring
-    #: passes and final solve) by the relaxation with consistent bounds, the final one finished
-    #: by Newton's (module docstring); off: Newton's alone (a bent-tube snapshot 1.4 s against
-    #: 2.1-2.3 s, its crossings within 0.4 mm of Newton's alone)
-    ring_frontal: bool = True
-    #: without a guide ring a snapshot's frontal iterations likewise (its pass and its final
-    #: solve by the relaxation with consistent bounds and the ring preconditioner, which has the
-    #: stick stiffness along a stuck yarn; the final one finished by Newton's frontal
-    #: iteration); off: Newton's alone (SuperLU without the cholmod extra: case A's full-size
-    #: run with 20 snapshots 185 s against 111 s with the final solves alone by the relaxation)
-    snapshot_frontal: bool = True
+from .settings import DEFAULT, InteractionSettings, RelaxSettings
 
 
 @dataclass
@@ -315,12 +167,12 @@ class RelaxResult:
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
-          width, plane=None, settings: RelaxSettings = RelaxSettings(),
-          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None):
+          width, plane=None, settings: RelaxSettings = DEFAULT.relax,
+          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
-    (held unless ``settings.consistent_bounds``), f_spool N, mu, h m half the yarn thickness,
+    (held unless ``consistent``), f_spool N, mu, h m half the yarn thickness,
     width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
@@ -330,18 +182,19 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     (``_posed_fixed_point``). Returns a :class:`RelaxResult` (``converged`` False if ``tol``
     was not reached).
 
-    Consistent bounds: an outer fixed point, as Newton's frontal loop (``frontal.solve_zone``):
-    the step is solved with the bounds held, the bounds (and ring top tensions) are taken anew
-    from its converged geometry and tensions, and the step is solved again from there until they
-    change by less than ``friction_tol`` relative to the tensions."""
+    Consistent bounds (``consistent``; else the bounds are held): an outer fixed point, as
+    Newton's frontal loop (``frontal.solve_zone``): the step is solved with the bounds held, the
+    bounds (and ring top tensions) are taken anew from its converged geometry and tensions, and
+    the step is solved again from there until they change by less than ``friction_tol``
+    relative to the tensions."""
     kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
               model=model)
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
-    if fresh is not None and not settings.consistent_bounds and res.converged and m:
+    if fresh is not None and not consistent and res.converged and m:
         res, bounds = _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh,
                                          top_tensions, kw)
-    if not settings.consistent_bounds or not res.converged:
+    if not consistent or not res.converged:
         if res.converged and m:
             # bounds held at the last step's (lagged): how far they are from those of the
             # converged geometry, the change Newton's frontal loop reports after its one
@@ -619,14 +472,14 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     bounds, ft = start_bounds(state, bc, settings)
     if m == 0:
         return None
-    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner, consistent_bounds=True,
+    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner,
                               bound_iterations=max_iter - 1, friction_tol=friction_tol,
                               **({} if tol is None else dict(tol=float(tol))))
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rsc, model=settings,
-                top_tensions=ring_top_tensions(state, bc))
+                top_tensions=ring_top_tensions(state, bc), consistent=True)
     if not res.residual < rsc.tol:
         return None
     _accept(state, res, centres, fr)
@@ -735,7 +588,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     ``frontal.solve_zone_inplace``.
     :class:`SimulationError` if it does not converge and the fallback is off."""
     from . import frontal
-    rs = RelaxSettings() if relax_settings is None else relax_settings
+    rs = settings.relax if relax_settings is None else relax_settings
+    if rs.full_retry is None:   # on where a step takes more than one frontal iteration
+        rs = dataclasses.replace(rs, full_retry=settings.frontal.max_iterations > 1)
     frontal_iteration = frontal.check_mode(mode) != "step"
     by_relaxation = rs.ring_frontal if bc.has_ring else rs.snapshot_frontal
     if frontal_iteration and by_relaxation and not settings.frontal.consistent_bounds:
@@ -757,10 +612,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     # ``max_iterations`` frontal iterations a step, as Newton's: each relaxation posed by the
     # last one's converged state (its bounds and top tensions), until they change by less than
     # ``friction_tolerance``; not reaching it is the lag, not a failure
-    passes = fr.max_iterations > 1 and not rs.consistent_bounds
+    passes = fr.max_iterations > 1
     if passes:
-        rs = dataclasses.replace(rs, consistent_bounds=True,
-                                 bound_iterations=fr.max_iterations - 1,
+        rs = dataclasses.replace(rs, bound_iterations=fr.max_iterations - 1,
                                  friction_tol=fr.friction_tolerance)
     m = state.m
     centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
@@ -773,7 +627,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
-                fresh=_posed_bounds(state, settings) if bc.has_ring else None)
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
     if not (res.residual < rs.tol if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
@@ -788,5 +642,5 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     _accept(state, res, centres, fr)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
-                               lagged=not (rs.consistent_bounds and res.converged),
+                               lagged=not (passes and res.converged),
                                relax_iterations=res.iterations)

@@ -20,11 +20,11 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None, layers=()):
+def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()):
     """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs, layers)
+    return plot(result, plots_dir, refs, steady_settings, layers)
 
 
 def plot_yarns_3d(result, path):
@@ -34,15 +34,18 @@ def plot_yarns_3d(result, path):
     return plot(result, path)
 
 
-def _picture_jobs(result, fields, out_dir, layer_results=()):
+def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
-    the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped."""
+    the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped.
+    ``settings``: ``preform.Settings`` (None: the defaults), the steady state the history
+    plots mark."""
     from .pictures import LaterJob, PictureJob
     from .surface import PICTURES
 
     plots = out_dir / PLOTS
+    steady = None if settings is None else settings.steady
     drawn, rendered = [], []
     output = getattr(result.config, "output", None)
     if output is not None and not output.pictures:    # [output] pictures = false
@@ -60,7 +63,8 @@ def _picture_jobs(result, fields, out_dir, layer_results=()):
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots, layers=layer_results)))
+                                lambda: plot_history(result, plots, steady_settings=steady,
+                                                     layers=layer_results)))
 
     def surface_pictures(shown):
         from .plots import run_label
@@ -137,7 +141,7 @@ def _relative(path, out_dir) -> str:
 
 
 def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=(),
-                  background=False, pictures=None) -> list[Path]:
+                  background=False, pictures=None, settings=None) -> list[Path]:
     """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
 
     result : preform.result.Result
@@ -156,6 +160,9 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     pictures : the worker :func:`start_pictures` started for ``result`` (then ``background`` is
         not looked at): it gets ``fields`` before the data files are written, and is waited for
         after them; stopped if writing fails
+    settings : the numerical settings of the run (``preform.Settings``; None: the defaults),
+        for the verdict, the steady state and the interlacing in summary.json and the plots,
+        and the binning of the RTM files and of the shell deck
     returns : the paths written, summary.json last (then report.html, io.report, from the finished folder)
 
     The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
@@ -170,7 +177,7 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
     try:
         out_dir = _prepare_folder(out_dir)
         summary = out_dir / SUMMARY
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, layer_results)
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, settings, layer_results)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []
             pictures.send(fields_arrays(fields) if fields is not None else None)
@@ -195,8 +202,10 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
                 written.append(write_input_mesh_fields(fields, result.mandrel, out_dir))
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
-        rtm = _write_rtm(result, fields, out_dir, written)
-        structural = _write_structural(result, fields, out_dir, written, layer_results)
+        rtm = _write_rtm(result, fields, out_dir, written,
+                         None if settings is None else settings.rtm)
+        structural = _write_structural(result, fields, out_dir, written, layer_results,
+                                       None if settings is None else settings.binning)
     except BaseException:
         if pictures is not None:
             pictures.stop()
@@ -213,9 +222,11 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=2)
     written += [p for p in drawn_here if Path(p).is_file()]
     files = [_relative(p, out_dir) for p in [*written, summary]]
-    from ..quality import surface_reasons
+    from ..quality import QUALITY, surface_reasons
 
-    extra = {"files": files, "rtm": rtm, "structural": structural, "quality_reasons": surface_reasons(result, fields),
+    quality = QUALITY if settings is None else settings.quality
+    extra = {"files": files, "rtm": rtm, "structural": structural,
+             "quality_reasons": surface_reasons(result, fields, quality),
              "pictures": {"failed": failed}}
     if layers is not None:   # the run is suspect when a layer above the first is
         extra["layers"] = layers
@@ -226,13 +237,14 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         stages = {**stages, "write": t_pictures - t_write, "pictures": now - t_pictures}
         extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
                      simulation_wall_time_s=float(result.wall_time_s))
-    written.append(write_summary(result, summary, extra=extra))
+    written.append(write_summary(result, summary, extra=extra, settings=settings))
     from .report import report_hook; report_hook(out_dir)  # noqa: E702 - the page of the finished folder
     return written
 
 
-def _write_rtm(result, fields, out_dir, written) -> dict:
-    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says."""
+def _write_rtm(result, fields, out_dir, written, settings=None) -> dict:
+    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says
+    (``settings``: ``rtm.BinningSettings``, None: the defaults)."""
     from ..rtm import missing_material
 
     reason = missing_material(result.config) if result.config is not None else "no config"
@@ -242,17 +254,19 @@ def _write_rtm(result, fields, out_dir, written) -> dict:
         return {"written": False, "reason": "no surface fields"}
     from .rtm_files import write_rtm
 
-    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness)
+    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness,
+                            settings=settings)
     written += paths
     return said
 
 
-def _write_structural(result, fields, out_dir, written, layer_results) -> dict:
+def _write_structural(result, fields, out_dir, written, layer_results, binning=None) -> dict:
     """``fe/`` when the config has a [material] section and the fields fibre content; what the
-    summary says (``preform.structural``)."""
+    summary says (``preform.structural``; ``binning``: its ``layup.BinSettings``, None: the
+    defaults)."""
     from ..structural import write_structural
 
-    paths, said = write_structural(result, fields, out_dir, layer_results)
+    paths, said = write_structural(result, fields, out_dir, layer_results, binning)
     written += paths
     return said
 

@@ -107,7 +107,8 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
 RTM_DIR = "rtm"
 
 
-def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None) -> tuple[list[Path], dict]:
+def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None,
+              settings=None) -> tuple[list[Path], dict]:
     """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
 
     Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
@@ -118,6 +119,8 @@ def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None) -> tuple[list
     (:func:`preform.rtm.bin_cells`). The summary gives that error (``k1_binning``), the preform's
     fibre volume fraction and, with a cavity, its compression (:func:`preform.rtm.compression`);
     a cavity that packs fibres beyond :data:`preform.rtm.MAX_COMPACTED_VF` is warned about.
+    ``settings``: the binning's (``preform.rtm.BinningSettings``; None: ``rtm.BINNING``), whose
+    ``sets`` ``n_sets`` overrides where given.
     """
     import warnings
 
@@ -138,9 +141,10 @@ def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None) -> tuple[list
     direction = cd["permeability_direction"]
     written = [write_lcmsim_h5(folder / "lcmsim.h5", fields.vertices, fields.faces, thickness,
                                cd["porosity"], k1, alpha, direction)]
-    n_sets = BINNING.sets if n_sets is None else int(n_sets)
+    settings = BINNING if settings is None else settings
+    n_sets = settings.sets if n_sets is None else int(n_sets)
     sets = n_sets - 1 if np.any(~valid) else n_sets
-    binning = bin_cells(k1[valid], sets, weights=area[valid])
+    binning = bin_cells(k1[valid], sets, weights=area[valid], settings=settings)
     index = np.full(len(k1), len(binning.values), dtype=np.int64)
     index[valid] = binning.index
     values = []

@@ -114,18 +114,18 @@ def _final(result, name):
     return float(column[-1]) if len(column) else None
 
 
-def _steady_state(result):
+def _steady_state(result, settings):
     from ..steady import steady_state
 
     if not result.steps:
         return None
-    return steady_state(result.history)
+    return steady_state(result.history, settings)
 
 
-def _quality(result, fields_reasons=(), interlacing=False):
+def _quality(result, settings, fields_reasons=(), interlacing=False):
     from ..quality import assess, verdict
 
-    q = assess(result, interlacing=interlacing)
+    q = assess(result, settings, interlacing=interlacing)
     return verdict([*q["reasons"], *fields_reasons])
 
 
@@ -135,19 +135,17 @@ def flag_counts(yarns) -> dict:
     return {name: int(np.count_nonzero(flags & bit)) for bit, name in FLAG_NAMES.items()}
 
 
-def _snapshot_checks(result):
+def _snapshot_checks(result, settings):
     """The written snapshots against the re-balance that checks each (the written state is the
     run's own): the largest distance of a crossing from its re-balanced place (m), the tolerance
     the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
     times of the snapshots beyond it and of those whose re-balance failed; None where no
-    snapshot was checked."""
-    from ..quality import QUALITY
-
+    snapshot was checked; ``settings``: the verdict's (``quality.QualitySettings``)."""
     shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
     failed = [s.time_s for s in result.snapshots if s.rebalance_error]
     if not shifts and not failed:
         return None
-    tolerance = (QUALITY.max_snapshot_shift_widths * float(result.config.yarn.width)
+    tolerance = (settings.max_snapshot_shift_widths * float(result.config.yarn.width)
                  if result.config is not None else None)
     beyond = [s.time_s for s in result.snapshots if tolerance is not None
               and np.isfinite(s.rebalance_shift_m) and s.rebalance_shift_m > tolerance]
@@ -166,17 +164,21 @@ def _interlacing(il):
             "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
 
 
-def summary_dict(result, extra=None) -> dict:
-    """Everything summary.json holds, as JSON-able data (non-finite numbers become null)."""
+def summary_dict(result, extra=None, settings=None) -> dict:
+    """Everything summary.json holds, as JSON-able data (non-finite numbers become null);
+    ``settings``: the run's ``preform.Settings`` (None: the defaults), whose ``steady``,
+    ``interlacing`` and ``quality`` read the run."""
     from .._version import __version__
+    from ..settings import resolved
 
+    settings = resolved(settings)
     config = result.config
     model = config.model.kind if config is not None else None
     extra = dict(extra or {})
-    steady = _steady_state(result) or {}
+    steady = _steady_state(result, settings.steady) or {}
     from ..quality import run_interlacing
 
-    interlaced = run_interlacing(result)
+    interlaced = run_interlacing(result, settings.interlacing)
     summary = {
         "preform_version": __version__,
         "model": model,
@@ -198,12 +200,13 @@ def summary_dict(result, extra=None) -> dict:
             "steady": steady["convergence_length_m"] if steady.get("reached") else None,
         },
         "steady_state": steady or None,
-        "quality": _quality(result, (extra or {}).pop("quality_reasons", ()), interlaced),
+        "quality": _quality(result, settings.quality, (extra or {}).pop("quality_reasons", ()),
+                            interlaced),
         "mandrel_repairs": list(result.mandrel.repairs) if result.mandrel is not None else [],
         "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
                   "flags": flag_counts(result.yarns)},
         "snapshots": len(result.snapshots),
-        "snapshot_checks": _snapshot_checks(result),
+        "snapshot_checks": _snapshot_checks(result, settings.quality),
         "interlacing": _interlacing(interlaced),
         "inputs": echo_inputs(config),
     }
@@ -212,8 +215,8 @@ def summary_dict(result, extra=None) -> dict:
     return _jsonable(summary)
 
 
-def write_summary(result, path, extra=None) -> Path:
+def write_summary(result, path, extra=None, settings=None) -> Path:
     """Write ``summary.json`` atomically; ``extra`` (dict) is merged in at the top level
-    (``write_results`` passes ``{"files": [...]}``)."""
-    text = json.dumps(summary_dict(result, extra), indent=2, allow_nan=False)
+    (``write_results`` passes ``{"files": [...]}``); ``settings``: :func:`summary_dict`'s."""
+    text = json.dumps(summary_dict(result, extra, settings), indent=2, allow_nan=False)
     return atomic_write_text(path, text + "\n")
