@@ -207,8 +207,8 @@ def render_braided_mandrel(result, path, title: str) -> None:
     drawn = "" if stride == 1 else f" (every {_ordinal(stride)} yarn drawn: the pixels cannot show them all)"
     # the back close-up is the part turned over about its axis: view and up reversed, the
     # screen's right (up x view) kept, so the tip stays on the left (a rotation, not a mirror)
-    views = [((0, 0), whole_view, whole_up, whole_centre - 0.3 * whole_half_h * whole_up, whole_half_w,
-              1.6 * whole_half_h, 2.0 * w / h, f"{title}: braided part{drawn}"),
+    views = [((0, 0), whole_view, whole_up, whole_centre - 0.2 * whole_half_h * whole_up, whole_half_w,
+              1.4 * whole_half_h, 2.0 * w / h, f"{title}: braided part{drawn}"),
              ((1, 0), front, up, mid, 3.0 * radius, 1.5 * radius, w / h,
               "middle of the braid, front" + ("" if close_stride == 1 else f" (every {_ordinal(close_stride)} yarn)")),
              ((1, 1), -front, -up, mid, 3.0 * radius, 1.5 * radius, w / h,
