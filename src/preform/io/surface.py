@@ -193,7 +193,7 @@ class _SurfaceScene:
             self.plotter.reset_camera_clipping_range()
         self.plotter.subplot(2, 0)
         self.plotter.set_background(BACKGROUND)
-        self.bar = None
+        self.bar = self.bar_title = None
 
     def close(self):
         self.plotter.close()
@@ -234,15 +234,17 @@ def _render(scene, array, label, path, title="", scale=1.0):
             plotter.remove_actor(scene.texts[row], render=False)
         scene.texts[row] = plotter.add_text(text, font_size=10, color="black", position="upper_left",
                                             render=False)
-    if scene.bar is None:        # one colour bar in its own row, retitled for each field
-        plotter.subplot(2, 0)
-        scene.bar = plotter.add_scalar_bar(title=label, mapper=scene.actors[1].mapper, color="black",
-                                           vertical=False, position_x=0.3, position_y=0.1, width=0.4,
-                                           height=0.6, title_font_size=18, label_font_size=14,
-                                           n_labels=ticks, fmt="%g")
-        scene.bar.SetTextPositionToPrecedeScalarBar()   # tick labels under the bar, title above
+    plotter.subplot(2, 0)
+    if scene.bar is None:        # one colour bar in its own row; its title a text above it
+        scene.bar = plotter.add_scalar_bar(title=" ", mapper=scene.actors[1].mapper, color="black",
+                                           vertical=False, position_x=0.3, position_y=0.05, width=0.4,
+                                           height=0.55, label_font_size=14, n_labels=ticks, fmt="%g")
+        scene.bar.SetTextPositionToPrecedeScalarBar()   # tick labels under the bar
     scene.bar.SetNumberOfLabels(ticks)
-    scene.bar.SetTitle(label)
     scene.bar.SetVisibility(bool(reached.any()))
+    if scene.bar_title is not None:
+        plotter.remove_actor(scene.bar_title, render=False)
+    scene.bar_title = plotter.add_text(label, font_size=11, color="black", position="upper_edge",
+                                       render=False)
     plotter.render()             # a screenshot alone may return the last frame drawn
     plotter.screenshot(str(path))
