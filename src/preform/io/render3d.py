@@ -253,17 +253,6 @@ def _ordinal(k: int) -> str:
     return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
 
 
-def frame_parallel(plotter, points, centre, view, up, aspect, margin=1.08):
-    """Parallel projection along ``-view`` (unit) with ``up``, fitting ``points`` in a viewport of
-    width / height ``aspect``."""
-    right = np.cross(view, up)
-    rel = points - centre
-    half_w = float(np.max(np.abs(rel @ right)))
-    half_h = float(np.max(np.abs(rel @ up)))
-    _camera(plotter, centre, view, up, half_w, half_h, aspect)
-    plotter.camera.parallel_scale = margin * max(half_h, half_w / aspect)
-
-
 #: the colour of the tip's label in every 3-D view (none of viridis' colours, so a test can find it)
 TIP_COLOUR = "#ff7f0e"
 
