@@ -10,7 +10,7 @@ Two ways:
   (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
   compile and the mandrel and the field mesh are built again. ``--jit`` adds each run's numba
   compile time per process (the command's own and the first-run worker's, ``preform._jit``;
-  numba's compile events, not cache loads) with the warm-up jobs each process ran, and at the
+  numba's compile events, not cache loads) with the worker's jobs, and at the
   end the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
@@ -149,9 +149,9 @@ def command(args):
 
 
 def jit_lines(log):
-    """The top-level compilations of one run (``preform._jit.CompileLog`` lines, depth 0: a
-    kernel called from Python, the kernels it calls included); prints their totals per process
-    and the warm-up jobs each process ran (wall seconds)."""
+    """The top-level compilations of one run (``$PREFORM_JIT_LOG`` lines of ``preform._jit``, depth
+    0: a kernel called from Python, the kernels it calls included); prints their totals per
+    process and the worker's jobs (wall seconds)."""
     lines = [json.loads(x) for x in log.read_text().splitlines()] if log.exists() else []
     top = [d for d in lines if d.get("event", "compile") == "compile" and d["depth"] == 0]
     for role in ("main", "worker"):

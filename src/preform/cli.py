@@ -151,13 +151,11 @@ class _CompileNote:
 
 
 def cmd_run(args) -> int:
-    from ._jit import CompileLog
-
-    with _CompileNote() as note, CompileLog("main"):
-        return _cmd_run(args, note)
+    with _CompileNote():
+        return _cmd_run(args)
 
 
-def _cmd_run(args, note=None) -> int:
+def _cmd_run(args) -> int:
     from .config import load_config
     from .pipeline import checked_geometry, run_case
 
@@ -167,26 +165,15 @@ def _cmd_run(args, note=None) -> int:
     startup = max(0.0, started - process_started()) if args.whole_process else None
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
-    from . import _jit
+    from ._jit import Warmup
 
-    # a first run: the stepper's and the field kernels compile in a worker meanwhile
-    warmup = _jit.start(config, args.config, args.model or "")
-    if warmup is not None and note is not None:
-        note.say()
-    try:
-        if warmup is not None:
-            warmup.lead()
+    # a first run: from the first compilation on, a worker compiles the run's later kernels
+    with Warmup(config, args.config, args.model or ""):
         mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
-    except BaseException:
-        if warmup is not None:
-            warmup.stop()
-        raise
-    if warmup is not None:
-        warmup.finish(mandrel)
-    _print_notes(notes)
-    outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                       force=args.force, geometry=(mandrel, centerline, []), started=started,
-                       background_pictures=True, startup_s=startup)
+        _print_notes(notes)
+        outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
+                           force=args.force, geometry=(mandrel, centerline, []), started=started,
+                           background_pictures=True, startup_s=startup)
     _print_notes(outcome.notes)
     result = outcome.result
     summary = written_summary(out_dir)

@@ -24,7 +24,6 @@ from scipy.spatial import cKDTree
 from ._kernels import fields as _k
 from .errors import PreformError
 from .geometry.remesh import RemeshSettings, isotropic_remesh, locate_faces, subdivide_long_edges
-from .geometry.small_mesh import INTAKE
 from .tolerances import tol
 
 #: default field-mesh edge length, in yarn widths ("a few yarn widths")
@@ -154,23 +153,16 @@ def _bisect_faces(F, source, mids, longest_local):
     return np.vstack(out_f).astype(np.int64), np.concatenate(out_s).astype(np.int64)
 
 
-def _merge_exact_duplicates(vertices, faces, settings=INTAKE):
+def _merge_exact_duplicates(vertices, faces):
     """Weld vertices with identical coordinates (an STL triangle soup) so faces share edges.
 
     A mandrel's vertices are welded already: the hash-table test (``_kernels.mesh.weld_exact``,
-    0.05 s on 500 k vertices; below ``settings.kernel_faces`` faces its NumPy form
-    ``geometry.small_mesh.weld_exact``, the same rows, so a first run on a small mandrel compiles
-    no kernel for it) returns them as they are; only when it finds equal rows does ``np.unique``
-    (a lexicographic sort, 1.2 s there) weld and reorder them."""
+    0.05 s on 500 k vertices) returns them as they are; only when it finds equal rows does
+    ``np.unique`` (a lexicographic sort, 1.2 s there) weld and reorder them."""
+    from ._kernels.mesh import weld_exact
+
     V = np.ascontiguousarray(vertices, dtype=np.float64)
-    if settings.kernels(len(faces)):
-        from ._kernels.mesh import weld_exact
-
-        distinct = len(weld_exact(V, np.empty(len(V), dtype=np.int64)))
-    else:
-        from .geometry.small_mesh import weld_exact
-
-        distinct = len(weld_exact(V)[0])
+    distinct = len(weld_exact(V, np.empty(len(V), dtype=np.int64)))
     if distinct == len(V):
         return vertices, faces
     unique, inverse = np.unique(vertices, axis=0, return_inverse=True)

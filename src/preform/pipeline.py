@@ -122,71 +122,6 @@ def estimate(config, mandrel, centerline, *, force=False, settings=None):
     return work
 
 
-def _kernels_cached(module) -> bool:
-    """Whether numba's on-disk cache holds every ``cache=True`` kernel of ``module`` (their index
-    files exist: numba then loads them instead of compiling)."""
-    import os
-
-    found = False
-    for value in vars(module).values():
-        cache = getattr(value, "_cache", None)
-        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
-        if index is not None:
-            found = True
-            if not os.path.exists(index):
-                return False
-    return found
-
-
-def _compile_map_kernels(config):
-    """Map two helices onto a small cylinder with the run's yarn settings: the field kernels get
-    compiled for the argument types of the run and written to numba's cache (``cache=True``).
-    The cylinder's own triangles are the field mesh, so nothing here remeshes or casts rays
-    (embree's thread pool, started in the parent, is not to be used after a fork)."""
-    from .fields import map_to_surface
-
-    result, mesh = small_map_case(config)
-    map_to_surface(result, mesh=mesh)
-    return []
-
-
-def small_map_case(config):
-    """(result, mesh) for ``fields.map_to_surface(result, mesh=mesh)``: two helices on a cylinder
-    of 5 cm radius with ``config``'s yarn, the cylinder's own triangles as the field mesh (the
-    arrays of the types a run's map passes, so the same kernel specialisations)."""
-    from .geometry import centerline_from_points, shapes
-    from .geometry.mandrel import mandrel_from_arrays
-    from .result import YarnPaths
-
-    r, length = 0.05, 0.1
-    mandrel = mandrel_from_arrays(*shapes.cylinder(r, length, n_around=24))
-    centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
-    z = np.linspace(0.0, length, 41)
-    points = [np.column_stack([r * np.cos(sign * 10 * z), r * np.sin(sign * 10 * z), z]) for sign in (-1, 1)]
-    m = 2 * len(z)
-    yarns = YarnPaths(points=np.vstack(points), offsets=np.array([0, len(z), m], dtype=np.int64),
-                      time_s=np.zeros(m), braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
-                      flags=np.zeros(m, np.uint8), group=np.array([0, 1], np.int8))
-    result = type("Small", (), {"config": config, "mandrel": mandrel, "centerline": centerline,
-                                "yarns": yarns})()
-    V = np.ascontiguousarray(mandrel.vertices, dtype=np.float64)
-    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
-    return result, (V, F, np.arange(len(F), dtype=np.int64), 0.02)
-
-
-def start_kernel_warmup(config):
-    """On a first run (numba's cache lacks the field kernels): a forked worker compiles them
-    (:func:`_compile_map_kernels`) on the second core while this process simulates, so the map
-    loads them from the cache. Returns the worker (``finish()`` it after the map) or None."""
-    from ._kernels import fields as field_kernels
-    from .io.pictures import PictureJob, PictureWorker
-
-    if _kernels_cached(field_kernels):
-        return None
-    return PictureWorker([PictureJob(("numba cache of the field kernels",),
-                                     lambda: _compile_map_kernels(config))])
-
-
 def with_rtm_fields(result, fields):
     """``fields`` with the RTM arrays (``preform.rtm``) when the config has tow material data."""
     from .rtm import missing_material, rtm_fields
@@ -247,17 +182,9 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         stages = {} if startup_s is None else {"start": float(startup_s)}
         stages["load_and_check"] = time.perf_counter() - t0
         t = time.perf_counter()
-        warmup = start_kernel_warmup(config) if background_pictures else None
-        try:
-            result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
-                              checkpoint=checkpoint, resume=resume, keep_checkpoint=True,
-                              settings=settings)
-        except BaseException:
-            if warmup is not None:
-                warmup.stop()
-            raise
-        if warmup is not None:   # its failure only means the map compiles the kernels itself
-            warmup.finish()
+        result = simulate(config, progress=progress, mandrel=mandrel, centerline=centerline,
+                          checkpoint=checkpoint, resume=resume, keep_checkpoint=True,
+                          settings=settings)
         stages["simulate"], t = time.perf_counter() - t, time.perf_counter()
         # the 3-D pictures start now, on the second core, beside the map and the data files
         pictures = start_pictures(result, out_dir) if background_pictures else None

@@ -11,9 +11,9 @@ which takes its own branch; a test or a study varies a knob by passing another t
 
 ``Settings()`` is the defaults every stage uses when it is given none. The studies' own
 settings (``design.DesignSettings``, ``sweeps.ClusterSettings``, ``compare.CompareSettings``,
-``calibrate.CalibrationSettings``) are inputs of a study, not of a run, and stay with it; so does
-``geometry.small_mesh.IntakeSettings``, which picks an implementation of the mesh intake (the
-same arrays either way), not a value of a result.
+``calibrate.CalibrationSettings``) are inputs of a study, not of a run, and stay with it; so, for
+now, does ``geometry.repair.IntakeSettings``, the mesh intake's thresholds, which ``repair_mesh``
+takes when a mandrel is loaded.
 """
 
 from __future__ import annotations

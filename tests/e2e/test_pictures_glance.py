@@ -10,8 +10,6 @@ section, an invisible min-max band, a layered run showing only layer 1, a moire 
 from __future__ import annotations
 
 import dataclasses
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,9 +21,7 @@ from preform.io.plots import braid_angle_figure, convergence_length_figure
 from preform.io.render3d import TIP_COLOUR, whole_stride
 from preform.io.surface import BAR_HEIGHT_PX, PICTURES
 from preform.steady import steady_state
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from simcase import make_config, write_centerline, write_stl  # noqa: E402
+from support.simcase import make_config, write_centerline, write_stl
 
 
 @pytest.fixture(scope="module")

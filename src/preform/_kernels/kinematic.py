@@ -11,7 +11,7 @@ inherit the facets. The tangency gap of a free yarn from ``x`` to its supply poi
 ``g = (G - x) . n(x)``: ``g < 0`` means the straight yarn would cut into the mandrel, so the fell
 point wraps on along the surface until ``g = 0``.
 
-Status codes of the walk (``WALK_*``): the slow NumPy twin lives in ``tests/naive_kinematic.py``.
+Status codes of the walk (``WALK_*``): the slow NumPy twin lives in ``tests/support/naive_kinematic.py``.
 """
 
 from __future__ import annotations
@@ -351,7 +351,7 @@ def lifted_points(V, T, CN, faces, points, clearance, out):
 # smooth normal n, and the braid angle between a direction d and t, both projected on the tangent
 # plane: alpha = arccos(|d_p . t_p| / (|d_p| |t_p|)); the kernels give the cosine, NumPy takes the
 # arccos (its vectorised arccos and libm's differ in the last bit). The operations follow the NumPy
-# reference (``tests/naive_analysis.py``) in order, so the results agree to the last bit.
+# reference (``tests/support/naive_analysis.py``) in order, so the results agree to the last bit.
 
 
 @njit(**INNER)

@@ -409,7 +409,7 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     holds. ``start``: ``(pos (m, 3), material (m, 2))``, the solver's initial iterate only
     (default: the posed positions and material). With the bounds and top tensions held, E has one
     minimum (its Hessian is positive definite), so the result of a time step does not depend on
-    ``start`` beyond the balance tolerance (``tests/test_start_independence.py``).
+    ``start`` beyond the balance tolerance (``tests/validation/test_start_independence.py``).
     ``centre`` (m, 2): where each yarn's friction term is centred (default:
     ``friction_centres(state)``). ``tol``, ``friction_tol``, ``max_iter``: the balance
     tolerance, the frontal tolerance and the frontal iterations (default: ``settings``'

@@ -14,7 +14,7 @@ another digest or arrays of the wrong shape is ignored, never trusted, and rebui
 are written atomically: an exclusive temporary file in the cache folder, renamed over the final
 name (a symlink there is replaced, not followed). The cache is a convenience: any failure to
 read or write it leaves the run to do the work itself, and the results are the same bytes
-either way (``tests/test_cache.py``).
+either way (``tests/unit/test_cache.py``).
 """
 
 from __future__ import annotations
