@@ -162,6 +162,9 @@ class Recording:
             "contacts": rows[:, 4],
             "iterations": rows[:, 5],
             "residual": rows[:, 6],
+            # the spread round the section: the least and largest angle over all yarns
+            "braid_angle_min_deg": np.degrees(alpha.min(axis=1)),
+            "braid_angle_max_deg": np.degrees(alpha.max(axis=1)),
         }
         assert tuple(history) == HISTORY_COLUMNS
         return history, s.reshape(steps, ny)

@@ -27,6 +27,8 @@ HISTORY_COLUMNS = (
     "contacts",
     "iterations",
     "residual",
+    "braid_angle_min_deg",
+    "braid_angle_max_deg",
 )
 
 

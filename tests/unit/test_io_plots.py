@@ -20,17 +20,19 @@ def test_history_plots_written(small_result, tmp_path):
 
 
 def test_braid_angle_figure_draws_history(small_result):
-    ax = braid_angle_figure(small_result).axes[0]
+    fig = braid_angle_figure(small_result)
+    ax = fig.axes[0]
     h = small_result.history
     warp, weft = ax.get_lines()
     np.testing.assert_array_equal(warp.get_xdata(), h["braided_length_m"])
     np.testing.assert_array_equal(warp.get_ydata(), h["braid_angle_warp_deg"])
     np.testing.assert_array_equal(weft.get_ydata(), h["braid_angle_weft_deg"])
-    assert "(m)" in ax.get_xlabel() and "(deg)" in ax.get_ylabel()
+    assert "(m)" in fig.deviation_axes.get_xlabel() and "(deg)" in ax.get_ylabel()
 
 
 def test_convergence_figure_band_spans_min_max(small_result):
-    ax = convergence_length_figure(small_result).axes[0]
+    fig = convergence_length_figure(small_result)
+    ax = fig.axes[0]
     h = small_result.history
     (mean,) = ax.get_lines()
     np.testing.assert_array_equal(mean.get_ydata(), h["convergence_length_mean_m"])
@@ -39,7 +41,7 @@ def test_convergence_figure_band_spans_min_max(small_result):
     lo = np.minimum(h["convergence_length_min_m"], h["convergence_length_max_m"]).min()
     hi = np.maximum(h["convergence_length_min_m"], h["convergence_length_max_m"]).max()
     np.testing.assert_allclose([y.min(), y.max()], [lo, hi], rtol=0, atol=1e-15)
-    assert "(m)" in ax.get_xlabel() and "(m)" in ax.get_ylabel()
+    assert "(m)" in fig.deviation_axes.get_xlabel() and "(m)" in ax.get_ylabel()
 
 
 def test_yarns_3d_written(small_result, tmp_path):
@@ -56,12 +58,13 @@ def _history_result(small_result, n=200, status="done"):
     H = 0.8 - 0.4 * np.exp(-8.0 * L)
     history = dict(small_result.history)
     history.update(braided_length_m=L, braid_angle_warp_deg=angle, braid_angle_weft_deg=angle,
+                   braid_angle_min_deg=np.maximum(angle - 1.0, 0.0), braid_angle_max_deg=angle + 1.0,
                    convergence_length_mean_m=H, convergence_length_min_m=H, convergence_length_max_m=H,
                    **{k: np.zeros(len(L)) for k in ("time_s", "contacts", "iterations", "residual")})
     return dataclasses.replace(small_result, history=history, status=status)
 
 
-def test_history_plot_range_leaves_out_the_wind_up_and_marks_steady_state(small_result):
+def test_history_plot_shows_the_whole_run_and_marks_steady_state(small_result):
     from preform.analysis.steady import steady_state
 
     result = _history_result(small_result)
@@ -69,7 +72,7 @@ def test_history_plot_range_leaves_out_the_wind_up_and_marks_steady_state(small_
     assert steady["reached"]
     ax = braid_angle_figure(result, steady=steady).axes[0]
     lo, hi = ax.get_ylim()
-    assert 55.0 < lo < 60.0 and 70.0 < hi < 73.0    # not down to the wind-up's 0 deg
+    assert lo == 0.0 and 71.0 < hi <= 90.0    # the wind-up from 0 deg and the overshoot to 71
     assert any(line.get_label().startswith("steady from") for line in ax.get_lines())
 
 

@@ -9,7 +9,7 @@ import pytest
 from vtkmodules.util.numpy_support import vtk_to_numpy
 
 from preform.analysis.fields import map_to_surface
-from preform.io.surface import H5, PICTURES, VTU, WINDOW_SIZE, XDMF, write_surface
+from preform.io.surface import BAR_HEIGHT_PX, H5, PICTURES, VTU, WIDTH_PX, XDMF, write_surface
 from support.field_standins import cylinder, helices, make_result
 
 
@@ -88,16 +88,16 @@ def test_pictures_show_the_mandrel(written):
         path = out / "plots" / file_name
         assert path in paths and path.exists()
         image = np.asarray(Image.open(path).convert("RGB")).astype(int)
-        assert image.shape[:2] == (WINDOW_SIZE[1], WINDOW_SIZE[0])
+        assert image.shape[1] == WIDTH_PX
         background = image[0, 0]
         drawn = np.abs(image - background).sum(axis=2) > 30
         assert drawn.mean() > 0.05, file_name  # not a blank frame
         # colours, not only grey: the braided part is coloured by the field
         rgb_spread = image.max(axis=2) - image.min(axis=2)
         assert (rgb_spread > 60).mean() > 0.02, file_name
-        # two views: the top half and the bottom half each show the mandrel
-        half = WINDOW_SIZE[1] // 2
-        assert drawn[:half].mean() > 0.02 and drawn[half:].mean() > 0.02, file_name
+        # two views above the colour bar's row: each shows the mandrel
+        half = (image.shape[0] - BAR_HEIGHT_PX) // 2
+        assert drawn[:half].mean() > 0.02 and drawn[half:2 * half].mean() > 0.02, file_name
 
 
 def test_rendering_failure_warns_and_writes_data(monkeypatch, tmp_path):

@@ -132,7 +132,7 @@ def test_the_work_limits_reach_the_estimate(tmp_path):
 
 #: the run's non-default settings, each to be seen in its files
 QUALITY_STRICT = dataclasses.replace(QUALITY, max_fell_jump=1e-3)
-STEADY_LONG_TAIL = dataclasses.replace(STEADY, tail=0.5, angle_deg=10.0, rel_H=0.5)
+STEADY_LONG_TAIL = dataclasses.replace(STEADY, fit_fraction=0.9, angle_deg=10.0, rel_H=0.5)
 INTERLACING_COARSE = dataclasses.replace(INTERLACING, points_per_yarn=2)
 REMESH_FEW = dataclasses.replace(RemeshSettings(), iterations=1)
 BINNING_COARSE = BinSettings(angle_step_deg=5.0)

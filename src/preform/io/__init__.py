@@ -27,11 +27,11 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None):
+def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()):
     """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs, steady_settings)
+    return plot(result, plots_dir, refs, steady_settings, layers)
 
 
 def plot_yarns_3d(result, path):
@@ -41,7 +41,7 @@ def plot_yarns_3d(result, path):
     return plot(result, path)
 
 
-def _picture_jobs(result, fields, out_dir, settings=None):
+def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
@@ -67,13 +67,14 @@ def _picture_jobs(result, fields, out_dir, settings=None):
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots, steady_settings=steady)))
+                                lambda: plot_history(result, plots, steady_settings=steady,
+                                                     layers=layer_results)))
 
     def surface_pictures(shown):
         from .plots import run_label
         from .surface import write_surface_pictures
 
-        return write_surface_pictures(shown, plots, run_label(result))
+        return write_surface_pictures(shown, plots, run_label(result), centerline=result.centerline)
 
     names = tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES)
     if fields is not None:
@@ -170,7 +171,8 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
     result, fields = analysed.result, analysed.fields
     try:
         out_dir = _prepare_folder(out_dir)
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings)
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings,
+                                           analysed.layer_results)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []
             pictures.send(fields_arrays(fields) if fields is not None else None)
