@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 
 def _config(stl, centerline, unit, kind, friction, ring, carriers, length):
-    from simcase import make_config
+    from support.simcase import make_config
 
     mu_r = 0.17 if (ring and friction > 0.0) else 0.0
     # without the ring the spools take its place (0.17 m): the same convergence length
@@ -99,7 +99,7 @@ def _flagged(res):
 
 def main(argv=None):
     from preform.geometry import shapes
-    from simcase import write_centerline, write_stl
+    from support.simcase import write_centerline, write_stl
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="the suite's size: two parts, 0.06 m")

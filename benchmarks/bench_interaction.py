@@ -316,7 +316,7 @@ def breakdown(carriers, mu, length, snapshots, out_dir, case=None):
         ("simulate outside the loop (geometry, result)", stages.get("simulate", 0.0) - s["loop"],
          float("nan")),
         ("load and check", stages.get("load_and_check", 0.0), float("nan")),
-        ("fields (map)", stages.get("map", 0.0), float("nan")),
+        ("fields and analysis", stages.get("analyse", 0.0), float("nan")),
         ("files (write)", stages.get("write", 0.0), float("nan")),
     ]
     for name, total, per in rows:

@@ -5,18 +5,18 @@ Two ways:
 - ``--command`` (the figure of ``benchmarks/README.md``'s table): ``preform run`` as a user runs
   it, ``--repeat``
   times in fresh processes; prints each run's wall time (measured outside the process) and the
-  stages of its summary (start, load and check, simulate, map, write, pictures), and the medians.
+  stages of its summary (start, load and check, simulate, analyse, write, pictures), and the medians.
   ``--fresh`` makes every run a first run in a fresh environment: an empty numba cache
   (``NUMBA_CACHE_DIR``) and an empty preform cache (``PREFORM_CACHE_DIR``), so the kernels
   compile and the mandrel and the field mesh are built again. ``--jit`` adds each run's numba
   compile time per process (the command's own and the first-run worker's, ``preform._jit``;
-  numba's compile events, not cache loads) with the warm-up jobs each process ran, and at the
+  numba's compile events, not cache loads) with the worker's jobs, and at the
   end the table per kernel (medians).
 - otherwise, through the Python API in this process: load and repair the STL (through the
   cache), centerline, checks, JIT (a 2 cm run that compiles or loads the numba cache), simulate,
-  map (field mesh from the cache), write the data files, pictures (as ``preform run`` does: the
-  3-D renders in a worker process started after the simulation, beside the map, the data files
-  and the matplotlib plots).
+  map (field mesh from the cache), analyse (``analysis.derived.analyse_run``), write the data
+  files, pictures (as ``preform run`` does: the 3-D renders in a worker process started after
+  the simulation, beside the map, the analysis, the data files and the matplotlib plots).
 
 Run: ``python benchmarks/bench_pipeline.py [--command] [--fresh] [--repeat 5]
 [--toml examples/case_a.toml] [--stl other.stl --unit mm]`` (``--stl`` swaps the mandrel, API
@@ -54,7 +54,8 @@ def config(toml, stl=None, unit="m"):
 def run_once(cfg, out_dir):
     import preform as pf
     from preform import pipeline
-    from preform.io import start_pictures, write_results
+    from preform.analysis.derived import analyse_run
+    from preform.io import start_pictures
     from preform.io.cache import cached_field_mesh, cached_mandrel
 
     t = {}
@@ -88,7 +89,10 @@ def run_once(cfg, out_dir):
     pictures = start_pictures(result, out_dir)   # as preform run: the 3-D renders beside the map
     fields = pf.map_to_surface(result, mesh=cached_field_mesh(result))
     t["map"] = time.perf_counter() - t0
-    write_results(result, fields, out_dir, stages={}, pictures=pictures)
+    t0 = time.perf_counter()
+    analysed = analyse_run(result, fields)
+    t["analyse"] = time.perf_counter() - t0
+    pipeline.write(analysed, out_dir, stages={}, pictures=pictures)
     stages = json.loads((Path(out_dir) / "summary.json").read_text())["stages_s"]
     t["write"], t["pictures"] = stages["write"], stages["pictures"]
     return t, result, fields
@@ -149,9 +153,9 @@ def command(args):
 
 
 def jit_lines(log):
-    """The top-level compilations of one run (``preform._jit.CompileLog`` lines, depth 0: a
-    kernel called from Python, the kernels it calls included); prints their totals per process
-    and the warm-up jobs each process ran (wall seconds)."""
+    """The top-level compilations of one run (``$PREFORM_JIT_LOG`` lines of ``preform._jit``, depth
+    0: a kernel called from Python, the kernels it calls included); prints their totals per
+    process and the worker's jobs (wall seconds)."""
     lines = [json.loads(x) for x in log.read_text().splitlines()] if log.exists() else []
     top = [d for d in lines if d.get("event", "compile") == "compile" and d["depth"] == 0]
     for role in ("main", "worker"):

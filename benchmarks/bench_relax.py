@@ -66,7 +66,7 @@ def _case_config(path, carriers, mu, solver):
 
 
 def _stepper(carriers, mu, steps, solver, case=None):
-    from simcase import advanced_stepper
+    from support.simcase import advanced_stepper
     from test_relax import _config
 
     cfg = (_config(carriers, 0.25 if mu is None else mu, solver) if case is None
@@ -133,7 +133,7 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as tmp:
             run_end_to_end(args.run, args.out or tmp)
         return
-    from simcase import capture_step as _capture
+    from support.simcase import capture_step as _capture
     from preform.interaction import frontal, relax as R
 
     summary = {}

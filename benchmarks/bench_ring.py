@@ -1,7 +1,7 @@
 """A time step behind a guide ring against one without, at the same size; and ``preform run``
 with the interaction model end to end, by stage.
 
-Steps (default): the case-B-like mandrel (``tests/simcase.case_b_like_config``: rounded square
+Steps (default): the case-B-like mandrel (``tests/support/simcase.case_b_like_config``: rounded square
 to circle, 20 mm eccentricity, 18 deg/s, 26.3 mm/s) with ``--carriers`` carriers, stepped
 ``--steps`` steps through its start-up, twice: behind case B's guide ring (0.17 m, ring friction
 ``--mu-r``, spool 0.85 m), and without a ring with the spool circle where the ring was (radius
@@ -77,7 +77,7 @@ def stepped(cfg, steps):
 
 
 def variant(folder, carriers, mu, mu_r, ring):
-    from simcase import case_b_like_config
+    from support.simcase import case_b_like_config
 
     cfg = case_b_like_config(folder, mu_r)
     m = dataclasses.replace(cfg.machine, carriers=carriers)

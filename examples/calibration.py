@@ -72,8 +72,8 @@ def write_case(folder: Path, name: str, values: dict, results: str) -> Path:
 
 def measure(run: Path, out: Path, noise: dict, seed: int) -> list[Path]:
     """The run sampled as a braid is measured, with Gaussian noise of ``noise`` per kind."""
-    from preform.compare import history_curve, load_run
-    from preform.interlacing import azimuths
+    from preform.studies.compare import history_curve, load_run
+    from preform.analysis.interlacing import azimuths
 
     rng = np.random.default_rng(seed)
     r = load_run(run)

@@ -35,7 +35,7 @@ def main(argv=None) -> Path:
         config = dataclasses.replace(config, process=dataclasses.replace(config.process, braid_length=args.length))
     out = Path(args.out) if args.out else config.output.dir
     outcome = run_case(config, out)
-    from preform.fields import map_to_surface
+    from preform.analysis.fields import map_to_surface
     from preform.pipeline import with_rtm_fields
 
     fields = with_rtm_fields(outcome.result, map_to_surface(outcome.result))

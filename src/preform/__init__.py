@@ -24,19 +24,19 @@ def __getattr__(name):
     if name == "simulate":
         from .simulation import simulate as value
     elif name in ("map_to_surface", "SurfaceFields"):
-        from . import fields
+        from .analysis import fields
         value = getattr(fields, name)
     elif name == "write_results":
-        from .io import write_results as value
+        from .pipeline import write_results as value   # analyse, then write
     elif name in ("load_mandrel", "Mandrel", "Centerline"):
         from . import geometry
         value = getattr(geometry, name)
     elif name == "CheckpointError":
         from .checkpoint import CheckpointError as value
-    elif name == "sweep":   # the module is preform.sweeps, so this name stays the function
-        from .sweeps import sweep as value
+    elif name == "sweep":   # the module is preform.studies.sweeps, so this name stays the function
+        from .studies.sweeps import sweep as value
     elif name == "design_speed":
-        from .design import design_speed as value
+        from .studies.design import design_speed as value
     elif name == "Settings":   # the numerical settings' tree: imports every stage's settings
         from .settings import Settings as value
     else:

@@ -1,119 +1,135 @@
-"""The work of a first run that a warm run does not do, done on the second core while this
-process loads the mandrel: compiling numba kernels, and building the field mesh.
+"""A first run's numba compilations shared with a second process.
 
-On a first run in an environment (numba's on-disk cache lacks the kinematic kernels), ``preform
-run`` compiles kernels for most of its first 10-30 s: the intake and check kernels
-(``_kernels.mesh``, ``edges``, ``sections``) while it loads and checks a mandrel of
-``IntakeSettings.kernel_faces`` faces or more (smaller ones take their NumPy forms,
-``geometry.small_mesh``, and compile nothing), then the
-stepper's (``_kernels.kinematic`` and the centerline projection) and the field kernels
-(``_kernels.fields``); its map then builds the field mesh, which later runs read from the preform
-cache. The first group is needed at once, the rest only after it, so :func:`start` launches a
-worker process that runs small representative jobs meanwhile (:data:`JOBS`, in the order the run
-needs what they make): ``projection`` (the centerline projection, which the checks need too:
-compiled first, the command loads it), ``stepper``, ``laid`` and ``angles`` (the laid yarn's and the
-history's braid angles: two jobs, so the process free first takes one), then
-what the map needs: ``clip`` and ``pool`` (the field kernels) and ``field_mesh`` (the run's own
-field mesh, into the preform cache). The kernels are
-``cache=True``: the worker writes them to the cache and this process loads them when it gets
-there instead of compiling them.
-
-The jobs are claimed through files created exclusively in a folder of the two processes: the
-worker claims them from the front; :meth:`Warmup.finish` (called once the mandrel is loaded and
-checked) claims what the worker has not reached, from the back, and runs it here, then waits for
-the jobs the worker holds: whichever process is free takes the next job. Before loading the
-mandrel, :meth:`Warmup.lead` runs a map job here while the worker does its first job (on a
-small mandrel the command would otherwise reach the projection first and compile it too). A compile job is the
-run's own code on a small cylinder (the same calls, so the same argument types and the same
-compiled specialisations), so nothing here knows the kernels' types; a job that fails, or a
-worker that dies, only means that the run does that work itself.
-
-The worker is a fresh interpreter (``python -m preform._jit``), not a fork: embree's thread pool
-and numba's state in this process are not fork-safe once started.
+numba compiles a kernel the first time it is called with new argument types; the kernels are
+``cache=True``, so a compiled kernel is written to numba's on-disk cache, and any later call
+with those types, in any process, loads it from there. A first run of ``preform run`` in an
+environment compiles, one kernel after another, in the order the run needs them: the mesh intake
+and the checks, the stepper, the braid angles, the field map. At the command's first compilation
+(numba's ``numba:compile`` event, raised for a compilation, not for a cache load) and when a
+core is idle, :class:`Warmup` starts a worker process (``python -m preform._jit``) that runs the
+same code on a small cylinder with the run's settings (the same argument types, so the same
+compiled specialisations): while the command compiles the repair's and then the stepper's
+kernels, the worker compiles the checks', a mandrel's and the projector's, then the braid
+angles' and the map's (:data:`JOBS`), and builds the run's field mesh into the preform cache;
+what one compiled, the other loads. Nothing is coordinated beyond that: a job that fails, or a
+worker that is slow or dies, only means that the command compiles or builds that part itself.
+The worker is a fresh interpreter, not a fork: embree's thread pool and numba's state are not
+fork-safe once started.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
+from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
-#: longest wait (s) for the worker's jobs before this process compiles what it needs itself
-WAIT_LIMIT_S = 300.0
-
-
-def kernels_cached(kernels) -> bool:
-    """Whether numba's on-disk cache holds each of the ``cache=True`` kernels (their index files
-    exist: numba then loads them instead of compiling)."""
-    for kernel in kernels:
-        cache = getattr(kernel, "_cache", None)
-        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
-        if index is None or not os.path.exists(index):
-            return False
-    return True
-
-
-def entry_kernels():
-    """The kernels the jobs' code calls from Python last (each compiles the helpers it calls):
-    when they are cached, so is what the jobs would compile. Not a whole module's kernels: some
-    (``tangency_gap``, ``smooth_normals_batch``, ...) a kinematic run never calls."""
-    from ._kernels import fields, kinematic
-
-    return (kinematic.advance_fell_points, kinematic.lifted_points, kinematic.braid_cosines_batch,
-            kinematic.laid_yarn_angles, fields.clip_polylines, fields.pool_sums)
-
-
-def needed(config) -> bool:
-    """Whether a run of ``config`` is a first run worth a worker: a kinematic model and numba's
-    cache without the stepper's or the field kernels (later runs load them)."""
-    if config.model.kind != "kinematic" or os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
-        return False
-    return not kernels_cached(entry_kernels())
+#: environment variable naming a file to which the command and the worker append one JSON line per
+#: numba compilation and per worker job (``benchmarks/bench_pipeline.py --jit``, the tests)
+LOG_ENV = "PREFORM_JIT_LOG"
 
 
 # ------------------------------------------------------------------------------------- jobs
-def small_case(config):
-    """(config, mandrel, centerline): ``config`` on a cylinder of 5 cm radius long enough for its
-    start (the machine, yarn, model and step settings of the run, so the same code paths run)."""
+def _cylinder(config):
+    """(config, vertices, faces, centerline): ``config`` braiding 1 cm on a cylinder of 5 cm
+    radius long enough for its start, with the run's machine, yarn, model and step settings."""
     from .geometry import centerline_from_points, shapes
-    from .geometry.mandrel import mandrel_from_arrays
 
-    radius = 0.05
     length = config.process.initial_position + 0.5
-    mandrel = mandrel_from_arrays(*shapes.cylinder(radius, length, n_around=32), source="warm-up cylinder")
+    V, F = shapes.cylinder(0.05, length, n_around=32)
     centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
     process = dataclasses.replace(config.process, braid_length=0.01)
-    return dataclasses.replace(config, process=process, layers=()), mandrel, centerline
+    return dataclasses.replace(config, process=process, layers=()), V, F, centerline
 
 
-def job_projection(config, mandrel=None):
-    """The centerline projection of points (``Centerline.project``): the first kernel that both the
-    command's checks and the stepper need, so the worker compiles it first and the command loads
-    it instead of compiling it a second time at the same moment."""
-    _, cylinder, centerline = small_case(config)
-    centerline.project(cylinder.vertices)
+def small_case(config):
+    """(config, mandrel, centerline) of :func:`_cylinder`."""
+    from .geometry.mandrel import mandrel_from_arrays
+
+    small, V, F, centerline = _cylinder(config)
+    return small, mandrel_from_arrays(V, F, source="warm-up cylinder"), centerline
 
 
-def job_stepper(config, mandrel=None):
-    """Three steps of the kinematic stepper on :func:`small_case`: the mandrel's arrays, the
-    projection, ray and walk kernels."""
-    from .simulation import make_stepper
+def job_checks(config):
+    """The checks' kernels on :func:`_cylinder`'s arrays (not the mandrel's own arrays, whose
+    kernels the command is compiling meanwhile): the centerline projection, the winding numbers
+    of the centerline-inside check, the section loops of the perimeters."""
+    from .checks import _check_centerline_inside
+    from .geometry.centerline import section_perimeters
+    from .geometry.sections import SectionIndex
 
-    small, cylinder, centerline = small_case(config)
-    make_stepper(small, cylinder, centerline).run(progress=False, max_steps=3)
+    small, V, F, centerline = _cylinder(config)
+    centerline.project(np.ascontiguousarray(V, dtype=np.float64))
+    surface = SimpleNamespace(vertices=V, faces=F, sections=SectionIndex(V, F))
+    _check_centerline_inside(small, surface, centerline)
+    section_perimeters(surface, centerline, np.array([0.1, 0.2]))
+
+
+def job_arrays(config):
+    """A mandrel's own arrays (``mandrel_from_arrays``: face normals, neighbours, corner normals)
+    on :func:`_cylinder`'s arrays."""
+    small_case(config)
+
+
+def small_map_case(config):
+    """(result, (V, F, source faces, edge length)) for ``fields.map_to_surface(result, mesh=...)``:
+    two helices on a cylinder of 5 cm radius with ``config``'s yarn, the cylinder's own triangles
+    as the field mesh (the array types of a run's map)."""
+    from .geometry import centerline_from_points, shapes
+    from .geometry.mandrel import mandrel_from_arrays
+    from .result import YarnPaths
+
+    r, length = 0.05, 0.1
+    mandrel = mandrel_from_arrays(*shapes.cylinder(r, length, n_around=24))
+    centerline = centerline_from_points(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, length]]))
+    z = np.linspace(0.0, length, 41)
+    points = [np.column_stack([r * np.cos(sign * 10 * z), r * np.sin(sign * 10 * z), z]) for sign in (-1, 1)]
+    m = 2 * len(z)
+    yarns = YarnPaths(points=np.vstack(points), offsets=np.array([0, len(z), m], dtype=np.int64),
+                      time_s=np.zeros(m), braid_angle_deg=np.zeros(m), face=np.full(m, -1, np.int64),
+                      flags=np.zeros(m, np.uint8), group=np.array([0, 1], np.int8))
+    result = SimpleNamespace(config=config, mandrel=mandrel, centerline=centerline, yarns=yarns)
+    V = np.ascontiguousarray(mandrel.vertices, dtype=np.float64)
+    F = np.ascontiguousarray(mandrel.faces, dtype=np.int64)
+    return result, (V, F, np.arange(len(F), dtype=np.int64), 0.02)
+
+
+def job_projector(config):
+    """The stepper's arc-length projector (``laid.CenterlineProjector``: its sample tree and
+    the projection on it) on :func:`_cylinder`'s centerline."""
+    from .laid import CenterlineProjector
+    from .tolerances import tol
+
+    _, V, _, centerline = _cylinder(config)
+    CenterlineProjector(centerline, spacing=tol.projector_spacing)(V)
+
+
+def job_pool(config):
+    """The neighbourhood sums of the map (``fields.pool``) on :func:`small_map_case`'s faces."""
+    from .analysis.fields import face_geometry, pool
+
+    _, (V, F, _, h) = small_map_case(config)
+    normals, areas, centroids = face_geometry(V, F)
+    pool(centroids, normals, 2.0 * h, areas[:, None])
+
+
+def job_clip(config):
+    """The yarns clipped to the faces (``fields.clip_yarns`` as the map calls it)."""
+    from .analysis.fields import clip_yarns, face_geometry
+
+    result, (V, F, _, _) = small_map_case(config)
+    normals, _, centroids = face_geometry(V, F)
+    clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
 
 
 def _analysis_case(config):
-    """(small config, surface arrays, centerline, two points on faces 0 and 1, those faces, their
-    centerline coordinates, a direction each) on :func:`small_case`'s cylinder, the arguments
-    the analysis jobs pass as a result does."""
+    """(config, surface arrays, centerline, points on faces 0 and 1, those faces, their arc
+    lengths, a direction each) on :func:`small_case`'s cylinder, as a result passes them."""
     from .kinematic import SurfaceArrays
 
     small, cylinder, centerline = small_case(config)
@@ -121,23 +137,12 @@ def _analysis_case(config):
     faces = np.array([0, 1], dtype=np.int64)
     points = np.ascontiguousarray(np.asarray(cylinder.vertices)[np.asarray(cylinder.faces)[faces]].mean(axis=1))
     s, _ = centerline.project(points)
-    directions = np.ascontiguousarray(points[::-1] - points)
-    return small, arrays, centerline, points, faces, s, directions
+    return small, arrays, centerline, points, faces, s, np.ascontiguousarray(points[::-1] - points)
 
 
-def job_angles(config, mandrel=None):
-    """The braid angles of the history (``analysis.braid_angles_at``), as a result computes
-    them, on two points of :func:`small_case`'s surface."""
-    from .analysis import braid_angles_at
-
-    _, arrays, centerline, points, faces, s, directions = _analysis_case(config)
-    braid_angles_at(arrays, centerline, points, faces, s, directions)
-
-
-def job_laid(config, mandrel=None):
-    """The laid yarn's braid angles of the yarn paths (``analysis.laid_braid_angles``), as a
-    result computes them, on the same two points."""
-    from .analysis import laid_braid_angles, mandrel_friction
+def job_laid(config):
+    """The laid yarn's braid angles (``laid.laid_braid_angles``) on two points."""
+    from .laid import laid_braid_angles, mandrel_friction
     from .tolerances import tol
 
     small, arrays, centerline, points, faces, s, _ = _analysis_case(config)
@@ -145,275 +150,186 @@ def job_laid(config, mandrel=None):
                       mandrel_friction(small), tol.slip_curvature, s=s)
 
 
-def job_clip(config, mandrel=None):
-    """Two helices clipped to the faces of a small cylinder (``fields.clip_yarns`` as
-    ``fields.map_to_surface`` calls it, on ``pipeline.small_map_case``): the clipping kernels."""
-    from .fields import clip_yarns, face_geometry
-    from .pipeline import small_map_case
+def job_angles(config):
+    """The history's braid angles (``laid.braid_angles_at``) on two points."""
+    from .laid import braid_angles_at
 
-    result, (V, F, _, _) = small_map_case(config)
-    normals, _, centroids = face_geometry(V, F)
-    clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
+    _, arrays, centerline, points, faces, s, directions = _analysis_case(config)
+    braid_angles_at(arrays, centerline, points, faces, s, directions)
 
 
-def job_pool(config, mandrel=None):
-    """The neighbourhood sums of the same small cylinder's faces (``fields.pool`` as
-    ``fields.map_to_surface`` calls it): the pooling kernels."""
-    from .fields import face_geometry, pool
-    from .pipeline import small_map_case
-
-    _, (V, F, _, h) = small_map_case(config)
-    normals, areas, centroids = face_geometry(V, F)
-    pool(centroids, normals, 2.0 * h, areas[:, None])
-
-
-def job_field_mesh(config, mandrel=None):
-    """The run's field mesh (the mandrel remeshed to the field edge length, a second or more)
-    built into the preform cache (``io.cache.cached_field_mesh``), so that the run's map reads it
-    instead of building it after the simulation. ``mandrel``: the run's (in the command); the
-    worker reads it from the cache, where the command stored it on loading, and leaves the job
-    to the run when it is not there yet. Nothing to do without the cache or with ``[[layer]]``
-    tables (the layers' field mesh is built on the way), nor where the cache cannot be written
-    (the map would build it a second time)."""
-    from types import SimpleNamespace
-
+def job_field_mesh(config):
+    """The run's field mesh into the preform cache (``io.cache.cached_field_mesh``), from the
+    mandrel the command stored there on loading it; nothing when it is not there (yet), without
+    the cache, or with ``[[layer]]`` tables (the layers build theirs on the way)."""
     from .io.cache import cache_dir, cached_field_mesh, cached_mandrel
 
     folder = cache_dir()
     if folder is None or config.layers or not (folder.is_dir() and os.access(folder, os.W_OK)):
         return
-    if mandrel is None:
-        mc = config.mandrel
-        mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body, build=False)
-        if mandrel is None:
-            return
-    cached_field_mesh(SimpleNamespace(config=config, mandrel=mandrel))
+    mc = config.mandrel
+    mandrel = cached_mandrel(mc.stl, unit=mc.stl_unit, body=mc.body, build=False)
+    if mandrel is not None:
+        cached_field_mesh(SimpleNamespace(config=config, mandrel=mandrel))
 
 
-#: each job's function of the run's config (and the run's mandrel, when the command runs it), in
-#: the order the run needs what they make; the last three are the map's, each 1-2 s of CPU, the
-#: two angle jobs 0.5 s each: the worker (from the front) and the command (from the back) meet
-#: among them, and small jobs there keep the two processes' finishing times within about one job
-#: of each other
-RUNNERS = {"projection": job_projection, "stepper": job_stepper, "laid": job_laid, "angles": job_angles,
-           "clip": job_clip, "field_mesh": job_field_mesh, "pool": job_pool}
-#: the jobs, in that order
-JOBS = tuple(RUNNERS)
-#: what the command runs before it loads the mandrel while the worker does its first job
-#: (:meth:`Warmup.lead`): the shortest of the map's compile jobs, which need none of its kernels
-LEAD_JOBS = ("clip",)
+#: the worker's jobs, in the order the command needs what they compile while it compiles the
+#: repair's and then the stepper's kernels itself: the checks', a mandrel's and the stepper's
+#: projector kernels (right after the repair), the braid angles' (after the simulation), the map's
+#: and the field mesh (from the mandrel the command stored in the cache when it loaded it)
+JOBS = (("checks", job_checks), ("arrays", job_arrays), ("projector", job_projector), ("laid", job_laid),
+        ("angles", job_angles), ("pool", job_pool), ("clip", job_clip), ("field_mesh", job_field_mesh))
 
 
 # ------------------------------------------------------------------------------ compile log
-#: the job this process is running (for the compile log), if any
-_RUNNING: list = []
-#: this process's role in the log (``main`` or ``worker``), set by :class:`CompileLog`
-_ROLE: list = []
-
-#: environment variable naming a file to which every process of the run appends one JSON line per
-#: numba compilation and per warm-up job (``benchmarks/bench_pipeline.py --jit``,
-#: ``tests/test_jit.py``)
-LOG_ENV = "PREFORM_JIT_LOG"
-
-
 def _log(line: dict) -> None:
-    """Append ``line`` (with this process's pid and role) to ``$PREFORM_JIT_LOG``, if set."""
+    """Append ``line`` (with this process's pid) to ``$PREFORM_JIT_LOG``, if set."""
     path = os.environ.get(LOG_ENV, "")
     if path:
         import json
 
-        line = {"pid": os.getpid(), "role": _ROLE[-1] if _ROLE else "", **line}
         with open(path, "a") as f:
-            f.write(json.dumps(line) + "\n")
+            f.write(json.dumps({"pid": os.getpid(), **line}) + "\n")
 
 
-class CompileLog:
-    """While entered and ``$PREFORM_JIT_LOG`` is set: numba's ``numba:compile`` events (raised for
-    a compilation, not for a cache load) appended to that file, one JSON line each: ``pid``,
-    ``role`` (``main`` or ``worker``), ``event`` ("compile"), ``job`` (the warm-up job running,
-    "" for the run's own work), ``kernel`` (module and name), ``depth`` (0 for a kernel
-    called from Python, 1 and more for one compiled inside another's compilation), ``start_s``
-    (``time.time()``), ``wall_s`` and ``cpu_s`` (this process's CPU time over the compilation,
-    the nested ones included). The warm-up jobs add their own lines (``event`` "job": ``job``,
-    ``start_s``, ``wall_s``, ``cpu_s``) and :meth:`Warmup.finish` one when it returns
-    (``event`` "finished", ``start_s``)."""
+class _Listener:
+    """numba ``numba:compile`` listener: ``first()`` at the first compilation; with the log set,
+    one line per compilation (``event`` "compile", ``role``, ``job`` running or "", ``kernel``,
+    ``depth`` 0 for a kernel called from Python, ``start_s``, ``wall_s``, ``cpu_s``)."""
 
-    def __init__(self, role: str):
-        self.role = role
-        self.path = os.environ.get(LOG_ENV, "")
-        self.listener = None
-
-    def __enter__(self):
-        _ROLE.append(self.role)
-        if not self.path:
-            return self
+    def __init__(self, role, first=None):
         from numba.core import event
 
-        class Listener(event.Listener):
-            stack: list = []
+        self.role, self.first, self.job, self.stack, self.event = role, first, "", [], event
+        outer = self
 
+        class Listener(event.Listener):
             def on_start(self, ev):
-                self.stack.append((time.time(), time.perf_counter(), time.process_time()))
+                if outer.first is not None:
+                    first, outer.first = outer.first, None
+                    first()
+                outer.stack.append((time.time(), time.perf_counter(), time.process_time()))
 
             def on_end(self, ev):
-                t_wall, t0, c0 = self.stack.pop()
+                start, t0, c0 = outer.stack.pop()
                 fn = ev.data["dispatcher"].py_func
-                _log({"event": "compile", "job": _RUNNING[-1] if _RUNNING else "",
-                      "kernel": f"{fn.__module__}.{fn.__qualname__}", "depth": len(self.stack),
-                      "start_s": t_wall, "wall_s": time.perf_counter() - t0,
-                      "cpu_s": time.process_time() - c0})
+                _log({"event": "compile", "role": outer.role, "job": outer.job,
+                      "kernel": f"{fn.__module__}.{fn.__qualname__}", "depth": len(outer.stack),
+                      "start_s": start, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0})
 
-        self.event, self.listener = event, Listener()
-        event.register("numba:compile", self.listener)
+        self.listener = Listener()
+
+    def __enter__(self):
+        self.event.register("numba:compile", self.listener)
         return self
 
     def __exit__(self, *exc):
-        _ROLE.pop()
-        if self.listener is not None:
-            self.event.unregister("numba:compile", self.listener)
+        self.event.unregister("numba:compile", self.listener)
         return False
 
 
-# ------------------------------------------------------------------------------ coordination
-def _claim(folder: Path, job: str) -> bool:
-    """True for the one process that creates ``job``'s claim file first."""
-    try:
-        os.close(os.open(folder / f"{job}.claim", os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
-    except FileExistsError:
-        return False
-    return True
+@dataclass(frozen=True)
+class WarmupSettings:
+    """When a first run starts the compile worker."""
+
+    #: the worker only gains on a core nobody else uses: it is started while the 1-minute load
+    #: average is below the number of cores minus this
+    idle_core: float = 0.5
+    #: seconds the command waits, at its end, for a worker still running to leave after SIGTERM
+    #: (it leaves once the compilation in progress returns) before killing it
+    stop_wait_s: float = 5.0
 
 
-def _run(folder: Path, job: str, config, runners=None, mandrel=None) -> None:
-    """Run ``job`` (``runners[job](config)``, :data:`RUNNERS` by default; ``mandrel=`` too when
-    given) and mark it done (also when it fails: the run then does the work itself)."""
-    _RUNNING.append(job)
-    start, t0, c0 = time.time(), time.perf_counter(), time.process_time()
+#: the defaults
+WARMUP = WarmupSettings()
+
+
+def _idle_core(settings) -> bool:
+    """Whether the machine has a core to spare (``settings.idle_core``); True where the load
+    average is not known."""
     try:
-        runner = (RUNNERS if runners is None else runners)[job]
-        runner(config) if mandrel is None else runner(config, mandrel=mandrel)
-    except Exception:   # noqa: BLE001 - a warm-up's failure must not stop the run
-        pass
-    finally:
-        _RUNNING.pop()
-        (folder / f"{job}.done").touch()
-        _log({"event": "job", "job": job, "start_s": start, "wall_s": time.perf_counter() - t0,
-              "cpu_s": time.process_time() - c0})
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        return os.getloadavg()[0] < cores - settings.idle_core
+    except (AttributeError, OSError):
+        return True
 
 
 class Warmup:
-    """The worker of a first run (see module docstring); :meth:`finish` before simulating."""
+    """While entered: at the command's first numba compilation, the worker for ``config`` (read
+    from ``config_path``, ``[model] kind`` replaced by ``model`` when given), for the kinematic
+    model and when a core is idle then (``settings``); on exit it is stopped if still running
+    (SIGTERM, then killed after ``settings.stop_wait_s``)."""
 
-    def __init__(self, folder: Path, process: subprocess.Popen, config, runners=None):
-        self.folder = folder
-        self.process = process
-        self.config = config
-        self.runners = RUNNERS if runners is None else runners
+    def __init__(self, config, config_path, model: str = "", settings: WarmupSettings = WARMUP):
+        self.argv = [sys.executable, "-m", "preform._jit", str(config_path), model]
+        self.settings = settings
+        self.process = None
+        self.compiles = _Listener("main", self.start if config.model.kind == "kinematic" else None)
 
-    def lead(self, jobs=LEAD_JOBS) -> None:
-        """Before the command loads and checks the mandrel: unless the worker has done its first
-        job (the centerline projection, which the checks call), run ``jobs`` here, then wait for
-        that job (while the worker runs, at most :data:`WAIT_LIMIT_S`). A small mandrel loads
-        without compiling (``geometry.small_mesh``), so the command would otherwise reach the
-        projection first and compile it a second time at the same moment; waiting for the
-        worker, which started on it earlier, ends sooner."""
-        first = self.folder / f"{next(iter(self.runners))}.done"
-        for job in jobs:
-            if first.exists() or self.process.poll() is not None:
-                return
-            if job in self.runners and _claim(self.folder, job):
-                _run(self.folder, job, self.config, self.runners)
-        deadline = time.monotonic() + WAIT_LIMIT_S
-        while not first.exists() and self.process.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
-
-    def finish(self, mandrel=None) -> None:
-        """Run here the jobs the worker has not claimed yet (the last ones first; ``mandrel``: the
-        run's, for the field mesh), wait for the ones it holds (at most :data:`WAIT_LIMIT_S`, and
-        only while it runs), and clean up."""
+    def start(self):
+        if not _idle_core(self.settings):
+            return
         try:
-            for job in reversed(list(self.runners)):
-                if _claim(self.folder, job):
-                    _run(self.folder, job, self.config, self.runners, mandrel)
-            deadline = time.monotonic() + WAIT_LIMIT_S
-            while not all((self.folder / f"{job}.done").exists() for job in self.runners):
-                if self.process.poll() is not None or time.monotonic() > deadline:
-                    break
-                time.sleep(0.02)
-        finally:
-            self.stop()
-            _log({"event": "finished", "start_s": time.time()})
+            self.process = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.DEVNULL, close_fds=True)
+        except OSError:   # no worker: the command compiles everything itself
+            self.process = None
 
-    def stop(self) -> None:
-        """End the worker (if still running) and remove the claims folder."""
-        if self.process.poll() is None:
+    def __enter__(self):
+        self.compiles.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self.compiles.__exit__(*exc)
+        self.stop()
+        return False
+
+    def stop(self):
+        if self.process is not None and self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout=5)
+                self.process.wait(timeout=self.settings.stop_wait_s)
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
-        shutil.rmtree(self.folder, ignore_errors=True)
-
-
-def start(config, config_path, model: str = ""):
-    """The worker running :data:`JOBS` for ``config`` (read from ``config_path``, with
-    ``[model] kind`` replaced by ``model`` when given), or None when not :func:`needed`."""
-    return launch(config, config_path, model) if needed(config) else None
-
-
-def launch(config, config_path, model: str = ""):
-    """The worker (:func:`main`, a fresh interpreter) and its claims folder, as a :class:`Warmup`;
-    None when it cannot be started."""
-    folder = Path(tempfile.mkdtemp(prefix="preform-jit-"))
-    argv = [sys.executable, "-m", "preform._jit", str(folder), str(config_path), model]
-    try:
-        process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                   stderr=subprocess.DEVNULL, close_fds=True)
-    except OSError:
-        shutil.rmtree(folder, ignore_errors=True)
-        return None
-    return Warmup(folder, process, config)
 
 
 class _Stopped(Exception):
     """SIGTERM in the worker. An Exception, so that numba's and the preform cache's writes remove
-    their temporary files on the way out (they clean up on Exception); the worker then claims
-    no further job."""
+    their temporary files on the way out (they clean up on Exception)."""
 
 
 def _on_sigterm(signum, frame):
-    _STOPPED.append(signum)
-    raise _Stopped("stopped")
-
-
-#: the signal that stopped the worker, once it has
-_STOPPED: list = []
+    raise _Stopped(signum)
 
 
 def main(argv=None) -> int:
-    """The worker: ``python -m preform._jit FOLDER CONFIG [MODEL]``; exit code 0, or 128 + the
-    signal's number when stopped."""
-    folder, config_path, *rest = sys.argv[1:] if argv is None else argv
+    """The worker: ``python -m preform._jit CONFIG [MODEL]``; exit code 0, or 143 when stopped."""
     import signal
 
+    config_path, *rest = sys.argv[1:] if argv is None else argv
     signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         from .config import load_config
 
         config = load_config(config_path)
-        model = rest[0] if rest else ""
-        if model:
-            config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=model))
-        with CompileLog("worker"):
-            for job in JOBS:
-                if _STOPPED:
-                    break
-                if _claim(Path(folder), job):
-                    _run(Path(folder), job, config)
+        if rest and rest[0]:
+            config = dataclasses.replace(config, model=dataclasses.replace(config.model, kind=rest[0]))
+        with _Listener("worker") as log:
+            for name, job in JOBS:
+                log.job = name
+                start, t0, c0 = time.time(), time.perf_counter(), time.process_time()
+                try:
+                    job(config)
+                except _Stopped:
+                    raise
+                except Exception:   # noqa: BLE001 - a failed job: the command does that work itself
+                    pass
+                _log({"event": "job", "role": "worker", "job": name, "start_s": start,
+                      "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0})
     except _Stopped:
-        pass
-    return 128 + _STOPPED[0] if _STOPPED else 0
+        return 128 + signal.SIGTERM
+    return 0
 
 
 if __name__ == "__main__":

@@ -79,7 +79,7 @@ def estimate_work(config, mandrel_area: float, time_step: float, convergence_len
     mandrel then travels ``braid_length + H_end - initial_position`` (the fell points start at the
     tip, ``initial_position`` from the supply plane), not just ``braid_length``.
     """
-    from .fields import DEFAULT_EDGE_WIDTHS
+    from .analysis.fields import DEFAULT_EDGE_WIDTHS
 
     edge = config.output.field_edge_length if config.output is not None else None
     edge = edge or DEFAULT_EDGE_WIDTHS * config.yarn.width

@@ -45,6 +45,12 @@ from ._version import __version__
 from .config import dump_config
 from .errors import PreformError
 
+#: the state of a running simulation in its results folder, saved periodically and on a stop,
+#: removed once the results are written (``preform.pipeline``)
+CHECKPOINT = "checkpoint.npz"
+#: the checkpoint of layer k (from 1) of a run with [[layer]] tables
+LAYER_CHECKPOINT = "checkpoint_layer{k}.npz"
+
 FORMAT = "preform-checkpoint"
 #: version of the arrays' layout and meaning; bump it when either changes
 FORMAT_VERSION = 2   # 2: snapshots carry external_force_N (snapshot_external_force)

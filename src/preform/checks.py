@@ -18,7 +18,6 @@ import numpy as np
 
 from . import analytic
 from .errors import ConfigError, MandrelError
-from .geometry.small_mesh import INTAKE
 from .tolerances import tol
 
 #: a mandrel that does not fit the spool circle and whose bounding-box diagonal exceeds this many
@@ -38,7 +37,7 @@ TIME_STEP_FACTOR = 10.0
 ESTIMATE_SECTIONS = 50
 
 
-def preflight(config, mandrel, centerline, settings=INTAKE) -> list[str]:
+def preflight(config, mandrel, centerline) -> list[str]:
     """Check a config against its geometry; raise for impossible set-ups, return warnings.
 
     Raises ConfigError (or MandrelError where no config key can fix it) when the mandrel's unit is
@@ -48,7 +47,6 @@ def preflight(config, mandrel, centerline, settings=INTAKE) -> list[str]:
     ring and the spool circle, when ``initial_position + braid_length`` exceeds the centerline,
     or when a kinematic run's mandrel end would pass the machine before braid_length is braided
     (:func:`mandrel_end_problem`; a warning for the interaction model).
-    settings : IntakeSettings, which meshes the winding numbers are a numba kernel for.
     """
     vertices = np.asarray(mandrel.vertices, dtype=float)
     if vertices.ndim != 2 or len(vertices) == 0:
@@ -56,7 +54,7 @@ def preflight(config, mandrel, centerline, settings=INTAKE) -> list[str]:
     s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
     _check_unit(config, float(mandrel.diagonal), float(distance.max()))
     _check_length(config, float(centerline.length))
-    _check_centerline_inside(config, mandrel, centerline, settings)
+    _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
     reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
     warnings = _check_fit(config, reach)
@@ -100,10 +98,9 @@ def _check_unit(config, diagonal: float, section_radius: float) -> None:
 INSIDE_SAMPLES = 25
 
 
-def _check_centerline_inside(config, mandrel, centerline, settings=INTAKE) -> None:
+def _check_centerline_inside(config, mandrel, centerline) -> None:
     """The centerline must run inside the mandrel where it is braided (the yarns are tied around
-    it): winding numbers (``_kernels.mesh.winding_numbers``; below ``settings.kernel_faces``
-    faces its NumPy form, equal to round-off, 1 or 0 far from the 0.5 that decides)."""
+    it): winding numbers (``_kernels.mesh.winding_numbers``)."""
     vertices, faces = getattr(mandrel, "vertices", None), getattr(mandrel, "faces", None)
     if vertices is None or faces is None:    # stand-in geometry without a mesh
         return
@@ -113,15 +110,10 @@ def _check_centerline_inside(config, mandrel, centerline, settings=INTAKE) -> No
     # inside where the winding number of the (closed, outward) surface is 1, outside 0
     V = np.ascontiguousarray(vertices, dtype=np.float64)
     F = np.ascontiguousarray(faces, dtype=np.int64)
-    if settings.kernels(len(F)):
-        from ._kernels.mesh import winding_numbers
+    from ._kernels.mesh import winding_numbers
 
-        w = np.empty(len(points))
-        winding_numbers(V, F, points, w)
-    else:
-        from .geometry.small_mesh import winding_numbers
-
-        w = winding_numbers(V, F, points)
+    w = np.empty(len(points))
+    winding_numbers(V, F, points, w)
     inside = w > 0.5
     if not np.all(inside):
         bad = s[~inside][0]

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 from ._version import __version__
+from .checkpoint import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 from .errors import ConfigError, MandrelError, PreformError
-from .pipeline import CHECKPOINT  # noqa: F401 - the checkpoint's name in a results folder
 
 EXIT_DONE, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``time.perf_counter()`` when this module was imported (the fallback of :func:`process_started`)
@@ -70,7 +70,7 @@ def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     """The three lines ``preform run`` prints at the end, from the written ``summary`` (whose wall
     time is the command's, with its stages), else from the result; then one line per layer of a
     run with [[layer]] tables."""
-    from .io.tables import summary_dict
+    from .analysis.derived import summary_dict
 
     s = summary if summary is not None else summary_dict(result)
     stages = s.get("stages_s") or {}
@@ -201,15 +201,12 @@ class _CompileNote:
 
 
 def cmd_run(args) -> int:
-    from ._jit import CompileLog
-
-    with _CompileNote() as note, CompileLog("main"):
-        return _cmd_run(args, note)
+    with _CompileNote():
+        return _cmd_run(args)
 
 
-def _cmd_run(args, note=None) -> int:
+def _cmd_run(args) -> int:
     from .config import load_config
-    from .pipeline import checked_geometry, run_case
 
     started = time.perf_counter()
     # the interpreter's start and the imports count when this process is the command itself
@@ -217,27 +214,17 @@ def _cmd_run(args, note=None) -> int:
     startup = max(0.0, started - process_started()) if args.whole_process else None
     config = _with_model(load_config(args.config), args.model)  # bad input fails here, before the heavy imports
     out_dir = _out_dir(config, args.out)
-    from . import _jit
+    from ._jit import Warmup
+    from .pipeline import load, run_case   # the stages' imports (numba, SciPy): after the config
 
-    # a first run: the stepper's and the field kernels compile in a worker meanwhile
-    warmup = _jit.start(config, args.config, args.model or "")
-    if warmup is not None and note is not None:
-        note.say()
-    try:
-        if warmup is not None:
-            warmup.lead()
-        mandrel, centerline, notes = checked_geometry(config)  # impossible set-ups fail here, before simulating
-    except BaseException:
-        if warmup is not None:
-            warmup.stop()
-        raise
-    if warmup is not None:
-        warmup.finish(mandrel)
-    _print_notes(notes)
-    outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
-                       force=args.force, geometry=(mandrel, centerline, []), started=started,
-                       background_pictures=True, startup_s=startup,
-                       say=lambda note: print(note, file=sys.stderr, flush=True))
+    # a first run: from the first compilation on, a worker compiles the run's later kernels
+    with Warmup(config, args.config, args.model or ""):
+        loaded = load(config)  # the load stage: impossible set-ups fail here, before simulating
+        _print_notes(loaded.notes)
+        outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
+                           force=args.force, geometry=(loaded.mandrel, loaded.centerline, []),
+                           started=started, background_pictures=True, startup_s=startup,
+                           say=lambda note: print(note, file=sys.stderr, flush=True))
     result = outcome.result
     summary = written_summary(out_dir)
     for line in summary_lines(result, out_dir, len(outcome.written), summary):
@@ -282,20 +269,11 @@ def cmd_check(args) -> int:
 
 def _cmd_check(args) -> int:
     from .config import load_config
-    from .pipeline import checked_geometry, estimate
 
     config = _with_model(load_config(args.config), getattr(args, "model", None))
-    mandrel, centerline, notes = checked_geometry(config)
-    if config.layers:   # [[layer]] tables: every layer's checks and estimate
-        from .pipeline import check_layers
-
-        _print_notes(check_layers(config, mandrel, centerline, notes, force=args.force)[0])
-        print(f"OK: {config.source or args.config}")
-        return EXIT_DONE
-    _print_notes(notes)
-    work = estimate(config, mandrel, centerline, force=args.force)
-    for line in work.lines():
-        print(f"note: {line}", file=sys.stderr)
+    from .pipeline import check, load   # the stages' imports (numba, SciPy): after the config
+    # the run's load and check stages, without a results folder: every layer's checks and estimate
+    _print_notes(check(load(config), None, force=args.force).notes)
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 
@@ -317,7 +295,7 @@ def cmd_mandrel_info(args) -> int:
     csv = Path(args.csv).expanduser().absolute() if args.csv else None
     if csv is not None and not csv.parent.is_dir():
         raise MandrelError(f"--csv {args.csv}: the folder {csv.parent} does not exist")
-    from .geometry import write_centerline_csv
+    from .io.centerline_csv import write_centerline_csv
     from .geometry.info import format_mandrel_info, mandrel_info
 
     info = mandrel_info(stl, unit=args.unit, centerline=centerline)
@@ -337,7 +315,7 @@ def cmd_mandrel_info(args) -> int:
 # ---------------------------------------------------------------- preform sweep
 
 def cmd_sweep(args) -> int:
-    from .sweeps import SWEEP_CSV, load_sweep, sweep
+    from .studies.sweeps import SWEEP_CSV, load_sweep, sweep
 
     spec = load_sweep(args.sweep)   # bad input fails here, before a cluster starts
     rows = sweep(args.sweep, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
@@ -356,8 +334,8 @@ def cmd_design(args) -> int:
     import dataclasses
 
     from .config import load_config
-    from .design import (DESIGN, design_speed, plot_design, read_target_table, shortfall,
-                         write_design_config, write_design_runs, write_design_table)
+    from .studies.design import (DESIGN, design_speed, plot_design, read_target_table, shortfall,
+                                 write_design_config, write_design_runs, write_design_table)
 
     config = load_config(args.config)
     if args.model:
@@ -406,7 +384,7 @@ def cmd_design(args) -> int:
 # ---------------------------------------------------------------- preform compare
 
 def cmd_compare(args) -> int:
-    from .compare import compare, off_lines, summary_lines
+    from .studies.compare import compare, off_lines, summary_lines
 
     comparisons, written = compare(args.results, args.measured, args.out, plot=not args.no_plot)
     for line in summary_lines(comparisons):
@@ -432,7 +410,7 @@ def add_compare_parser(sub) -> None:
 # ---------------------------------------------------------------- preform calibrate
 
 def cmd_calibrate(args) -> int:
-    from .calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
+    from .studies.calibrate import (CALIBRATE_CSV, CALIBRATED_TOML, calibrate, parse_noise, parse_param,
                             report_lines)
 
     params = [parse_param(p) for p in args.param]   # bad input fails here, before a cluster starts

@@ -20,11 +20,11 @@ from pathlib import Path
 
 from .errors import ConfigError
 from .machine import PATTERN_M, carrier_count_problem
+from .materials import CONSTANTS as MATERIAL_CONSTANTS
+from .materials import PRESETS as MATERIAL_PRESETS
+from .materials import FibreMatrix, stiffness_problem
 from .zone import SOLVERS as ZONE_SOLVERS
 from .zone import ZONES
-from .structural.materials import CONSTANTS as MATERIAL_CONSTANTS
-from .structural.materials import PRESETS as MATERIAL_PRESETS
-from .structural.materials import FibreMatrix, stiffness_problem
 
 
 @dataclass(frozen=True)
@@ -155,7 +155,7 @@ class AxialYarnConfig:
 
 @dataclass(frozen=True)
 class RtmConfig:
-    """The RTM hand-off (preform.rtm): how fibre content and permeability are read."""
+    """The RTM hand-off (preform.analysis.rtm): how fibre content and permeability are read."""
 
     #: m, the mould cavity the preform is compressed to; None: the preform's own thickness
     cavity_thickness: float | None = None

@@ -3,10 +3,16 @@
 A checkpoint comes from disk and may have been damaged or crafted; the numba kernels read indices
 unchecked. So every array is taken by name with its expected shape and dtype, floats must be finite
 and indices must lie in range; a failure raises ValueError naming the array and what was expected
-(the checkpoint reader turns it into a message for people). A leaf module: numpy only.
+(the checkpoint reader turns it into a message for people). :func:`jsonable` turns the other
+way: numbers, arrays and dataclasses into the plain types a JSON file holds. A leaf module: numpy
+only.
 """
 
 from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
 
 import numpy as np
 
@@ -60,3 +66,27 @@ def unprefixed(prefix, arrays) -> dict:
     """The arrays whose name starts with ``prefix``, the prefix removed."""
     n = len(prefix)
     return {k[n:]: v for k, v in arrays.items() if k.startswith(prefix)}
+
+
+def jsonable(value):
+    """Plain JSON types: dataclasses -> dicts, Paths -> str, tuples -> lists, numpy -> Python,
+    non-finite floats -> None (a NaN in a result file would look like data)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    return str(value)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import plain
-from .analysis import braid_angles_at, laid_braid_angles
+from .laid import braid_angles_at, laid_braid_angles
 from .result import FLAG_SLIP, HISTORY_COLUMNS, Snapshot, YarnPaths
 
 #: columns of Recording.rows: time, H mean, H min, H max, contacts, iterations, residual
@@ -112,8 +112,8 @@ class Recording:
     def yarn_paths(self, surface, project, centerline, group, mu, curvature_tol, fell_s=None) -> YarnPaths:
         """Deposited yarn per yarn: its tie point, then per step the points laid inside the step
         in order and its end point, with the braid angle and slip tendency of the laid yarn
-        (``analysis.laid_braid_angles``; surface: kinematic.SurfaceArrays, project:
-        analysis.CenterlineProjector, group (ny,) 0 warp 1 weft, mu: yarn-mandrel friction,
+        (``laid.laid_braid_angles``; surface: kinematic.SurfaceArrays, project:
+        laid.CenterlineProjector, group (ny,) 0 warp 1 weft, mu: yarn-mandrel friction,
         curvature_tol: ``Tolerances.slip_curvature``; fell_s: the fell points' arc lengths
         (steps, ny) from ``history``, so that only the points laid inside steps are projected)."""
         ny = self.n_yarns
@@ -162,6 +162,9 @@ class Recording:
             "contacts": rows[:, 4],
             "iterations": rows[:, 5],
             "residual": rows[:, 6],
+            # the spread round the section: the least and largest angle over all yarns
+            "braid_angle_min_deg": np.degrees(alpha.min(axis=1)),
+            "braid_angle_max_deg": np.degrees(alpha.max(axis=1)),
         }
         assert tuple(history) == HISTORY_COLUMNS
         return history, s.reshape(steps, ny)

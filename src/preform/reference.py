@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: the start-up transient is settled when it has fallen to this fraction (1 %: the steady-state
-#: reading's tolerance on H, preform.steady)
+#: reading's tolerance on H, preform.analysis.steady)
 SETTLED_FRACTION = 0.01
 
 

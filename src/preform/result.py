@@ -1,6 +1,6 @@
 """What a simulation returns: plain arrays in frozen dataclasses (docs/architecture.md §1, §2).
 
-Everything the writers (``preform.io``) and the surface mapping (``preform.fields``) need is here,
+Everything the writers (``preform.io``) and the surface mapping (``preform.analysis.fields``) need is here,
 so they never reach into the solver.
 """
 
@@ -27,6 +27,8 @@ HISTORY_COLUMNS = (
     "contacts",
     "iterations",
     "residual",
+    "braid_angle_min_deg",
+    "braid_angle_max_deg",
 )
 
 

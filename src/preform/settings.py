@@ -11,9 +11,9 @@ which takes its own branch; a test or a study varies a knob by passing another t
 
 ``Settings()`` is the defaults every stage uses when it is given none. The studies' own
 settings (``design.DesignSettings``, ``sweeps.ClusterSettings``, ``compare.CompareSettings``,
-``calibrate.CalibrationSettings``) are inputs of a study, not of a run, and stay with it; so does
-``geometry.small_mesh.IntakeSettings``, which picks an implementation of the mesh intake (the
-same arrays either way), not a value of a result.
+``calibrate.CalibrationSettings``) are inputs of a study, not of a run, and stay with it; so, for
+now, does ``geometry.repair.IntakeSettings``, the mesh intake's thresholds, which ``repair_mesh``
+takes when a mandrel is loaded.
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ from .budget import WorkLimits
 from .geometry.offset import OffsetSettings
 from .geometry.remesh import RemeshSettings
 from .interaction.settings import InteractionSettings
-from .interlacing import InterlacingSettings
-from .quality import QualitySettings
-from .rtm import BinningSettings
-from .steady import SteadySettings
+from .analysis.interlacing import InterlacingSettings
+from .analysis.quality import QualitySettings
+from .analysis.rtm import BinningSettings
+from .analysis.steady import SteadySettings
 from .structural.layup import BinSettings
 from .tolerances import Tolerances
 
@@ -55,10 +55,10 @@ class Settings:
     #: the work estimate's limits, refused beyond unless ``--force`` (``budget.check_work``)
     limits: WorkLimits = field(default_factory=WorkLimits)
     #: how the RTM solver files group the faces' K1 into property sets
-    #: (``io.rtm_files.write_rtm``)
+    #: (``analysis.rtm.solver_properties``)
     rtm: BinningSettings = field(default_factory=BinningSettings)
     #: how finely the shell deck's plies are binned into element groups
-    #: (``structural.write_structural``)
+    #: (``structural.layup.structural_layup``)
     binning: BinSettings = field(default_factory=BinSettings)
 
 

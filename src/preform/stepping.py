@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import plain
-from .analysis import CenterlineProjector, mandrel_friction
 from .checks import end_message, end_passed
 from .config import DEFAULT_SNAPSHOTS
+from .laid import CenterlineProjector, mandrel_friction
 from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
 from .kinematic import Depositor

@@ -11,7 +11,7 @@ import json
 import re
 
 import pytest
-from simcase import write_cylinder_case
+from support.simcase import write_cylinder_case
 
 import preform as pf
 from preform.cli import _quality_line, main
@@ -109,7 +109,7 @@ def test_the_carriers_fit_where_the_model_narrows_the_yarns(tmp_path, capsys):
     perimeter; narrowed to the default least width (2 mm, half the width) they need 0.064 m, so
     check passes; at min_width = width they cannot narrow, and check refuses them."""
     from preform.geometry import shapes
-    from simcase import write_centerline, write_stl
+    from support.simcase import write_centerline, write_stl
 
     v, f = shapes.cylinder(0.02, 0.3, n_around=48)
     path = cylinder_case(tmp_path, 0.05, carriers=64)

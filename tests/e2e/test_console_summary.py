@@ -14,10 +14,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from simcase import write_cylinder_case
+from support.simcase import write_cylinder_case
 
 import preform as pf
-from preform.key_numbers import field_statistics
+from preform.analysis.key_numbers import field_statistics
 from preform.pipeline import CHECKPOINT, checked_geometry, estimate, run_case
 
 #: the cylinder case's machine and process (simcase.CYLINDER_CASE)

@@ -2,7 +2,7 @@
 undirected edge table in the order of ``np.unique`` on the edge keys, the face across every
 directed edge, duplicate faces, and the consistent winding of each body. Each one replaces a
 NumPy sort of the ``3 m`` half-edges (or a graph-components call) with O(m) passes and gives
-the NumPy form's arrays exactly (tests/test_big_mesh_kernels.py)."""
+the NumPy form's arrays exactly (tests/unit/test_big_mesh_kernels.py)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Numba kernel clipping deposited yarn polylines to the faces of a mesh (docs/theory.md §5).
 
-Arrays and scalars only; the wrapper is :func:`preform.fields.map_to_surface`, the slow NumPy
-reference lives in ``tests/test_fields_kernels.py``.
+Arrays and scalars only; the wrapper is :func:`preform.analysis.fields.map_to_surface`, the slow
+NumPy reference lives in ``tests/unit/test_fields_kernels.py``.
 
 Which face owns a point in space: face ``f`` owns the wedge bounded by its three *edge planes*.
 The edge plane of the edge shared by faces ``f`` and ``g`` contains that edge and the mean of the

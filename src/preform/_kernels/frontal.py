@@ -4,7 +4,7 @@ Arrays and scalars only; the layout of the crossing arrays is documented in
 ``preform/interaction/zone_state.py`` (creation order, ``low``/``up`` links, ``over``, ``normal``,
 material coordinates ``material``); the reading of the paper implemented here is in
 ``preform/interaction/frontal.py``; the numerical constants arrive as arguments from
-``preform/interaction/settings.py``. The slow NumPy twins live in ``tests/naive_frontal.py``.
+``preform/interaction/settings.py``. The slow NumPy twins live in ``tests/support/naive_frontal.py``.
 
 Geometry. The centerline point of yarn ``side`` (0 warp, 1 weft) at crossing ``c`` is
 ``P = C + o h N`` with ``o = over[c]`` for the warp and ``-over[c]`` for the weft, ``h`` half the

@@ -11,7 +11,7 @@ inherit the facets. The tangency gap of a free yarn from ``x`` to its supply poi
 ``g = (G - x) . n(x)``: ``g < 0`` means the straight yarn would cut into the mandrel, so the fell
 point wraps on along the surface until ``g = 0``.
 
-Status codes of the walk (``WALK_*``): the slow NumPy twin lives in ``tests/naive_kinematic.py``.
+Status codes of the walk (``WALK_*``): the slow NumPy twin lives in ``tests/support/naive_kinematic.py``.
 """
 
 from __future__ import annotations
@@ -346,12 +346,12 @@ def lifted_points(V, T, CN, faces, points, clearance, out):
 
 
 # ---------------------------------------------------------------- braid angles of laid yarn
-# Post-processing of a run (``preform.analysis``): per point, the centerline tangent at its arc
+# Post-processing of a run (``preform.laid``): per point, the centerline tangent at its arc
 # length s (linear blend of the polyline's vertex tangents, as ``Centerline.frames_at``), the
 # smooth normal n, and the braid angle between a direction d and t, both projected on the tangent
 # plane: alpha = arccos(|d_p . t_p| / (|d_p| |t_p|)); the kernels give the cosine, NumPy takes the
 # arccos (its vectorised arccos and libm's differ in the last bit). The operations follow the NumPy
-# reference (``tests/naive_analysis.py``) in order, so the results agree to the last bit.
+# reference (``tests/support/naive_analysis.py``) in order, so the results agree to the last bit.
 
 
 @njit(**INNER)
@@ -413,7 +413,7 @@ def braid_cosines_batch(V, T, CN, S, CT, points, faces, s, directions, out):
 @njit(cache=True)
 def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curvature_tol,
                      cosines, slip):
-    """cos of the braid angle and slip tendency of laid yarn (``analysis.laid_braid_angles``).
+    """cos of the braid angle and slip tendency of laid yarn (``laid.laid_braid_angles``).
 
     points (m, 3), faces (m,), s (m,) arc lengths; prev_i / next_i (m,) the neighbours along the
     yarn (the point itself at the ends). Direction: the chord points[next] - points[prev], or the

@@ -3,8 +3,8 @@ a matrix of blocks per pair of crossings linked by a segment, its elimination or
 dissection), its symbolic analysis, and the factorisation and solves with 3 x 3 blocks (the
 crossings' positions) and 5 x 5 blocks (with their materials, the ``"full"`` preconditioner).
 QDLDL's up-looking algorithm (Davis 2005; QDLDL, Apache-2.0) with every scalar a block. The slow
-twins are in ``tests/naive_relax.py`` and the dense solves of ``tests/test_relax.py`` and
-``tests/test_relax_ring.py``.
+twins are in ``tests/support/naive_relax.py`` and the dense solves of ``tests/validation/test_relax.py`` and
+``tests/validation/test_relax_ring.py``.
 """
 
 from __future__ import annotations

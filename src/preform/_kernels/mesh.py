@@ -77,7 +77,7 @@ def project_to_polyline(points, P, S, out_s, out_d):
     """Closest point of the polyline P (n, 3) (arc lengths S (n,)) to each of points (m, 3).
 
     The nearest segment (``_segment_d2``), the lowest-index one of equal distances, exactly as
-    trying every segment for every point (``tests/naive_kinematic.project_to_polyline``), but
+    trying every segment for every point (``tests/support/naive_kinematic.project_to_polyline``), but
     with the segments in runs of about sqrt(n) under bounding spheres: a run whose sphere is
     farther than the best distance so far cannot hold the nearest segment and is skipped. The
     previous point's run is searched first (points come in spatial order along yarns or faces).
@@ -220,12 +220,12 @@ def closest_on_candidates(points, V, F, ptr, cand, out_point, out_face, out_d2):
 
 
 # ------------------------------------------------- arc length through a dense resampling
-# ``analysis.CenterlineProjector``: the centerline resampled at a fine spacing, the nearest sample
+# ``laid.CenterlineProjector``: the centerline resampled at a fine spacing, the nearest sample
 # found exactly through a box tree over runs of consecutive samples, then the two resampled
 # segments at that sample projected. Dot products are summed as (x0 y0 + x2 y2) + x1 y1, the
 # order NumPy's einsum("ij,ij->i") takes on this code's reference machine, and norms as
 # (x0^2 + x1^2) + x2^2 (np.linalg.norm), so the arc lengths are those of the whole-array NumPy
-# projector (tests/test_polyline_projection.py) to the last bit.
+# projector (tests/unit/test_polyline_projection.py) to the last bit.
 
 _LEAF = 32  # samples per leaf box of the tree (8, 16, 32: 0.34, 0.21, 0.19 s for 442 k points near a bend)
 

@@ -15,7 +15,7 @@ tension ``f = k (l - q) / q`` (``k = EA``, ``compression EA`` when slack), ``l =
 eps2)`` (top: ``+ eps2_top``), material ``q = s_c - s_below``; jamming push ``k_jam (l_jam -
 l)`` between two crossings closer than ``l_jam``; smoothed friction ``g sqrt(x^2 + eps_f^2) + kappa0
 x^2 / 2`` in the slide ``x = s - s_old``. The constants arrive as arguments from
-``preform/interaction/settings.py`` (``EnergySettings``, ``FrontalSettings``). The slow twins are in ``tests/naive_relax.py``.
+``preform/interaction/settings.py`` (``EnergySettings``, ``FrontalSettings``). The slow twins are in ``tests/support/naive_relax.py``.
 
 Here: the segments, the yarns' material sweep, the forces and residual, the wall's active set,
 the friction bounds, the reduced energy and Anderson mixing. The preconditioners' matrices are

@@ -1,7 +1,7 @@
 """Numba kernel of the yarn-ring contact (paper §2.3, eqs. 9-13, Fig. A.17; docs/theory.md §4).
 
 Scalars in, one float64 output row out, an integer status back (callable from another ``@njit``
-kernel). Public wrapper: ``preform.interaction.ring``; slow reference: ``tests/naive_contact.py``.
+kernel). Public wrapper: ``preform.interaction.ring``; slow reference: ``tests/support/naive_contact.py``.
 
 Machine frame: the ring is the circle of radius ``r`` about the z axis in the plane ``z = z_ring``;
 its point ``R(theta) = (r cos theta, r sin theta, z_ring)`` with tangent ``t_r = (-sin, cos, 0)``

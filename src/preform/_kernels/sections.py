@@ -2,7 +2,7 @@
 
 A plane cuts a mesh into segments whose end points, once welded, are graph nodes; the closed loops
 are walked from node to node. The walk is the one of the Python reference in
-``preform.geometry.small_mesh.chain_loops``, step for step (node order, neighbour order, which
+``tests/support/naive_intake.py`` (``chain_loops``), step for step (node order, neighbour order, which
 coordinates a node keeps), so the loops are the same.
 """
 

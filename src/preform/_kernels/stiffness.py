@@ -2,7 +2,7 @@
 of the scalar force-density Laplacian, the block-Jacobi corrections, the lattice's geometric
 stiffness in 3 x 3 blocks (``"block"``) and the Hessian in the positions and materials in 5 x 5
 blocks (``"full"``), and the block update. Layout and equations as in ``_kernels/relax.py``; the
-slow twins are in ``tests/naive_relax.py`` and ``tests/test_relax_ring.py``.
+slow twins are in ``tests/support/naive_relax.py`` and ``tests/validation/test_relax_ring.py``.
 """
 
 from __future__ import annotations

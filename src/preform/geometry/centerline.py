@@ -17,10 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MandrelError
-from . import small_mesh
 from .mandrel import UNITS
 from .sections import plane_segments
-from .small_mesh import INTAKE
 
 #: the tip region counts as elongated (its own principal axis is trusted) when its largest
 #: principal variance exceeds the second by this factor
@@ -242,43 +240,19 @@ def _header_columns(names, default):
     return default
 
 
-def write_centerline_csv(path, centerline: Centerline, unit: str = "m") -> Path:
-    """Write ``x,y,z,s,perimeter`` (lengths in ``unit``) atomically; readable by read_centerline_csv.
-
-    The file is written atomically with the user's umask (``preform.io.atomic``): an interrupted
-    write never leaves a half file, and a symlink planted at ``path`` is replaced, never followed. ``write_centerline_csv(centerline, path)`` (the older argument
-    order) is accepted too. perimeter is ``nan`` when the centerline has none.
-    """
-    if isinstance(path, Centerline):
-        path, centerline = centerline, path
-    _check_unit(unit, "centerline unit")
-    path = Path(path)
-    scale = 1.0 / UNITS[unit]
-    per = centerline.perimeter if centerline.perimeter is not None else np.full(len(centerline.s), np.nan)
-    lines = ["x,y,z,s,perimeter"]
-    for p, s, q in zip(centerline.points * scale, centerline.s * scale, per * scale):
-        lines.append(f"{p[0]:.9g},{p[1]:.9g},{p[2]:.9g},{s:.9g},{q:.9g}")
-    from ..io.atomic import atomic_write_text   # imported here: preform.io loads matplotlib
-
-    return atomic_write_text(path, "\n".join(lines) + "\n")
-
-
-def _slab_index(mesh, settings=INTAKE):
+def _slab_index(mesh):
     """Face centroids (nf, 3) and each face's largest centroid-to-corner distance (nf,) m, cached
-    in the mesh's ``metadata``: a plane farther than that from a centroid cannot cut the face.
-    ``_kernels.mesh.centroids_and_reach``, or its NumPy form below ``settings.kernel_faces``."""
+    in the mesh's ``metadata``: a plane farther than that from a centroid cannot cut the face
+    (``_kernels.mesh.centroids_and_reach``)."""
     cached = mesh.metadata.get("_preform_slab")
     if cached is None:
+        from .._kernels.mesh import centroids_and_reach
+
         F = np.ascontiguousarray(mesh.faces.view(np.ndarray), dtype=np.int64)
         V = np.ascontiguousarray(mesh.vertices.view(np.ndarray), dtype=np.float64)
-        if settings.kernels(len(F)):
-            from .._kernels.mesh import centroids_and_reach
-
-            centroids = np.empty((len(F), 3))
-            reach = np.empty(len(F))
-            centroids_and_reach(V, F, centroids, reach)
-        else:
-            centroids, reach = small_mesh.centroids_and_reach(V, F)
+        centroids = np.empty((len(F), 3))
+        reach = np.empty(len(F))
+        centroids_and_reach(V, F, centroids, reach)
         cached = mesh.metadata["_preform_slab"] = (centroids, reach)
     return cached
 
@@ -303,7 +277,7 @@ def _axis_order(mesh, axis):
 WINDOW_MIN_COS = 0.5
 
 
-def _faces_near_plane(mesh, normal, level, settings=INTAKE):
+def _faces_near_plane(mesh, normal, level):
     """Indices (ascending) of the faces whose centroid lies within their reach of the plane
     ``x . normal = level``: ``|c . n - level| <= reach (1 + 1e-9)``.
 
@@ -312,7 +286,7 @@ def _faces_near_plane(mesh, normal, level, settings=INTAKE):
     n_a^2)``, so only centroids with ``|(c_a - m_a) n_a - (level - m . n)| <= reach_max (1 + 1e-9)
     + R sqrt(1 - n_a^2)`` can pass; those (a binary search in the sorted coordinates) are tested.
     """
-    centroids, reach = _slab_index(mesh, settings)
+    centroids, reach = _slab_index(mesh)
     axis = int(np.argmax(np.abs(normal)))
     na = float(normal[axis])
     if abs(na) < WINDOW_MIN_COS or len(centroids) < 10000:
@@ -330,7 +304,7 @@ def _faces_near_plane(mesh, normal, level, settings=INTAKE):
     return candidates[near]
 
 
-def _section_loops(mesh, origin, normal, settings=INTAKE):
+def _section_loops(mesh, origin, normal):
     """Closed section loops (list of (k, 3) arrays, first point repeated last) of a mesh with a plane.
 
     ``mesh``: anything with ``vertices``, ``faces`` and a ``metadata`` dict for the face index
@@ -338,13 +312,11 @@ def _section_loops(mesh, origin, normal, settings=INTAKE):
     centroid lies within their own centroid-to-corner distance of the plane are cut, found by
     ``_faces_near_plane``: on a 2 M-face mandrel a section then costs about a millisecond instead
     of 77 ms for the whole mesh. The cut is ``plane_segments`` on those faces' corners.
-    ``settings``: which meshes (by face count) take the NumPy forms, and how many of a small
-    mesh's sections chain their loops in Python (counted in ``metadata``).
     """
     normal = np.asarray(normal, dtype=float)
     origin = np.asarray(origin, dtype=float)
     level = float(origin @ normal)
-    local = _faces_near_plane(mesh, normal, level, settings)
+    local = _faces_near_plane(mesh, normal, level)
     if len(local) == 0:
         return []
     V = np.asarray(mesh.vertices).view(np.ndarray)
@@ -352,23 +324,17 @@ def _section_loops(mesh, origin, normal, settings=INTAKE):
     segments = plane_segments(corners, corners @ normal - level, normal, origin)
     if segments is None:
         return []
-    cut = mesh.metadata.get("_preform_sections_cut", 0)
-    mesh.metadata["_preform_sections_cut"] = cut + 1
-    return chain_segments(segments, kernels=settings.kernels(len(mesh.faces)) or cut >= settings.python_sections)
+    return chain_segments(segments)
 
 
-def chain_segments(segments, rel_tol=1e-9, kernels=True):
+def chain_segments(segments, rel_tol=1e-9):
     """Join segments (n, 2, 3) that share end points into closed loops; open chains are dropped.
 
     End points closer than ``rel_tol * 1e3`` of the segments' extent are one node (rounded
-    coordinates); the walk over the nodes is ``_kernels.sections.chain_loops`` with ``kernels``,
-    else the same walk in Python (``small_mesh.chain_loops``). Each loop is (k + 1, 3), its first
-    point repeated last.
+    coordinates); the walk over the nodes is ``_kernels.sections.chain_loops``. Each loop is
+    (k + 1, 3), its first point repeated last.
     """
-    if kernels:
-        from .._kernels.sections import chain_loops
-    else:
-        chain_loops = small_mesh.chain_loops
+    from .._kernels.sections import chain_loops
 
     if len(segments) == 0:
         return []
@@ -432,21 +398,20 @@ def _nearest_loop(loops, normal, predicted):
     return best
 
 
-def section_perimeters(mandrel, centerline: Centerline, s_values, settings=INTAKE) -> np.ndarray:
-    """Perimeter (m) of the section loop around the centerline at each s (plane normal to T);
-    ``settings``: which meshes the numba kernels serve."""
+def section_perimeters(mandrel, centerline: Centerline, s_values) -> np.ndarray:
+    """Perimeter (m) of the section loop around the centerline at each s (plane normal to T)."""
     s_values = np.atleast_1d(np.asarray(s_values, dtype=float))
     p, T, _, _ = centerline.frames_at(s_values)
     out = np.zeros(len(s_values))
     for k in range(len(s_values)):
-        best = _nearest_loop(_section_loops(mandrel.sections, p[k], T[k], settings), T[k], p[k])
+        best = _nearest_loop(_section_loops(mandrel.sections, p[k], T[k]), T[k], p[k])
         out[k] = 0.0 if best is None else best[3]
     return out
 
 
-def with_perimeter(centerline: Centerline, mandrel, settings=INTAKE) -> Centerline:
+def with_perimeter(centerline: Centerline, mandrel) -> Centerline:
     """A copy with ``perimeter`` filled from the mandrel's sections."""
-    return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s, settings))
+    return replace(centerline, perimeter=section_perimeters(mandrel, centerline, centerline.s))
 
 
 #: ``auto_centerline`` cuts faces into pieces no longer than this fraction of the mandrel's

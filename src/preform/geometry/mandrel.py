@@ -16,8 +16,6 @@ import numpy as np
 
 from ..errors import MandrelError
 from ..tolerances import tol
-from . import small_mesh
-from .small_mesh import INTAKE
 
 UNITS = {"m": 1.0, "mm": 1e-3}
 
@@ -260,21 +258,18 @@ class Mandrel:
         return n / np.linalg.norm(n)
 
 
-def face_neighbors(faces, settings=INTAKE) -> np.ndarray:
-    """(nf, 3) int64: the face across edge k (corners k, k+1) of each face, -1 if none or ambiguous.
-    Below ``settings.kernel_faces`` faces by a sort (``small_mesh.face_neighbors``)."""
+def face_neighbors(faces) -> np.ndarray:
+    """(nf, 3) int64: the face across edge k (corners k, k+1) of each face, -1 if none or ambiguous."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     nf = len(faces)
     if nf == 0:
         return np.zeros((0, 3), dtype=np.int64)
-    if not settings.kernels(nf):
-        return small_mesh.face_neighbors(faces)
     from .._kernels.edges import directed_neighbors, edge_table
 
     # the half-edges grouped by undirected edge (no sort), then within each group the lowest
     # half-edge running the other way; an edge used twice in the same direction is non-manifold
     # or mis-wound: no neighbour (the same arrays as a stable argsort of the directed keys
-    # searched for each twin key, tests/test_big_mesh_kernels.py)
+    # searched for each twin key, tests/unit/test_big_mesh_kernels.py)
     order = np.empty(3 * nf, dtype=np.int64)
     _, count = edge_table(faces, int(faces.max()) + 1, np.empty(3 * nf, dtype=np.int64), order)
     out = np.empty(3 * nf, dtype=np.int64)
@@ -282,19 +277,15 @@ def face_neighbors(faces, settings=INTAKE) -> np.ndarray:
     return out.reshape(nf, 3)
 
 
-def _corner_normals(vertices, faces, face_normals, settings=INTAKE):
+def _corner_normals(vertices, faces, face_normals):
     """Crease-split smooth corner normals (``_kernels.mesh.corner_normals``): interior angles
     ``arccos(clip(cos, -1, 1))`` from ``corner_cosines`` (NumPy's arccos), the faces around each
-    vertex from ``corners_by_vertex``; their NumPy forms below ``settings.kernel_faces``."""
+    vertex from ``corners_by_vertex``."""
+    from .._kernels.mesh import corner_cosines, corner_normals, corners_by_vertex
+
     V = np.ascontiguousarray(vertices, dtype=np.float64)
     F = np.ascontiguousarray(faces, dtype=np.int64)
     cos_crease = float(np.cos(np.radians(tol.crease_angle_deg)))
-    if not settings.kernels(len(F)):
-        angles = np.arccos(np.clip(small_mesh.corner_cosines(V, F), -1.0, 1.0))
-        ptr, around, corner = small_mesh.corners_by_vertex(F, len(V))
-        return small_mesh.corner_normals(F, np.ascontiguousarray(face_normals, dtype=np.float64), angles,
-                                         ptr, around, corner, cos_crease)
-    from .._kernels.mesh import corner_cosines, corner_normals, corners_by_vertex
 
     c = np.empty((len(F), 3))
     corner_cosines(V, F, c)
@@ -306,11 +297,10 @@ def _corner_normals(vertices, faces, face_normals, settings=INTAKE):
     return corner_normals(F, face_normals, angles, vert_ptr, vert_faces, vert_corner, cos_crease)
 
 
-def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bool = True,
-                        settings=INTAKE) -> Mandrel:
-    """Build a Mandrel from vertices (nv, 3) m and faces (nf, 3); checks closure and orientation.
-    settings : IntakeSettings, which meshes the numba kernels build the arrays of (the same arrays
-    as the NumPy forms of smaller ones, ``small_mesh``)."""
+def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bool = True) -> Mandrel:
+    """Build a Mandrel from vertices (nv, 3) m and faces (nf, 3); checks closure and orientation."""
+    from .._kernels.mesh import face_cross_normals
+
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     name = source or "mandrel"
@@ -319,19 +309,14 @@ def mandrel_from_arrays(vertices, faces, source: str = "", repairs=(), check: bo
     if not np.all(np.isfinite(vertices)):
         raise MandrelError(f"{name}: the STL has non-finite vertex coordinates")
     # cross = (p1 - p0) x (p2 - p0), normals = cross / |cross| (cross where |cross| = 0)
-    if settings.kernels(len(faces)):
-        from .._kernels.mesh import face_cross_normals
-
-        cross = np.empty((len(faces), 3))
-        normals = np.empty((len(faces), 3))
-        face_cross_normals(vertices, faces, cross, normals)
-    else:
-        cross, normals = small_mesh.face_cross_normals(vertices, faces)
-    neighbors = face_neighbors(faces, settings)
+    cross = np.empty((len(faces), 3))
+    normals = np.empty((len(faces), 3))
+    face_cross_normals(vertices, faces, cross, normals)
+    neighbors = face_neighbors(faces)
     if check:
         _check_closed(name, vertices, faces, neighbors, cross)
     return Mandrel(vertices=vertices, faces=faces, face_normals=normals,
-                   corner_normals=_corner_normals(vertices, faces, normals, settings), neighbors=neighbors,
+                   corner_normals=_corner_normals(vertices, faces, normals), neighbors=neighbors,
                    source=str(source), repairs=tuple(repairs))
 
 

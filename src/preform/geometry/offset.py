@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import PreformError
+from .remesh import locate_faces, refine_to_edge_length, subdivide_long_edges
 
 
 class OffsetError(PreformError):
@@ -210,10 +211,7 @@ def _where(V, F, folded) -> str:
 
 def refined_surface(vertices, faces, max_edge):
     """The same piecewise-flat surface with no edge longer than ``max_edge`` (m): long edges cut
-    into pieces, then longest-edge bisection (as ``preform.fields.fields_on_input``)."""
-    from ..fields import refine_to_edge_length
-    from .remesh import subdivide_long_edges
-
+    into pieces, then longest-edge bisection (as ``preform.analysis.fields.fields_on_input``)."""
     V, F, _ = subdivide_long_edges(np.asarray(vertices, dtype=np.float64),
                                    np.asarray(faces, dtype=np.int64), max_edge)
     V, F, _ = refine_to_edge_length(V, F, max_edge)
@@ -242,8 +240,6 @@ def interpolate(vertices, faces, vertex_values, points, normals, reach):
     its projection onto the face's plane, clipped into the face).
     vertex_values : (nv,) or (nv, c);  points, normals : (m, 3);  returns (m,) or (m, c)
     """
-    from .remesh import locate_faces
-
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
     face = locate_faces(V, F, points, normals, reach)

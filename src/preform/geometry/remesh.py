@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import PreformError
+
 
 @dataclass(frozen=True)
 class RemeshSettings:
@@ -243,3 +245,73 @@ def locate_faces(vertices, faces, points, normals, reach, mesh=None):
         _, _, tri = trimesh.proximity.closest_point(mesh, points[missing])
         out[missing] = tri
     return out
+
+
+#: refinement guard: at most this many edge-splitting passes (each halves the longest edges)
+MAX_REFINE_PASSES = 60
+
+
+def refine_to_edge_length(vertices, faces, max_edge):
+    """A conforming refinement of a triangle mesh with no edge longer than ``max_edge``.
+
+    Longest-edge bisection (Rivara): each pass bisects the longest edge of every face that has an
+    edge above ``max_edge``, plus, for conformity, the longest edge of every face sharing a split
+    edge (repeated until closed). Bisection keeps a face's shape (a needle of length L and width
+    w becomes needles of L / 2 and w / 2), so it suits faces that are already about as wide as
+    long: ``preform.analysis.fields.fields_on_input`` uses it after cutting long edges into pieces
+    (:func:`subdivide_long_edges`); the field mesh itself is remeshed.
+
+    vertices : (nv, 3) float64, m;  faces : (nf, 3) int64;  max_edge : float, m (> 0)
+    returns : (vertices (nv', 3) float64, faces (nf', 3) int64, source_faces (nf',) int64), the
+        first nv vertices unchanged, winding kept, each new face inside input face source_faces.
+    Raises PreformError if ``max_edge`` is not positive and finite.
+    """
+    if not (np.isfinite(max_edge) and max_edge > 0):
+        raise PreformError(f"[output] field_edge_length = {max_edge!r}: expected a positive length in m")
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    source = np.arange(len(F), dtype=np.int64)
+    for _ in range(MAX_REFINE_PASSES):
+        edges = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1, 3)
+        edge_len = np.linalg.norm(V[unique[:, 0]] - V[unique[:, 1]], axis=1)
+        face_len = edge_len[inverse]
+        longest = inverse[np.arange(len(F)), np.argmax(face_len, axis=1)]
+        marked = np.zeros(len(unique), bool)
+        marked[longest[face_len.max(axis=1) > max_edge]] = True
+        if not marked.any():
+            break
+        while True:  # closure: a face with a split edge also splits its longest edge
+            need = marked[inverse].any(axis=1) & ~marked[longest]
+            if not need.any():
+                break
+            marked[longest[need]] = True
+        mid_index = np.full(len(unique), -1, dtype=np.int64)
+        mid_index[marked] = len(V) + np.arange(marked.sum())
+        V = np.vstack([V, 0.5 * (V[unique[marked, 0]] + V[unique[marked, 1]])])
+        F, source = _bisect_faces(F, source, mid_index[inverse], np.argmax(face_len, axis=1))
+    return V, F, source
+
+
+def _bisect_faces(F, source, mids, longest_local):
+    """Split faces whose edges are marked (mids (nf, 3): midpoint of edge j or -1); the longest
+    edge (local index longest_local) of a split face is always marked and bisected first."""
+    marked = mids >= 0
+    untouched = ~marked.any(axis=1)
+    out_f, out_s = [F[untouched]], [source[untouched]]
+    for shift in range(3):  # rotate so the longest edge is (a, b), with midpoint m0
+        rot = [(shift + i) % 3 for i in range(3)]
+        sel = ~untouched & (longest_local == shift)
+        a, b, c = (F[sel, r] for r in rot)
+        m0, m1, m2 = (mids[sel, r] for r in rot)
+        k1, k2 = marked[sel, rot[1]], marked[sel, rot[2]]
+        src = source[sel]
+        pieces = (  # (condition, triangles): left half (a, m0, c), right half (m0, b, c)
+            (~k2, [a, m0, c]), (k2, [a, m0, m2]), (k2, [m2, m0, c]),
+            (~k1, [m0, b, c]), (k1, [m0, b, m1]), (k1, [m0, m1, c]),
+        )
+        for cond, tri in pieces:
+            out_f.append(np.column_stack(tri)[cond])
+            out_s.append(src[cond])
+    return np.vstack(out_f).astype(np.int64), np.concatenate(out_s).astype(np.int64)

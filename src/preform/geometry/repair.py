@@ -9,23 +9,23 @@
    cap's middle vertex, so no crack is left behind;
 3. drops exact duplicate faces (same three vertices, either winding);
 4. refuses non-manifold edges (three or more faces on one edge), and triangles that do not connect
-   at all (more than ``UNWELDED`` of the edges open);
+   at all (more than ``IntakeSettings.unwelded`` of the edges open);
 5. makes the winding consistent by propagating orientation across every two-face edge (one
    connected-components call on the orientation double cover; a non-orientable surface is refused);
 6. finds the disjoint bodies and refuses several of them unless ``body`` chooses one;
 7. fills small holes by ear clipping the loop in its mean plane, and refuses large ones (an open
-   surface). Small: the loop spans at most ``SMALL_HOLE`` of the bounding-box diagonal, or it has
-   at most ``FEW_EDGES`` edges (one or two missing triangles, which on a coarse CAD mesh may run the
-   whole length of the part). No patch may cover more than ``MAX_FILL_SHARE`` of the surface,
+   surface). Small: the loop spans at most ``small_hole`` of the bounding-box diagonal, or it has
+   at most ``few_edges`` edges (one or two missing triangles, which on a coarse CAD mesh may run the
+   whole length of the part). No patch may cover more than ``max_fill_share`` of the surface,
    whatever its span. The report names the largest fill: its triangles, its span and its share
    of the surface;
 8. turns the winding outwards (signed volume > 0) and refuses a surface that encloses no volume;
 9. refuses self-intersections: an edge that pierces a triangle it does not belong to (one batched
    ray query, embree when installed). Coplanar overlaps are not detected.
 
-The passes are numba kernels for big meshes; below ``IntakeSettings.kernel_faces`` faces they are
-their NumPy forms (``geometry.small_mesh``), with the same results, so that a first run on a small
-mandrel compiles none of them.
+The passes are numba kernels (``_kernels.mesh``, ``_kernels.edges``) on plain arrays; their slow
+NumPy references are in ``tests/support/naive_intake.py``. The thresholds are
+:class:`IntakeSettings`.
 
 Every change is said in ``RepairReport.messages``, which the run log and ``summary.json`` repeat.
 Merging the corners of an STL triangle soup (``3 * n_faces`` vertices, as every STL file is) is the
@@ -41,23 +41,29 @@ from scipy.spatial import cKDTree
 
 from ..errors import MandrelError
 from ..tolerances import tol
-from . import small_mesh
-from .small_mesh import INTAKE
-from .small_mesh import edge_keys as _edge_keys
 
-#: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
-SMALL_HOLE = 0.05
-#: so are one or two missing triangles (a loop of at most this many edges): on a coarse CAD mesh one
-#: triangle can span the whole part
-FEW_EDGES = 4
-#: no fill may cover more than this share of the surface (the open mesh's area), whatever its span:
-#: 5 % is the end cap of a cylinder 4.5 diameters long (r / (2 L + 2 r)); more would invent the shape
-MAX_FILL_SHARE = 0.05
-#: a closed surface enclosing less than this times diagonal**3 encloses no volume (flat, folded)
-MIN_VOLUME = 1e-9
 
-#: more than this fraction of open edges means the triangles were never connected (not holes)
-UNWELDED = 0.5
+@dataclass(frozen=True)
+class IntakeSettings:
+    """The mesh intake's thresholds: which holes are filled, and which meshes are refused."""
+
+    #: holes whose boundary loop spans at most this fraction of the bounding-box diagonal are filled
+    small_hole: float = 0.05
+    #: so are one or two missing triangles (a loop of at most this many edges): on a coarse CAD
+    #: mesh one triangle can span the whole part
+    few_edges: int = 4
+    #: no fill may cover more than this share of the surface (the open mesh's area), whatever its
+    #: span: 5 % is the end cap of a cylinder 4.5 diameters long (r / (2 L + 2 r)); more would
+    #: invent the shape
+    max_fill_share: float = 0.05
+    #: a closed surface enclosing less than this times diagonal**3 encloses no volume (flat, folded)
+    min_volume: float = 1e-9
+    #: more than this fraction of open edges means the triangles were never connected (not holes)
+    unwelded: float = 0.5
+
+
+#: the defaults
+INTAKE = IntakeSettings()
 
 _UNIT_NAMES = {1.0: "m", 1e-3: "mm"}
 
@@ -105,7 +111,7 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None,
         are given in the file's own coordinates so they can be found in the CAD tool
     body : None (exactly one body required), "largest", or an index into the bodies ordered by
         decreasing bounding-box diagonal (0 is the largest)
-    settings : IntakeSettings, which meshes (by input face count) the numba kernels handle
+    settings : IntakeSettings, the thresholds of hole filling and of the refusals
 
     Returns ``(vertices (k, 3) float64 m, faces (l, 3) int64, RepairReport)``; unused vertices are
     dropped. The inputs are not modified. Raises MandrelError, naming ``source``, what is wrong and
@@ -114,26 +120,25 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None,
     say = _Messages(source, unit_scale)
     V, F = _validated(vertices, faces, say)
     counts = {"input_vertices": len(V), "input_faces": len(F)}
-    kernels = settings.kernels(len(F))
-    radius = tol.merge_vertices * _diagonal(V, kernels=kernels)
+    radius = tol.merge_vertices * _diagonal(V)
 
-    V, F, counts["merged_vertices"] = _merge_vertices(V, F, radius, kernels)
+    V, F, counts["merged_vertices"] = _merge_vertices(V, F, radius)
     if counts["merged_vertices"]:
         say.change(f"merged {counts['merged_vertices']:,} duplicate vertices")
-    F, counts["degenerate_faces"] = _drop_degenerate(V, F, radius, kernels)
+    F, counts["degenerate_faces"] = _drop_degenerate(V, F, radius)
     if counts["degenerate_faces"]:
         say.change(f"dropped {counts['degenerate_faces']:,} degenerate faces")
-    F, counts["duplicate_faces"] = _drop_duplicate_faces(F, kernels)
+    F, counts["duplicate_faces"] = _drop_duplicate_faces(F)
     if counts["duplicate_faces"]:
         say.change(f"dropped {counts['duplicate_faces']:,} duplicated faces")
     if len(F) == 0:
         say.refuse(f"no usable triangles (all {counts['input_faces']:,} are degenerate)",
                    "export the mandrel again as a closed solid")
 
-    edges = _EdgeTable(F, kernels)
+    edges = _EdgeTable(F)
     _refuse_non_manifold(V, edges, say)
-    _refuse_unwelded(V, edges, radius, say)
-    flipped, component = _orientation(F, edges, V, say, kernels)
+    _refuse_unwelded(V, edges, radius, say, settings)
+    flipped, component = _orientation(F, edges, V, say)
     if flipped.any():
         F = np.where(flipped[:, None], F[:, ::-1], F)
     keep, counts["bodies"] = _choose_body(V, F, component, body, say)
@@ -143,12 +148,12 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None,
     # every edge of a body lies in that body's faces only (two-face edges join faces of one body,
     # and no edge has more), so with no open edge now no kept body has a hole
     closed = not np.any(edges.count == 1)
-    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say, closed, kernels)
+    F, counts["holes_filled"], counts["largest_hole"] = _fill_small_holes(V, F, say, closed, settings)
     volume = _signed_volume(V, F)
     if volume < 0:
         F = F[:, ::-1]
         flipped = ~flipped
-    _refuse_flat(V, F, say, abs(volume), kernels)
+    _refuse_flat(V, F, say, abs(volume), settings)
     n_flipped = int(flipped.sum())
     counts["flipped_faces"] = n_flipped
     if n_flipped == len(flipped):
@@ -161,7 +166,7 @@ def repair_mesh(vertices, faces, *, source="mandrel", unit_scale=1.0, body=None,
     V = np.ascontiguousarray(V, dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.int64)
     mesh = trimesh.Trimesh(V, F, process=False)
-    _refuse_self_intersections(V, F, say, mesh, kernels)
+    _refuse_self_intersections(V, F, say, mesh)
     return V, F, RepairReport(**counts, messages=tuple(say.changes), ray_mesh=mesh)
 
 
@@ -216,21 +221,23 @@ def _validated(vertices, faces, say):
     return V, F
 
 
-def _diagonal(V, F=None, kernels=True):
+def _diagonal(V, F=None):
     """Bounding-box diagonal (m) of finite vertices (n, 3), or of those faces F (m, 3) use; 1 for a
-    single point. One pass (``_kernels.mesh.vertex_bounds``, or its NumPy form unless
-    ``kernels``): ``V.max(axis=0) - V.min(axis=0)`` exactly, without gathering
-    ``V[np.unique(F)]``."""
+    single point. One pass (``_kernels.mesh.vertex_bounds``): ``V.max(axis=0) - V.min(axis=0)``
+    exactly, without gathering ``V[np.unique(F)]``."""
+    from .._kernels.mesh import vertex_bounds
+
     F = np.zeros((0, 3), dtype=np.int64) if F is None else np.ascontiguousarray(F, dtype=np.int64)
     V = np.ascontiguousarray(V, dtype=np.float64)
-    if kernels:
-        from .._kernels.mesh import vertex_bounds
-
-        lo, hi = np.empty(3), np.empty(3)
-        vertex_bounds(V, F, lo, hi)
-    else:
-        lo, hi = small_mesh.vertex_bounds(V, F)
+    lo, hi = np.empty(3), np.empty(3)
+    vertex_bounds(V, F, lo, hi)
     return float(np.linalg.norm(hi - lo)) or 1.0
+
+
+def _edge_keys(F, n_vertices):
+    """Undirected edge key per face side: (m, 3) int64, side k runs F[:, k] -> F[:, k + 1]."""
+    a, b = F, np.roll(F, -1, axis=1)
+    return np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
 
 
 def _compact(V, F):
@@ -243,15 +250,15 @@ def _compact(V, F):
     return V[used], remap[F]
 
 
-def _merge_vertices(V, F, radius, kernels=True):
+def _merge_vertices(V, F, radius):
     """Merge vertices closer than ``radius`` (m): the lowest index of each cluster survives.
 
     Returns (vertices, faces, merged) where ``merged`` leaves out the corners shared by an STL
     soup's triangles when the input is a soup (exact copies, ``3 * len(F)`` vertices).
     """
-    first, inverse = _weld_exact(V, kernels)
+    first, inverse = _weld_exact(V)
     exact = V[first]
-    pairs = _near_pairs(exact, radius, kernels)
+    pairs = _near_pairs(exact, radius)
     n_exact = len(exact)
     # clusters: connected components of the pairs on the exact vertices; survivors: the lowest
     # input vertex of each, ascending; new_index: each input vertex's survivor's rank (one
@@ -259,7 +266,7 @@ def _merge_vertices(V, F, radius, kernels=True):
     # vertices: their first appearances survive, in order, and new_index is the weld's inverse
     if len(pairs) == 0:
         survivors, new_index = first, inverse
-    elif kernels:
+    else:
         from .._kernels.edges import merge_clusters
 
         survivors = np.empty(len(V), dtype=np.int64)
@@ -267,8 +274,6 @@ def _merge_vertices(V, F, radius, kernels=True):
         n = merge_clusters(inverse, np.ascontiguousarray(pairs.reshape(-1, 2), dtype=np.int64), n_exact,
                            survivors, new_index)
         survivors = survivors[:n]
-    else:
-        survivors, new_index = small_mesh.merge_clusters(inverse, pairs.reshape(-1, 2), n_exact)
     n_clusters = len(survivors)
     merged = len(V) - n_clusters
     if len(V) == 3 * len(F):
@@ -281,14 +286,14 @@ def _merge_vertices(V, F, radius, kernels=True):
 GRID_REACH = 1e12
 
 
-def _near_pairs(P, radius, kernels=True):
+def _near_pairs(P, radius):
     """``cKDTree(P).query_pairs(radius, output_type="ndarray")``: the pairs of rows of P (n, 3)
-    within ``radius`` (m). With ``kernels``, a grid of cubes of edge ``2 radius`` comes first
+    within ``radius`` (m). A grid of cubes of edge ``2 radius`` comes first
     (``_kernels.mesh.grid_neighbours_exist``): when no two points share a cube or touch cubes,
     no pair is that close and the tree (0.45 s on 500 k points) is not built; else the tree."""
     cube = 2.0 * radius
     P = np.ascontiguousarray(P, dtype=np.float64)
-    if kernels and len(P) and cube > 0 and np.isfinite(cube) and float(np.abs(P).max()) < GRID_REACH * cube:
+    if len(P) and cube > 0 and np.isfinite(cube) and float(np.abs(P).max()) < GRID_REACH * cube:
         from .._kernels.mesh import grid_neighbours_exist
 
         if not grid_neighbours_exist(P, cube):
@@ -296,20 +301,19 @@ def _near_pairs(P, radius, kernels=True):
     return cKDTree(P).query_pairs(radius, output_type="ndarray")
 
 
-def _weld_exact(V, kernels=True):
+def _weld_exact(V):
     """The distinct rows of V (n, 3) in order of first appearance: (first (k,) the index of each
     one's first appearance, ascending; inverse (n,) the distinct row of each vertex). A hash
-    table (``_kernels.mesh.weld_exact``), or a lexicographic sort unless ``kernels``."""
-    V = np.ascontiguousarray(V, dtype=np.float64)
-    if not kernels:
-        return small_mesh.weld_exact(V)
+    table (``_kernels.mesh.weld_exact``)."""
     from .._kernels.mesh import weld_exact
+
+    V = np.ascontiguousarray(V, dtype=np.float64)
 
     inverse = np.empty(len(V), dtype=np.int64)
     return weld_exact(V, inverse), inverse
 
 
-def _drop_degenerate(V, F, radius, kernels=True):
+def _drop_degenerate(V, F, radius):
     """Drop zero-area faces (height below ``radius`` m); split the neighbour across a cap's long edge.
 
     In NumPy (kernel ``_kernels.mesh.degenerate_faces``)::
@@ -322,20 +326,16 @@ def _drop_degenerate(V, F, radius, kernels=True):
         longest = length.argmax(axis=1)
         caps = ~collapsed & (area2 <= radius * length.max(axis=1))
 
-    Unless ``kernels``, this NumPy form itself (``small_mesh.degenerate_faces``).
     Returns (faces, dropped).
     """
+    from .._kernels.mesh import degenerate_faces
+
     V = np.ascontiguousarray(V, dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.int64)
-    if kernels:
-        from .._kernels.mesh import degenerate_faces
-
-        collapsed = np.empty(len(F), dtype=bool)
-        caps = np.empty(len(F), dtype=bool)
-        longest = np.empty(len(F), dtype=np.int64)
-        degenerate_faces(V, F, float(radius), collapsed, caps, longest)
-    else:
-        collapsed, caps, longest = small_mesh.degenerate_faces(V, F, float(radius))
+    collapsed = np.empty(len(F), dtype=bool)
+    caps = np.empty(len(F), dtype=bool)
+    longest = np.empty(len(F), dtype=np.int64)
+    degenerate_faces(V, F, float(radius), collapsed, caps, longest)
     if caps.any():
         F = _split_across_caps(F, np.nonzero(caps)[0], longest, collapsed | caps)
     keep = ~(collapsed | caps)
@@ -372,19 +372,15 @@ def _split_across_caps(F, caps, longest, dropped):
     return np.vstack([F, np.array(extra, dtype=np.int64).reshape(-1, 3)])
 
 
-def _drop_duplicate_faces(F, kernels=True):
+def _drop_duplicate_faces(F):
     """Keep the first of faces with the same vertex set (either winding): (faces, dropped).
 
     The faces ``np.unique(np.sort(F, axis=1), axis=0, return_index=True)`` keeps, by a hash
-    table (``_kernels.edges.first_of_each_face``) instead of a lexicographic sort when
-    ``kernels``."""
-    if kernels:
-        from .._kernels.edges import first_of_each_face
+    table (``_kernels.edges.first_of_each_face``) instead of a lexicographic sort."""
+    from .._kernels.edges import first_of_each_face
 
-        keep = np.empty(len(F), dtype=bool)
-        first_of_each_face(np.ascontiguousarray(F, dtype=np.int64), keep)
-    else:
-        keep = small_mesh.first_of_each_face(F)
+    keep = np.empty(len(F), dtype=bool)
+    first_of_each_face(np.ascontiguousarray(F, dtype=np.int64), keep)
     n_kept = int(keep.sum())
     return (F if n_kept == len(F) else F[keep]), len(F) - n_kept
 
@@ -394,18 +390,15 @@ class _EdgeTable:
     ``count`` faces per edge, ``pairs`` (k, 2) the two half-edge ids (3 * face + side) of every
     two-face edge."""
 
-    def __init__(self, F, kernels=True):
+    def __init__(self, F):
+        from .._kernels.edges import edge_table
+
         F = np.ascontiguousarray(F, dtype=np.int64)
         # np.unique of the edge keys (_edge_keys) with its inverse and counts, and the stable
-        # argsort of the inverse: in O(m) passes instead of sorts with ``kernels``
-        if kernels:
-            from .._kernels.edges import edge_table
-
-            inverse = np.empty(3 * len(F), dtype=np.int64)
-            order = np.empty(3 * len(F), dtype=np.int64)
-            self.key, self.count = edge_table(F, int(F.max()) + 1, inverse, order)
-        else:
-            self.key, self.count, inverse, order = small_mesh.edge_table(F, int(F.max()) + 1)
+        # argsort of the inverse, in O(m) passes instead of sorts
+        inverse = np.empty(3 * len(F), dtype=np.int64)
+        order = np.empty(3 * len(F), dtype=np.int64)
+        self.key, self.count = edge_table(F, int(F.max()) + 1, inverse, order)
         self.side_edge = inverse.reshape(-1, 3)
         starts = np.concatenate([[0], np.cumsum(self.count)[:-1]])
         two = np.nonzero(self.count == 2)[0]
@@ -426,17 +419,17 @@ def _refuse_non_manifold(V, edges, say):
             "export the mandrel as one closed solid: union touching parts and remove internal faces")
 
 
-def _refuse_unwelded(V, edges, radius, say):
+def _refuse_unwelded(V, edges, radius, say, settings=INTAKE):
     """Most edges open: the triangles' corners do not meet, holes would be everywhere."""
     n_open = int(np.sum(edges.count == 1))
-    if n_open > UNWELDED * len(edges.count):
+    if n_open > settings.unwelded * len(edges.count):
         say.refuse(f"{n_open:,} of {len(edges.count):,} triangle edges have no neighbouring triangle: the "
                    f"corners of neighbouring triangles do not coincide to within {_mm(radius)} (the merge "
                    f"tolerance, {tol.merge_vertices:g} of the mesh size)",
                    "export the STL as one watertight mesh (binary STL, fine tessellation)")
 
 
-def _orientation(F, edges, V, say, kernels=True):
+def _orientation(F, edges, V, say):
     """Flips for a consistent winding, and a component label per face (both (m,)).
 
     Orientation double cover: node f is face f as given, node f + m is face f reversed. Across a
@@ -447,19 +440,15 @@ def _orientation(F, edges, V, say, kernels=True):
 
     The components are found by a union-find over the faces that keeps each face's parity
     against its root (``_kernels.edges.orient_bodies``): the same flips and body numbers (in
-    order of the bodies' lowest faces) as connected components of the 2 m-node cover, 10x faster;
-    unless ``kernels``, those components (``small_mesh.orient_bodies``).
+    order of the bodies' lowest faces) as connected components of the 2 m-node cover, 10x faster.
     """
+    from .._kernels.edges import orient_bodies
+
     F = np.ascontiguousarray(F, dtype=np.int64)
     pairs = np.ascontiguousarray(edges.pairs, dtype=np.int64).reshape(-1, 2)
-    if kernels:
-        from .._kernels.edges import orient_bodies
-
-        flipped = np.empty(len(F), dtype=bool)
-        component = np.empty(len(F), dtype=np.int64)
-        f = orient_bodies(F, pairs, flipped, component)
-    else:
-        flipped, component, f = small_mesh.orient_bodies(F, pairs)
+    flipped = np.empty(len(F), dtype=bool)
+    component = np.empty(len(F), dtype=np.int64)
+    f = orient_bodies(F, pairs, flipped, component)
     if f >= 0:
         say.refuse(f"the surface cannot be oriented (one-sided like a Moebius strip), e.g. "
                    f"{say.where(V[F[f]].mean(axis=0))}", "export the mandrel as one closed solid")
@@ -497,11 +486,11 @@ def _choose_body(V, F, component, body, say):
     return component == chosen, n
 
 
-def _boundary_loops(F, kernels=True):
+def _boundary_loops(F):
     """Boundary loops of a consistently wound mesh: lists of vertex ids in the faces' direction
     (each boundary edge runs loop[i] -> loop[i + 1] in its face). A vertex where two holes touch is
     split into simple loops; an unclosed chain comes back as None."""
-    edges = _EdgeTable(F, kernels)
+    edges = _EdgeTable(F)
     sides = np.nonzero(edges.count[edges.side_edge] == 1)
     tails = F[sides]
     heads = F[sides[0], (sides[1] + 1) % 3]
@@ -544,26 +533,26 @@ def _simple_loops(walk):
     return [loop for loop in out if len(loop) >= 3]
 
 
-def _fill_small_holes(V, F, say, closed=False, kernels=True):
+def _fill_small_holes(V, F, say, closed=False, settings=INTAKE):
     """Fill the small boundary loops (module docstring, step 7); refuse if any is large.
 
     closed : True when F is known to have no open edge (the loops are not searched for).
-    kernels : whether the edge table and bounds are the numba kernels (else their NumPy forms).
+    settings : which holes are small (``small_hole``, ``few_edges``, ``max_fill_share``).
     Returns (faces, holes filled, largest span m).
     """
     say.mark_holes()
-    loops = [] if closed else _boundary_loops(F, kernels)
+    loops = [] if closed else _boundary_loops(F)
     if not loops:
         return F, 0, 0.0
-    spans = np.array([np.inf if loop is None else _diagonal(V[loop], kernels=kernels) for loop in loops])
-    limit = SMALL_HOLE * _diagonal(V, F, kernels)
+    spans = np.array([np.inf if loop is None else _diagonal(V[loop]) for loop in loops])
+    limit = settings.small_hole * _diagonal(V, F)
     patches = [None if loop is None else _triangulate_loop(V, loop[::-1]) for loop in loops]  # fills run against the loop
     surface = _area(V, F).sum()
     patch_area = np.array([np.inf if patch is None else _area(V, patch).sum() for patch in patches])
     share = patch_area / surface
-    small = [patch is not None and (span <= limit or len(patch) <= FEW_EDGES - 2)
+    small = [patch is not None and (span <= limit or len(patch) <= settings.few_edges - 2)
              for patch, span in zip(patches, spans)]
-    too_much = [ok and sh > MAX_FILL_SHARE for ok, sh in zip(small, share)]
+    too_much = [ok and sh > settings.max_fill_share for ok, sh in zip(small, share)]
     if any(too_much):
         worst = int(np.argmax(np.where(too_much, share, -1.0)))
         k = len(patches[worst])
@@ -571,7 +560,7 @@ def _fill_small_holes(V, F, say, closed=False, kernels=True):
             f"the mesh is an open surface: a hole {_mm(spans[worst])} across, "
             f"{say.where(V[loops[worst]].mean(axis=0))}, would need a patch of {k} triangle"
             f"{'s' if k > 1 else ''} covering {100 * share[worst]:.1f} % of the surface (holes are "
-            f"filled up to {MAX_FILL_SHARE:.0%} of the surface)",
+            f"filled up to {settings.max_fill_share:.0%} of the surface)",
             "a mandrel must be one closed solid: close (cap) it in your CAD tool and export it again")
     if not all(small):
         worst = int(np.argmax(np.where(small, -1.0, spans)))
@@ -579,7 +568,7 @@ def _fill_small_holes(V, F, say, closed=False, kernels=True):
         place = "" if loops[worst] is None else ", " + say.where(V[loops[worst]].mean(axis=0))
         say.refuse(
             f"the mesh is an open surface: {len(loops)} boundary loop(s), {len(small) - sum(small)} too "
-            f"large to fill, the largest {size}{place} (holes up to {SMALL_HOLE:.0%} of the mandrel's "
+            f"large to fill, the largest {size}{place} (holes up to {settings.small_hole:.0%} of the mandrel's "
             f"size, {_mm(limit)}, and single missing triangles are filled automatically)",
             "a mandrel must be one closed solid: close (cap) it in your CAD tool and export it again")
     big = int(np.argmax(patch_area))
@@ -660,10 +649,10 @@ def _signed_volume(V, F):
     return float(np.einsum("ij,ij->", p[:, 0], np.cross(p[:, 1], p[:, 2]))) / 6.0
 
 
-def _refuse_flat(V, F, say, volume, kernels=True):
+def _refuse_flat(V, F, say, volume, settings=INTAKE):
     """volume: the outward-wound mesh's enclosed volume (m^3, ``_signed_volume``)."""
-    diag = _diagonal(V, F, kernels)
-    if volume <= MIN_VOLUME * diag**3:
+    diag = _diagonal(V, F)
+    if volume <= settings.min_volume * diag**3:
         say.refuse(f"the closed surface encloses no volume ({volume:.3g} m^3 for a {_mm(diag)} wide mesh: "
                    "flat or folded onto itself)", "export the mandrel as a solid body")
 
@@ -673,13 +662,11 @@ def _refuse_flat(V, F, say, volume, kernels=True):
 RAY_ADVANCE = 1e-6
 
 
-def self_intersections(vertices, faces, mesh=None, kernels=True):
+def self_intersections(vertices, faces, mesh=None):
     """Edges that pierce a triangle they do not belong to: (k, 2) int64 vertex-index pairs.
 
     vertices : (n, 3) float64, m; faces : (m, 3) int64; mesh : a trimesh.Trimesh of exactly
-    these arrays to cast on (its embree scene is built on first use and kept by it), or None;
-    kernels : whether the ray bookkeeping runs in the numba kernels named below or in their
-    NumPy forms (``small_mesh``, the same rays and hits; for small meshes).
+    these arrays to cast on (its embree scene is built on first use and kept by it), or None.
     Every pair of crossing, non-coplanar triangles has such an edge. Each edge, shortened by a
     hair at both ends, is cast along itself (embree when installed, which works in float32 on
     the mesh shifted to its bounding box's corner and scaled to a 100-unit box) and every
@@ -695,26 +682,19 @@ def self_intersections(vertices, faces, mesh=None, kernels=True):
     if mesh is None:
         mesh = trimesh.Trimesh(vertices, faces, process=False)
     n = np.int64(len(vertices))
-    if kernels:
-        from .._kernels.edges import edge_table
-        from .._kernels.mesh import edge_ray_geometry
+    from .._kernels.edges import edge_table
+    from .._kernels.mesh import edge_ray_geometry, face_cross_normals
 
-        # the distinct edges in increasing key, _unique(_edge_keys(faces, n)), without a sort
-        key, _ = edge_table(faces, int(n), np.empty(3 * len(faces), dtype=np.int64),
-                            np.empty(3 * len(faces), dtype=np.int64))
-        e = np.stack([key // n, key % n], axis=1)
-        k = len(e)
-        ok = np.empty(k, dtype=bool)
-        a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
-        length, eps = np.empty(k), np.empty(k)
-        k = edge_ray_geometry(vertices, e, ok, a, u, length, eps, origin)   # origin = a + eps u
-        e, a, u, length, eps, origin = e[ok], a[:k], u[:k], length[:k], eps[:k], origin[:k]
-    else:
-        key = _unique(_edge_keys(faces, n))
-        e = np.stack([key // n, key % n], axis=1)
-        ok, a, u, length, eps, origin = small_mesh.edge_ray_geometry(vertices, e)
-        e = e[ok]
-        k = len(e)
+    # the distinct edges in increasing key, _unique(_edge_keys(faces, n)), without a sort
+    key, _ = edge_table(faces, int(n), np.empty(3 * len(faces), dtype=np.int64),
+                        np.empty(3 * len(faces), dtype=np.int64))
+    e = np.stack([key // n, key % n], axis=1)
+    k = len(e)
+    ok = np.empty(k, dtype=bool)
+    a, u, origin = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+    length, eps = np.empty(k), np.empty(k)
+    k = edge_ray_geometry(vertices, e, ok, a, u, length, eps, origin)   # origin = a + eps u
+    e, a, u, length, eps, origin = e[ok], a[:k], u[:k], length[:k], eps[:k], origin[:k]
     intersector = mesh.ray
     scene = getattr(intersector, "_scene", None)
     if scene is None or not hasattr(scene, "scene"):        # no embree: trimesh's own rays
@@ -724,19 +704,14 @@ def self_intersections(vertices, faces, mesh=None, kernels=True):
         own = np.any(faces[tri] == e[ray, 0:1], axis=1) | np.any(faces[tri] == e[ray, 1:2], axis=1)
         return e[_unique(ray[inside & ~own])]
     base = max(1e-8, RAY_ADVANCE * float(np.linalg.norm(np.ptp(vertices, axis=0))))
-    if kernels:
-        from .._kernels.mesh import face_cross_normals
-
-        normals = np.empty((len(faces), 3))
-        face_cross_normals(vertices, faces, np.empty((len(faces), 3)), normals)
-    else:
-        normals = small_mesh.face_cross_normals(vertices, faces)[1]
+    normals = np.empty((len(faces), 3))
+    face_cross_normals(vertices, faces, np.empty((len(faces), 3)), normals)
     scene_origin = np.asarray(scene.origin, dtype=np.float64)
     offset = np.full(k, base)
     last = np.full(k, -1, dtype=np.int64)
     bad = np.zeros(k, dtype=bool)
     live = np.arange(k, dtype=np.int64)
-    batch, hits = _edge_ray_passes(k) if kernels else (small_mesh.edge_ray_batch, small_mesh.edge_ray_hits)
+    batch, hits = _edge_ray_passes(k)
     for _ in range(100):
         live, origin32, dirs32, far32 = batch(live, origin, a, u, length, eps, scene_origin, float(scene.scale))
         if len(live) == 0:
@@ -749,9 +724,9 @@ def self_intersections(vertices, faces, mesh=None, kernels=True):
 
 
 def _edge_ray_passes(k):
-    """``_kernels.mesh.edge_ray_batch`` and ``edge_ray_hits`` for at most ``k`` rays, called as
-    their NumPy forms are (``small_mesh``): the rays still going, and the batch's float32
-    origins, directions and far distances, as arrays returned (views of buffers kept here)."""
+    """``_kernels.mesh.edge_ray_batch`` and ``edge_ray_hits`` for at most ``k`` rays, as functions
+    that return the rays still going, and the batch's float32 origins, directions and far
+    distances (views of buffers kept here)."""
     from .._kernels.mesh import edge_ray_batch, edge_ray_hits
 
     rays = np.empty(k, dtype=np.int64)
@@ -770,8 +745,8 @@ def _edge_ray_passes(k):
     return batch, hits
 
 
-def _refuse_self_intersections(V, F, say, mesh=None, kernels=True):
-    bad = self_intersections(V, F, mesh, kernels)
+def _refuse_self_intersections(V, F, say, mesh=None):
+    bad = self_intersections(V, F, mesh)
     if len(bad):
         say.refuse(f"the surface intersects itself ({len(bad):,} edges pierce other triangles, e.g. "
                    f"{say.where(V[bad[0, 0]])}), so inside and outside are ambiguous",

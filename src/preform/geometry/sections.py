@@ -63,7 +63,7 @@ def plane_segments(corners, dots, normal, origin):
 
     Segments come in that order (all of the first case, then the second, then the third), the
     way trimesh's ``mesh_plane`` orders them, and equal to its segments bit for bit (the same
-    arithmetic, ``tests/test_plane_segments.py``), without importing trimesh on the everyday run.
+    arithmetic, ``tests/unit/test_plane_segments.py``), without importing trimesh on the everyday run.
     """
     signs = np.zeros(len(dots), dtype=np.int8)
     signs[dots < -ON_PLANE] = -1

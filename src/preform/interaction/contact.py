@@ -83,10 +83,9 @@ def cone_ratio(delta, mu):
     return (1.0 - m) / (1.0 + m), high
 
 
-def bound_change(up, yarn, tension, f_top, new, old, floor) -> float:
-    """Largest change from friction bounds ``old`` to ``new`` (m, 2), each relative to its
-    crossing's ``f_int + f_ext`` (the scale of the friction law), at least ``floor`` times the
-    yarn's top tension: a scale that cannot vanish where a yarn goes slack.
+def bound_scale(up, yarn, tension, f_top, floor) -> np.ndarray:
+    """(m, 2) N: the scale of each crossing's friction bound, its ``f_int + f_ext``, at least
+    ``floor`` times the yarn's top tension: a scale that cannot vanish where a yarn goes slack.
 
     up : (m, 2) the crossing above on each yarn, -1 below the yarn's top (``f_ext`` is then the
     top tension); yarn : (m, 2) the yarns; tension : (m, 2) ``f_int``; f_top : (n_yarns,)."""
@@ -96,4 +95,11 @@ def bound_change(up, yarn, tension, f_top, new, old, floor) -> float:
         top = f_top[yarn[:, side]]
         scale[:, side] = np.maximum(tension[:, side] + np.where(
             u >= 0, tension[np.maximum(u, 0), side], top), floor * top)
-    return float(np.max(np.abs(new - old) / scale))
+    return scale
+
+
+def bound_change(up, yarn, tension, f_top, new, old, floor) -> float:
+    """Largest change from friction bounds ``old`` to ``new`` (m, 2), each relative to its
+    crossing's scale (:func:`bound_scale`: ``f_int + f_ext``, the scale of the friction law, at
+    least ``floor`` times the yarn's top tension)."""
+    return float(np.max(np.abs(new - old) / bound_scale(up, yarn, tension, f_top, floor)))

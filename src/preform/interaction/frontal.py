@@ -62,7 +62,10 @@ existing crossing keeps the bound of the last step's converged geometry, a new o
 its creation geometry, and ``f_top`` is that of the posed geometry (behind a guide ring: Capstan
 over the posed deflection). With those held E has one minimum, so the step's result does not
 depend on the solver's initial iterate (``start``), only on the posed state, to the balance
-tolerance. A time step makes ``max_iterations`` of them (the bounds lag by up to a step), a
+tolerance. A time step makes ``max_iterations`` of them (the bounds lag by up to a step);
+behind a guide ring each re-solves the step with the top tensions and the bounds of its
+converged geometry until they change by less than ``posed_tolerance`` (``PosedIteration``: a
+fixed point from that posed state, so the result still depends only on it). A
 snapshot up to ``snapshot_iterations``, to ``snapshot_tolerance``; one that has made no progress
 over two iterations after ``snapshot_damping_after`` moves each bound only ``snapshot_damping``
 of the way to its new value from then on (x+ = x + w (G(x) - x): a plain iteration that cycles
@@ -90,7 +93,7 @@ import scipy.sparse as sp
 from .._kernels import frontal as frontal_kernels
 from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
-from .contact import bound_change
+from .contact import bound_change, bound_scale
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
 
@@ -156,6 +159,10 @@ class SolveReport:
     #: the relaxation did not converge and Newton's solve gave the result (``relax.solve_zone``,
     #: ``RelaxSettings.newton_fallback``)
     fallback: bool = False
+    #: behind a guide ring, the solves of the posed iteration after the first
+    #: (``PosedIteration``), and whether its change fell below ``posed_tolerance``
+    posed_solves: int = 0
+    posed_converged: bool = True
 
 
 #: what a zone solve is for (``solve_zone_inplace``'s and ``relax.solve_zone``'s ``mode``):
@@ -409,7 +416,7 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     holds. ``start``: ``(pos (m, 3), material (m, 2))``, the solver's initial iterate only
     (default: the posed positions and material). With the bounds and top tensions held, E has one
     minimum (its Hessian is positive definite), so the result of a time step does not depend on
-    ``start`` beyond the balance tolerance (``tests/test_start_independence.py``).
+    ``start`` beyond the balance tolerance (``tests/validation/test_start_independence.py``).
     ``centre`` (m, 2): where each yarn's friction term is centred (default:
     ``friction_centres(state)``). ``tol``, ``friction_tol``, ``max_iter``: the balance
     tolerance, the frontal tolerance and the frontal iterations (default: ``settings``'
@@ -424,8 +431,8 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     consistent = fr.consistent_bounds and time_step
     # behind a guide ring a time step's top tensions (Capstan, eq. 9) and friction bounds
     # (``posed_all_bounds``; else the new crossings' only) are those of its own converged
-    # geometry (``FrontalSettings.posed_iterations``)
-    posed_left = fr.posed_iterations - 1 if time_step and not consistent and bc.has_ring else 0
+    # geometry (``FrontalSettings.posed_iterations``, ``PosedIteration``)
+    posed_loop = time_step and not consistent and bc.has_ring and fr.posed_iterations > 1
     tol = settings.newton.balance_tolerance if tol is None else tol
     if consistent:
         friction_tol, max_iter = fr.consistent_tolerance, fr.consistent_iterations
@@ -457,20 +464,26 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
     cycling = False
     history = []
     newton = 0
+    pi = None
     residual = np.inf
     change = np.inf
     for it in range(1, max_iter + 1):
         residual, steps = _balance_or_continue(net, tol)
         newton += steps
-        while residual < tol and posed_left > 0:
-            bound1, _, f_top1 = net.bounds()
-            bound1 = np.where(posed, bound1, net.bound)
-            if not _relative_change(state, net, bound1, f_top1) >= fr.posed_tolerance:
-                break
-            posed_left -= 1
-            net.bound, net.f_top = bound1, f_top1
-            residual, steps = _balance_or_continue(net, tol)
-            newton += steps
+        if residual < tol and posed_loop:
+            scale = bound_scale(state.up[:m], state.yarn[:m], net.tension, net.f_top,
+                                fr.change_scale_floor)
+            pi = PosedIteration(fr, posed, scale, net.f_top, pi)
+            while residual < tol:
+                bound1, _, f_top1 = net.bounds()
+                bound1 = np.where(posed, bound1, net.bound)
+                x = pi.step(net.bound, net.f_top, bound1, f_top1,
+                            _relative_change(state, net, bound1, f_top1))
+                if x is None:
+                    break
+                net.bound, net.f_top = x
+                residual, steps = _balance_or_continue(net, tol)
+                newton += steps
         if not residual < tol:
             break
         bound1, psi, f_top1 = net.bounds()
@@ -479,14 +492,15 @@ def solve_zone_inplace(state, bc: Boundary, *, settings: InteractionSettings = D
         if change < friction_tol:
             _accept_inplace(state, net)
             return SolveReport(it, max(float(residual), change), np.array(history),
-                               net.f_top.copy(), newton, **_trace(net))
+                               net.f_top.copy(), newton, **_trace(net), **_posed_report(pi))
         if it == max_iter:
             # friction bounds lagged: balance holds, Psi to within the last change; the next
             # step starts from the newest bounds
             _accept_inplace(state, net)
             state.bound[:m] = bound1
             return SolveReport(it, max(float(residual), change), np.array(history),
-                               net.f_top.copy(), newton, lagged=True, **_trace(net))
+                               net.f_top.copy(), newton, lagged=True, **_trace(net),
+                               **_posed_report(pi))
         if damped and not cycling and it >= max(fr.snapshot_damping_after, 3):
             cycling = history[-1] >= history[-3]     # no progress over two iterations
         if cycling:
@@ -539,6 +553,84 @@ class _BoundMixing:
             new = G[-1] - np.diff(G, axis=0).T @ gamma
         # a combination may reach below zero where a yarn runs straight (bound 0): no bound is
         return np.maximum(new[:2 * m], 0.0).reshape(m, 2), new[2 * m:]
+
+
+class PosedIteration:
+    """The posed iteration of a time step behind a guide ring, for both solvers
+    (``FrontalSettings.posed_iterations``): the map x -> G(x) from the held top tensions and
+    friction bounds of ``posed`` (m, 2) bool to those of the geometry a solve with x converges
+    to. ``step(bound, f_top, bound1, f_top1, change)`` is given the held x = (bound, f_top),
+    G(x) = (bound1, f_top1) and their relative change (``_relative_change``); it returns the
+    next x to solve with, or None where the iteration stops: the change below
+    ``posed_tolerance`` (converged), or ``posed_iterations`` solves made. The next x is G(x)
+    while the change contracts by at least ``posed_contraction`` a solve, and Anderson's
+    combination (type II, depth ``posed_mixing``) of the last iterates from the first solve
+    that contracts less (the plain iteration creeps there, at ~0.93 a solve): each entry
+    relative to its scale ``scale`` ((m, 2) f_int + f_ext; the top tensions relative to
+    themselves), so that the combination weighs the entries as the change does. A solve whose
+    change rose clears the combination's history (a crossing switched between stick and slip,
+    where the map is not smooth) and takes x <- G(x). ``changes``:
+    the change of every solve, in order; ``solves``: the solves after the first. ``before``:
+    the iteration of an earlier frontal iteration of the same step, whose solves count
+    against the same limit."""
+
+    def __init__(self, fr, posed, scale, f_top_scale, before=None):
+        self.left = fr.posed_iterations - 1 if before is None else before.left
+        self.solves = 0 if before is None else before.solves
+        self.tol = fr.posed_tolerance
+        self.contraction = fr.posed_contraction
+        self.depth = fr.posed_mixing
+        self.posed = posed
+        self.w = np.concatenate([1.0 / scale[posed], 1.0 / np.asarray(f_top_scale, float)])
+        self.x, self.g = [], []
+        self.mixing = False
+        self.changes = []
+
+    @property
+    def converged(self) -> bool:
+        """Whether the last change was below ``posed_tolerance``."""
+        return bool(self.changes) and self.changes[-1] < self.tol
+
+    def step(self, bound, f_top, bound1, f_top1, change):
+        self.changes.append(float(change))
+        if not change >= self.tol or self.left <= 0:
+            return None
+        self.left -= 1
+        self.solves += 1
+        bound1 = np.where(self.posed, bound1, bound)
+        c = self.changes
+        if len(c) > 1 and c[-1] > self.contraction * c[-2]:
+            self.mixing = True
+        if not self.mixing or self.depth <= 0:
+            return bound1, f_top1
+        if self.x and c[-1] > c[-2]:
+            # a combination that raised the change (a crossing switched between stick and
+            # slip: the map is not smooth across that): the history is cleared, x <- G(x)
+            self.x, self.g = [], []
+            return bound1, f_top1
+        self.x.append(np.concatenate([bound[self.posed], f_top]) * self.w)
+        self.g.append(np.concatenate([bound1[self.posed], f_top1]) * self.w)
+        del self.x[:-(self.depth + 1)], self.g[:-(self.depth + 1)]
+        new = self.g[-1]
+        if len(self.x) > 1:
+            G = np.array(self.g)
+            R = G - np.array(self.x)
+            gamma = np.linalg.lstsq(np.diff(R, axis=0).T, R[-1], rcond=None)[0]
+            new = G[-1] - np.diff(G, axis=0).T @ gamma
+        new = new / self.w
+        k = int(np.count_nonzero(self.posed))
+        out = bound.copy()
+        # a combination may reach below zero where a yarn runs straight (bound 0): no bound is
+        out[self.posed] = np.maximum(new[:k], 0.0)
+        # nor a top tension below a thousandth of Capstan's (a yarn over the ring is pulled)
+        return out, np.maximum(new[k:], 1e-3 * np.asarray(f_top1, float))
+
+
+def _posed_report(pi):
+    """SolveReport's fields of a posed iteration (None: none)."""
+    if pi is None:
+        return {}
+    return dict(posed_solves=pi.solves, posed_converged=pi.converged)
 
 
 def _trace(net):

@@ -126,6 +126,7 @@ class InteractionZone:
         self.fell_ref = None          # (2n, 3) where the next step's boundary moves from
         self.staged = 0               # steps solved in stages (``_staged``)
         self.wall_resolves = 0        # steps solved again with every crossing's plane (``step``)
+        self.lag_resolves = 0         # steps solved again with their bounds iterated (``step``)
         self.t = 0.0
         self.stage = ""               # the part of the step under way (a fault's message names it)
         self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
@@ -246,6 +247,20 @@ class InteractionZone:
                 bc = self._staged(t0, t1, bc, where, centre, fell_start, posed)
             except SimulationError as again:
                 raise step_check.with_cause(self, again) from None
+        zs = self.settings.zone
+        if (not self.last_report.residual <= zs.max_step_residual
+                and self.settings.frontal.max_iterations < zs.lag_iterations):
+            # the bounds' lag above the limit: the step again with its bounds iterated to
+            # those of its converged geometry (``lag_iterations`` frontal iterations)
+            self.lag_resolves += 1
+            _restore(st, posed)
+            again = dataclasses.replace(self.settings, frontal=dataclasses.replace(
+                self.settings.frontal, max_iterations=zs.lag_iterations))
+            try:
+                self.last_report = self.solve_zone(st, bc, settings=again, where=where,
+                                                   centre=centre)
+            except SimulationError as err:
+                raise step_check.with_cause(self, err) from None
         step_check.check_step(self, where, posed["bound"])
         self.f_top = self.last_report.f_top
         self.stage = "the guide ring's contact"

@@ -127,7 +127,7 @@ from .._kernels import zone as KZ
 from .._kernels.zone import Lattice
 from ..errors import SimulationError
 from . import preconditioners as PC
-from .contact import bound_change
+from .contact import bound_change, bound_scale
 from .settings import DEFAULT, InteractionSettings, RelaxSettings
 
 
@@ -164,6 +164,8 @@ class RelaxResult:
     fallback_scalar: bool = False
     #: factorisations of the preconditioner
     factorisations: int = 0
+    #: behind a guide ring, the posed iteration (``frontal.PosedIteration``; None: none)
+    posed: object = None
 
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
@@ -177,10 +179,10 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
     the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
-    held. fresh: (m, 2) bool, the bounds of crossings created in the step; given, a step with
-    held bounds is solved again with them and the top tensions taken of its converged geometry
-    (``_posed_fixed_point``). Returns a :class:`RelaxResult` (``converged`` False if ``tol``
-    was not reached).
+    held. fresh: (m, 2) bool, the bounds a step behind a guide ring takes of its converged
+    geometry (``_posed_bounds``); given, a step with held bounds is solved again with them and
+    the top tensions taken of its converged geometry (``_posed_fixed_point``). Returns a
+    :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
 
     Consistent bounds (``consistent``; else the bounds are held): an outer fixed point, as
     Newton's frontal loop (``frontal.solve_zone``): the step is solved with the bounds held, the
@@ -192,8 +194,8 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
     if fresh is not None and not consistent and res.converged and m:
-        res, bounds = _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh,
-                                         top_tensions, kw)
+        res, bounds, res.posed = _posed_fixed_point(lat, res, s_fell, s_old, fell, top,
+                                                    bounds, fresh, top_tensions, kw)
     if not consistent or not res.converged:
         if res.converged and m:
             # bounds held at the last step's (lagged): how far they are from those of the
@@ -227,35 +229,45 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
 
 def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_tensions, kw):
     """The step solved again with what has no state of its own taken of its converged
-    geometry (``FrontalSettings.posed_iterations``): the top tensions behind a guide ring
-    (``top_tensions`` of the result's positions: Capstan, eq. 9) and the friction bounds of the
-    new crossings (``fresh`` (m, 2) bool: theirs of the result), the other bounds held, until
-    these change by less than ``posed_tolerance`` relative to the tensions or after
-    ``posed_iterations`` solves; each solve starts from the last one's result. The iterations,
-    histories and times of all are summed into the returned result (the last converged one)."""
+    geometry (``FrontalSettings.posed_iterations``, ``frontal.PosedIteration``): the top
+    tensions behind a guide ring (``top_tensions`` of the result's positions: Capstan, eq. 9)
+    and the friction bounds of ``fresh`` (m, 2) bool (every crossing's with
+    ``posed_all_bounds``, else the new crossings'), the other bounds held, until these change
+    by less than ``posed_tolerance`` relative to the tensions or after ``posed_iterations``
+    solves; each solve starts from the last one's result. The iterations, histories and times
+    of all are summed into the returned result (the last one; not converged where a solve did
+    not converge, which gives the step to Newton), with the iteration (``posed``). Returns
+    (result, the bounds it held, the iteration)."""
+    from .frontal import PosedIteration
     fr = kw["model"].frontal
     iterations, history, times = res.iterations, [res.history], dict(res.times)
-    f_top = res.f_top
-    for _ in range(fr.posed_iterations - 1):
-        change = _bound_change(lat, np.where(fresh, res.bounds, bounds), bounds, res.tension,
-                               res.f_top, fr.change_scale_floor)
+    held_top = res.f_top
+    pi = PosedIteration(fr, fresh, bound_scale(lat.up, lat.yarn, res.tension, res.f_top,
+                                               fr.change_scale_floor), res.f_top)
+    while True:
+        bound1 = np.where(fresh, res.bounds, bounds)
+        change = _bound_change(lat, bound1, bounds, res.tension, res.f_top,
+                               fr.change_scale_floor)
+        f_top1 = res.f_top
         if top_tensions is not None:
-            f_top = np.asarray(top_tensions(res.pos), dtype=float)
-            change = max(change, float(np.max(np.abs(f_top - res.f_top) / f_top)))
-        if not change >= fr.posed_tolerance:
+            f_top1 = np.asarray(top_tensions(res.pos), dtype=float)
+            change = max(change, float(np.max(np.abs(f_top1 - res.f_top) / f_top1)))
+        x = pi.step(bounds, held_top, bound1, f_top1, change)
+        if x is None:
             break
-        bounds = np.where(fresh, res.bounds, bounds)
-        nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
+        nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, x[1], x[0],
                                   **kw)
         iterations += nxt.iterations
         history.append(nxt.history)
         for key, v in nxt.times.items():
             times[key] = times.get(key, 0.0) + v
-        if not nxt.converged:
-            break
         res = nxt
+        if not nxt.converged:
+            # not converged: the step is Newton's (``solve_zone``'s fallback)
+            break
+        bounds, held_top = x
     res.iterations, res.history, res.times = iterations, np.concatenate(history), times
-    return res, bounds
+    return res, bounds, pi
 
 
 def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
@@ -566,8 +578,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     ``mode`` (``frontal.SOLVE_MODES``) says what the solve is for. A time step ("step") is one
     relaxation with the bounds held, as Newton's single frontal iteration per step; the bounds
     of the converged geometry go into ``state.bound`` for the next step. Behind a guide ring it
-    is solved again with the top tensions and the new crossings' bounds of its converged
-    geometry until they settle (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``),
+    is solved again with the top tensions and the bounds (``posed_all_bounds``: every
+    crossing's, else the new crossings') of its converged geometry until they settle
+    (``relax``'s ``fresh``, ``FrontalSettings.posed_iterations``, ``frontal.PosedIteration``),
     as Newton's step is. With ``FrontalSettings.max_iterations`` k > 1 it is up to k
     relaxations, each posed by the last one's converged state (its bounds and top tensions,
     the same friction centres), until the bounds change by less than ``friction_tolerance``,
@@ -640,7 +653,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
             f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
     _accept(state, res, centres, fr)
+    posed = {} if res.posed is None else dict(posed_solves=res.posed.solves,
+                                              posed_converged=res.posed.converged)
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
                                lagged=not (passes and res.converged),
-                               relax_iterations=res.iterations)
+                               relax_iterations=res.iterations, **posed)

@@ -3,7 +3,7 @@
 ``InteractionZone.step`` calls :func:`check_step` after its solve: a slack yarn
 (``ZoneSettings.slack_tension``; the model admits none: every free yarn is pulled by its carrier)
 or a residual above ``ZoneSettings.max_step_residual`` (the friction bounds the step held differ
-from those of its solution by more than the tensions they bound) raises
+from those of its solution by more than that share of the tensions they bound) raises
 :class:`~preform.errors.SimulationError`, which stops the run as ``failed`` with its results up
 to the last good step. :func:`with_cause` adds the likely cause to a solver's own failure. The
 cause is read off where the crossing in question sits (:func:`likely_cause`): under the guide
@@ -50,7 +50,8 @@ def check_step(zone, where, held) -> None:
         raise SimulationError(
             f"the yarn-interaction model did not converge {where}: residual {residual:.3g} "
             f"(limit {zs.max_step_residual:g}: the friction bounds the step held differ from "
-            f"those of its solution by more than the tensions they bound), {what}")
+            f"those of its solution by more than that share of the tensions they bound), "
+            f"{what}")
 
 
 def with_cause(zone, err) -> SimulationError:

@@ -7,9 +7,16 @@ The plotting modules (matplotlib, pyvista) are imported only when a picture is d
 
 from __future__ import annotations
 
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import report
 from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_folder
+from .fe_files import write_structural
+from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
+from .rtm_files import write_rtm
+from .surface import INPUT_VTU, PICTURES, write_input_mesh_fields, write_surface
 from .tables import write_history, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp
 
@@ -20,11 +27,11 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None):
+def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()):
     """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs, steady_settings)
+    return plot(result, plots_dir, refs, steady_settings, layers)
 
 
 def plot_yarns_3d(result, path):
@@ -34,16 +41,13 @@ def plot_yarns_3d(result, path):
     return plot(result, path)
 
 
-def _picture_jobs(result, fields, out_dir, settings=None):
+def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
     the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped.
     ``settings``: ``preform.Settings`` (None: the defaults), the steady state the history
     plots mark."""
-    from .pictures import LaterJob, PictureJob
-    from .surface import PICTURES
-
     plots = out_dir / PLOTS
     steady = None if settings is None else settings.steady
     drawn, rendered = [], []
@@ -63,13 +67,14 @@ def _picture_jobs(result, fields, out_dir, settings=None):
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots, steady_settings=steady)))
+                                lambda: plot_history(result, plots, steady_settings=steady,
+                                                     layers=layer_results)))
 
     def surface_pictures(shown):
         from .plots import run_label
         from .surface import write_surface_pictures
 
-        return write_surface_pictures(shown, plots, run_label(result))
+        return write_surface_pictures(shown, plots, run_label(result), centerline=result.centerline)
 
     names = tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES)
     if fields is not None:
@@ -84,7 +89,7 @@ _FIELD_NUMBERS = ("unmapped_length_m", "edge_length_m", "pool_radius_m")
 
 
 def fields_arrays(fields) -> dict:
-    """``fields`` (preform.fields.SurfaceFields) as a dict name -> numpy array, to hand to a
+    """``fields`` (preform.analysis.fields.SurfaceFields) as a dict name -> numpy array, to hand to a
     picture worker without pickling (:func:`fields_from_arrays` makes it back)."""
     import numpy as np
 
@@ -98,7 +103,7 @@ def fields_arrays(fields) -> dict:
 
 def fields_from_arrays(arrays):
     """The SurfaceFields of :func:`fields_arrays`' dict."""
-    from ..fields import SurfaceFields
+    from ..analysis.fields import SurfaceFields
 
     cell_data = {name[len("cell_data/"):]: values for name, values in arrays.items()
                  if name.startswith("cell_data/")}
@@ -124,8 +129,6 @@ def start_pictures(result, out_dir):
     the surface pictures from the fields :func:`write_results` hands it (``pictures=``).
     Returns the ``io.pictures.PictureWorker`` (without fork it draws them in ``write_results``),
     or None when the folder cannot be prepared (``write_results`` then says why)."""
-    from .pictures import PictureWorker
-
     try:
         out_dir = _prepare_folder(out_dir)
     except OSError:
@@ -139,44 +142,37 @@ def _relative(path, out_dir) -> str:
     return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
 
 
-def write_results(result, fields, out_dir, stages=None, layers=None, layer_results=(),
-                  background=False, pictures=None, settings=None) -> list[Path]:
-    """Write all result files of ``result`` (and of ``fields`` if not None) into ``out_dir``.
+@dataclass
+class Writing:
+    """The files of one run as they are written (:func:`write_data`, :func:`draw_pictures`,
+    :func:`write_summary_last`): the folder, the paths written so far, what the summary says of
+    the RTM and structural files, the pictures still to draw here and the picture worker."""
 
-    result : preform.result.Result
-    fields : preform.fields.SurfaceFields or None (no surface files then)
-    out_dir : str or Path, created if missing
-    stages : dict stage -> seconds of wall time so far (``preform run``'s), or None; the summary's
-        ``wall_time_s`` is then the whole command's, these stages, the writing of the data files
-        (``write``) and what the pictures take after it (``pictures``: the matplotlib pictures
-        drawn here, then the wait for the worker's renders) included. The stages follow each
-        other in this process; a picture worker renders beside the stages since it started.
-    layers : summary.json's ``layers`` entries of a run with [[layer]] tables, or None
-    layer_results : the Results of layers 2, 3, ...: their ``history.csv`` and ``yarns.vtp`` go
-        to ``layer2/``, ``layer3/``, ... (``result`` is the first layer's)
-    background : render the 3-D pictures in a worker process while the data files are written
-        (``io.pictures.PictureWorker``), else one after the other here
-    pictures : the worker :func:`start_pictures` started for ``result`` (then ``background`` is
-        not looked at): it gets ``fields`` before the data files are written, and is waited for
-        after them; stopped if writing fails
-    settings : the numerical settings of the run (``preform.Settings``; None: the defaults),
-        for the verdict, the steady state and the interlacing in summary.json and the plots,
-        and the binning of the RTM files and of the shell deck
-    returns : the paths written, summary.json last (then report.html, io.report, from the finished folder)
+    out_dir: Path
+    written: list
+    rtm: dict
+    structural: dict
+    to_draw: list
+    worker: object
+    failed: list = field(default_factory=list)
 
-    The data files come first; a picture that cannot be drawn is reported (a RuntimeWarning and
-    the summary's ``pictures.failed``) and never stops the rest.
+
+def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing:
+    """Write the data files of ``analysed`` (``preform.analysis.derived.Analysed``) into
+    ``out_dir``: ``history.csv``, ``yarns.vtp``, ``convergence.pvd``, a stack's ``layer{k}/``,
+    the surface files, ``rtm/`` and ``fe/`` where they were analysed; an earlier summary is
+    removed first. The pictures are set up, not drawn (:func:`draw_pictures`).
+
+    background : render the 3-D pictures in a worker process (``io.pictures.PictureWorker``),
+        else one after the other in :func:`draw_pictures`
+    pictures : the worker :func:`start_pictures` started for ``analysed.result`` (then
+        ``background`` is not looked at): it gets the fields now; stopped if writing fails
     """
-    import time
-    import warnings
-
-    from .pictures import PictureWorker, run_jobs
-
-    t_write = time.perf_counter()
+    result, fields = analysed.result, analysed.fields
     try:
         out_dir = _prepare_folder(out_dir)
-        summary = out_dir / SUMMARY
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, settings)
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings,
+                                           analysed.layer_results)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []
             pictures.send(fields_arrays(fields) if fields is not None else None)
@@ -187,93 +183,81 @@ def write_results(result, fields, out_dir, stages=None, layers=None, layer_resul
         written = [write_history(result, out_dir / HISTORY),
                    write_yarns_vtp(result.yarns, out_dir / YARNS),
                    *write_convergence(result.snapshots, out_dir)]
-        for k, layer in enumerate(layer_results, start=2):
+        for k, layer in enumerate(analysed.layer_results, start=2):
             folder = safe_folder(out_dir, f"layer{k}")
             written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
         if fields is not None:
-            from .surface import write_surface
-
             written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
-            from .surface import INPUT_VTU, write_input_mesh_fields
-
-            output = result.config.output
-            if output is not None and output.input_mesh_fields and result.mandrel is not None:
-                written.append(write_input_mesh_fields(fields, result.mandrel, out_dir))
+            if analysed.input_mesh_fields is not None:
+                written.append(write_input_mesh_fields(analysed.input_mesh_fields, out_dir))
             else:   # not left over from an earlier run into this folder
                 (out_dir / INPUT_VTU).unlink(missing_ok=True)
-        rtm = _write_rtm(result, fields, out_dir, written,
-                         None if settings is None else settings.rtm)
-        structural = _write_structural(result, fields, out_dir, written, layer_results,
-                                       None if settings is None else settings.binning)
+        if analysed.rtm is not None:
+            written += write_rtm(analysed.rtm, out_dir)
+            rtm = analysed.rtm.said()
+        else:
+            rtm = {"written": False, "reason": analysed.rtm_reason}
+        paths, structural = write_structural(analysed.structural, out_dir)
+        written += paths
+        if analysed.structural is None:
+            structural = {"written": False, "reason": analysed.structural_reason}
     except BaseException:
         if pictures is not None:
             pictures.stop()
         raise
-    t_pictures = time.perf_counter()
+    return Writing(out_dir=out_dir, written=written, rtm=rtm, structural=structural,
+                   to_draw=drawn + rendered, worker=pictures)
+
+
+def draw_pictures(writing: Writing) -> Writing:
+    """Draw the pictures left to this process, then wait for the worker's; a picture that cannot
+    be drawn is reported (a RuntimeWarning, and the summary's ``pictures.failed``) and never
+    stops the rest."""
     try:
-        drawn_here, failed = run_jobs(drawn + rendered)
+        drawn_here, failed = run_jobs(writing.to_draw)
     except BaseException:
-        pictures.stop()
+        writing.worker.stop()
         raise
-    more, more_failed = pictures.finish()
+    more, more_failed = writing.worker.finish()
     drawn_here, failed = drawn_here + more, failed + more_failed
     for text in failed:
-        warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=2)
-    written += [p for p in drawn_here if Path(p).is_file()]
-    files = [_relative(p, out_dir) for p in [*written, summary]]
-    from ..quality import QUALITY, surface_reasons
+        warnings.warn(f"{text}; the data files are written", RuntimeWarning, stacklevel=3)
+    writing.written += [p for p in drawn_here if Path(p).is_file()]
+    writing.to_draw, writing.failed = [], failed
+    return writing
 
-    quality = QUALITY if settings is None else settings.quality
-    from ..key_numbers import key_numbers
 
-    extra = {**key_numbers(result, fields), "files": files, "rtm": rtm, "structural": structural,
-             "quality_reasons": surface_reasons(result, fields, quality),
-             "pictures": {"failed": failed}}
-    if layers is not None:   # the run is suspect when a layer above the first is
-        extra["layers"] = layers
-        extra["quality_reasons"] += [f"layer {e['layer']}: {reason}" for e in layers[1:]
-                                     for reason in e["quality"]["reasons"]]
-    if stages is not None:
-        now = time.perf_counter()
-        stages = {**stages, "write": t_pictures - t_write, "pictures": now - t_pictures}
-        extra.update(wall_time_s=sum(stages.values()), stages_s=stages,
-                     simulation_wall_time_s=float(result.wall_time_s))
-    written.append(write_summary(result, summary, extra=extra, settings=settings))
-    from .report import report_hook; report_hook(out_dir)  # noqa: E702 - the page of the finished folder
+def write_summary_last(analysed, writing: Writing, extra=None) -> list[Path]:
+    """Write ``summary.json``: ``analysed.summary`` with the files written, what was said of the
+    RTM and structural files, the pictures not drawn, a stack's ``layers`` and ``extra`` (a
+    caller's, e.g. the stage timings) merged in. Returns every path written, summary.json last."""
+    summary = writing.out_dir / SUMMARY
+    files = [_relative(p, writing.out_dir) for p in [*writing.written, summary]]
+    said = {"files": files, "rtm": writing.rtm, "structural": writing.structural,
+            "pictures": {"failed": writing.failed}}
+    if analysed.layers is not None:
+        said["layers"] = analysed.layers
+    said.update(extra or {})
+    written = [*writing.written, write_summary({**analysed.summary, **said}, summary)]
+    report.report_hook(writing.out_dir)   # report.html, the page of the finished folder
     return written
 
 
-def _write_rtm(result, fields, out_dir, written, settings=None) -> dict:
-    """``rtm/`` when the fields carry fibre content (tow data given); what the summary says
-    (``settings``: ``rtm.BinningSettings``, None: the defaults)."""
-    from ..rtm import missing_material
-
-    reason = missing_material(result.config) if result.config is not None else "no config"
-    if reason:
-        return {"written": False, "reason": reason}
-    if fields is None or "fibre_volume_fraction" not in fields.cell_data:
-        return {"written": False, "reason": "no surface fields"}
-    from .rtm_files import write_rtm
-
-    paths, said = write_rtm(fields, out_dir, cavity_thickness=result.config.rtm.cavity_thickness,
-                            settings=settings)
-    written += paths
-    return said
-
-
-def _write_structural(result, fields, out_dir, written, layer_results, binning=None) -> dict:
-    """``fe/`` when the config has a [material] section and the fields fibre content; what the
-    summary says (``preform.structural``; ``binning``: its ``layup.BinSettings``, None: the
-    defaults)."""
-    from ..structural import write_structural
-
-    paths, said = write_structural(result, fields, out_dir, layer_results, binning)
-    written += paths
-    return said
+def write_results(analysed, out_dir, *, background=False, pictures=None, extra=None) -> list[Path]:
+    """Write all result files of ``analysed`` (``preform.analysis.derived.Analysed``: a run with
+    everything derived from it) into ``out_dir``, created if missing: :func:`write_data`, then
+    :func:`draw_pictures`, then :func:`write_summary_last`. Returns the paths written,
+    summary.json last. ``preform.pipeline.write_results`` analyses a Result and its fields and
+    calls this."""
+    writing = draw_pictures(write_data(analysed, out_dir, background=background, pictures=pictures))
+    return write_summary_last(analysed, writing, extra)
 
 
 __all__ = [
     "write_results",
+    "write_data",
+    "draw_pictures",
+    "write_summary_last",
     "start_pictures",
     "write_summary",
     "write_history",

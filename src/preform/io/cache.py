@@ -14,7 +14,7 @@ another digest or arrays of the wrong shape is ignored, never trusted, and rebui
 are written atomically: an exclusive temporary file in the cache folder, renamed over the final
 name (a symlink there is replaced, not followed). The cache is a convenience: any failure to
 read or write it leaves the run to do the work itself, and the results are the same bytes
-either way (``tests/test_cache.py``).
+either way (``tests/unit/test_cache.py``).
 """
 
 from __future__ import annotations
@@ -168,18 +168,18 @@ def store(kind: str, key: str, arrays: dict) -> Path | None:
 
 def _field_mesh_key(mandrel, h, remesh) -> str:
     from .._version import __version__
-    from ..fields import LOCATE_REACH_EDGES
+    from ..analysis.fields import LOCATE_REACH_EDGES
 
-    return make_key("field_mesh", __version__, source_digest("preform.fields", "preform.geometry.remesh"),
+    return make_key("field_mesh", __version__, source_digest("preform.analysis.fields", "preform.geometry.remesh"),
                     library_versions("numpy", "gpytoolbox", "pyfqmr", "trimesh", "embreex"),
                     np.asarray(mandrel.vertices, dtype=np.float64), np.asarray(mandrel.faces, dtype=np.int64),
                     float(h), repr(remesh), LOCATE_REACH_EDGES)
 
 
 def cached_field_mesh(result, edge_length=None, remesh=None):
-    """``preform.fields.field_mesh(result, edge_length, remesh)`` through the cache: the field
+    """``preform.analysis.fields.field_mesh(result, edge_length, remesh)`` through the cache: the field
     mesh depends only on the mandrel's arrays, the edge length and the remesher's settings."""
-    from ..fields import default_edge_length, field_mesh
+    from ..analysis.fields import default_edge_length, field_mesh
     from ..geometry.remesh import RemeshSettings
 
     remesh = RemeshSettings() if remesh is None else remesh

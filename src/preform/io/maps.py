@@ -32,6 +32,46 @@ RTM_PANELS = (("fibre_volume_fraction", "fibre volume fraction (-)", 1.0),
               ("permeability_k1_m2", "permeability K1 (1e-12 m^2, log scale)", 1e12),
               ("porosity", "porosity (-)", 1.0))
 DPI = 130
+#: arrays that are >= 0 by their physics: their colour bars start at 0
+NON_NEGATIVE = ("cover_factor", "thickness_m", "fibre_volume_fraction", "porosity", "areal_weight_kg_m2")
+#: ticks a colour bar's rounded range aims for
+BAR_TICKS = 5
+
+
+def rounded_limits(lo: float, hi: float, zero: bool = False) -> tuple[float, float]:
+    """Colour-bar limits holding [lo, hi] on round numbers (multiples of a 1-2-5 step giving about
+    BAR_TICKS ticks), from 0 when ``zero`` (a quantity >= 0); a uniform field gets a range of
+    one step around its value."""
+    if zero:
+        lo = min(lo, 0.0)
+    span = hi - lo
+    if not span > 1e-9 * max(1.0, abs(hi)):
+        span = max(0.02 * abs(hi), 1e-12)
+        lo, hi = (0.0 if zero and lo - span < 0 else lo - span), hi + span
+        span = hi - lo
+    raw = span / BAR_TICKS
+    power = 10.0 ** np.floor(np.log10(raw))
+    step = next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw * (1 - 1e-9))
+    lo_r = np.floor(lo / step + 1e-9) * step
+    hi_r = np.ceil(hi / step - 1e-9) * step
+    if hi_r <= lo_r:
+        hi_r = lo_r + step
+    digits = max(0, -int(np.floor(np.log10(step))))     # round off the floating-point dust
+    return float(np.round(lo_r, digits + 1)), float(np.round(hi_r, digits + 1))
+
+
+def layer_panels(cell_data) -> tuple:
+    """The map's panels: PANELS for one layer; for a stack, the braid angle of every layer (a
+    panel each: ``layer<k>_braid_angle_deg``) and the stack's cover factor and thickness."""
+    k, angles = 2, []
+    while f"layer{k}_braid_angle_deg" in cell_data:
+        angles.append((f"layer{k}_braid_angle_deg", f"braid angle of layer {k} (deg)", 1.0))
+        k += 1
+    if not angles:
+        return PANELS
+    return (("braid_angle_deg", "braid angle of layer 1 (deg)", 1.0), *angles,
+            ("cover_factor", "cover factor of the stack (-)", 1.0),
+            ("thickness_m", "thickness of the stack (mm)", 1e3))
 
 
 def unrolled_coordinates(vertices, faces, centerline):
@@ -100,7 +140,7 @@ def face_raster(polys, extent, shape) -> np.ndarray:
 #: (fixed, so the picture needs no layout pass: the constrained layout of three panels with
 #: their colour bars measured every tick label twice, half the time of drawing the map)
 WIDTH_IN, PANEL_IN = 10.0, 3.0
-LEFT_IN, RIGHT_IN, TOP_IN, BOTTOM_IN, TITLE_IN = 0.75, 1.25, 0.65, 0.55, 0.35
+LEFT_IN, RIGHT_IN, TOP_IN, BOTTOM_IN, TITLE_IN = 0.75, 1.25, 0.65, 0.75, 0.35
 BAR_GAP_IN, BAR_IN = 0.15, 0.15
 
 
@@ -134,12 +174,24 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
 
     polys = unrolled_coordinates(fields.vertices, fields.faces, centerline)
     data = fields.cell_data
+    if panels is PANELS:
+        panels = layer_panels(data)
     reached = fields.reached()
     n = len(panels)
     fig = Figure(figsize=(WIDTH_IN, PANEL_IN * n), dpi=DPI)
     fig.suptitle(title, y=1.0 - 0.12 / (PANEL_IN * n), va="top")
     s_all = polys[..., 0]
     extent = (float(s_all.min()), float(s_all.max()), -180.0, 180.0)
+    # faces on the +-180 deg seam spill past one edge of the map: drawn once more, a turn
+    # away, they fill the other edge too (no gaps of background along the seam)
+    nf = len(polys)
+    high, low = polys[..., 1].max(axis=1) > 180.0, polys[..., 1].min(axis=1) < -180.0
+    turn = np.array([0.0, 360.0])
+    wrapped = np.concatenate([polys, polys[high] - turn, polys[low] + turn])
+    owner = np.concatenate([np.arange(nf), np.flatnonzero(high), np.flatnonzero(low)])
+    zero = np.asarray(centerline.frames_at(np.array([0.0]))[2])[0]
+    around = ("around (deg)" if n > 1 else "around the centerline (deg)")
+    fig.zero_direction = zero
     grey = np.array(to_rgba(UNREACHED))
     fig.face_pixels, fig.shown, fig.colour_ranges = [], [], []
     axes, rasters = [], {}
@@ -147,12 +199,12 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         ax = fig.add_axes(rect, sharex=axes[0] if axes else None)
         axes.append(ax)
         values = np.asarray(data[name], dtype=float) * scale
-        shown = reached & (values > 0) if name in POSITIVE_ONLY else reached
-        if name == "braid_angle_deg" and "layer2_braid_angle_deg" in data:
-            label = "braid angle of layer 1 (deg)"     # the stack's totals in the other panels
+        positive = name in POSITIVE_ONLY or name.endswith("_braid_angle_deg")
+        shown = reached & (values > 0) if positive else reached
         shape = (max(1, round(rect[3] * PANEL_IN * n * DPI)), max(1, round(rect[2] * WIDTH_IN * DPI)))
         if shape not in rasters:                  # panels of one size share one raster
-            rasters[shape] = face_raster(polys, extent, shape)
+            raster = face_raster(wrapped, extent, shape)
+            rasters[shape] = np.where(raster >= 0, owner[np.maximum(raster, 0)], -1)
         pixels = rasters[shape]
         rgba = np.zeros((*pixels.shape, 4))                 # transparent where no face lies
         on = pixels >= 0
@@ -160,9 +212,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         colour_range = None
         if np.any(shown):
             lo, hi = float(values[shown].min()), float(values[shown].max())
-            if hi - lo < 1e-9 * max(1.0, abs(hi)):   # a uniform field: a range around its value
-                pad = 0.5 if name == "braid_angle_deg" else max(0.01 * abs(hi), 1e-12)
-                lo, hi = lo - pad, hi + pad
+            if not (name.startswith("permeability") and lo > 0):   # decades: log colours below
+                lo, hi = rounded_limits(lo, hi, zero=name in NON_NEGATIVE)
             # permeability spans decades: log colours
             norm = LogNorm(lo, hi) if name.startswith("permeability") and lo > 0 else Normalize(lo, hi)
             mappable = ScalarMappable(norm=norm, cmap="viridis")
@@ -179,11 +230,13 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(-180.0, 180.0)
         ax.set_yticks([-180, -90, 0, 90, 180])
-        ax.set_ylabel("around (deg)")
+        ax.set_ylabel(around)
         ax.set_title(label + ("; grey: no yarn" if np.any(~shown) else ""), fontsize=10)
         if k < n - 1:
             ax.tick_params(labelbottom=False)
-    axes[-1].set_xlabel("centerline arc length from the tip s (m)")
+    axes[-1].set_xlabel("centerline arc length from the tip s (m)\naround: 0 deg is the direction "
+                        f"({zero[0]:+.2f}, {zero[1]:+.2f}, {zero[2]:+.2f}) from the centerline at the "
+                        "tip (mandrel frame), angles right-handed about the centerline", fontsize=9)
     return fig
 
 

@@ -36,6 +36,34 @@ def view_axes(points):
     return centre, vt[0], vt[1], vt[2]
 
 
+def part_axes(points, centerline=None):
+    """(centre, long axis, across, third) of the part ``points`` (n, 3) show, for the views.
+
+    With a centerline, its stretch under the points gives the long axis (a short braid on a thick
+    part is wider than long, and a principal-component axis would then look at its end); on a
+    curved stretch ``third`` is the normal of its plane (the bend faces the viewer), on a
+    straight one the section's direction of least spread. Without one: :func:`view_axes`."""
+    centre, axis, across, third = view_axes(points)
+    if centerline is None or len(points) < 3:
+        return centre, axis, across, third
+    s = centerline.project(points)[0]
+    lo, hi = float(np.min(s)), float(np.max(s))
+    if not hi > lo:
+        return centre, axis, across, third
+    path = np.asarray(centerline.frames_at(np.linspace(lo, hi, 64))[0])
+    _, sv, vt = np.linalg.svd(path - path.mean(axis=0), full_matrices=False)
+    axis = vt[0]
+    if sv[1] > 1e-3 * sv[0]:              # curved: the plane of the bend faces the viewer
+        third = vt[2] - np.dot(vt[2], axis) * axis
+    else:                                 # straight: the section's least spread
+        rel = points - centre
+        rel = rel - np.outer(rel @ axis, axis)
+        third = np.linalg.svd(rel, full_matrices=False)[2][1]   # [2]: the axis, no spread left
+        third = third - np.dot(third, axis) * axis
+    third /= np.linalg.norm(third)
+    return centre, axis, np.cross(third, axis), third
+
+
 def _yarn_polylines(yarns, group):
     """The yarns of ``group`` as point blocks (each (k, 3), every ``stride``-th point and the
     last, at most ``MAX_POINTS_PER_YARN``), one per yarn with two points or more."""
@@ -131,8 +159,10 @@ def _camera(plotter, centre, view, up, half_width, half_height, aspect):
 def render_braided_mandrel(result, path, title: str) -> None:
     """Render ``result`` (mandrel + yarns, mandrel frame) into the PNG ``path``.
 
-    Top: the whole braided part from the front (where the braid lies on the mandrel); bottom:
-    close-ups of the middle of the braid from the front and from the back (the yarn pattern).
+    Top: the whole braided part from the front (where the braid lies on the mandrel), tip on the
+    left, with a ruler of arc length from the tip, drawing every k-th yarn where the pixels
+    cannot show them all (:func:`whole_stride`); bottom: close-ups of the middle of the braid
+    from the front and from the back (the yarn pattern); the three panels framed apart.
     """
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
@@ -144,7 +174,7 @@ def render_braided_mandrel(result, path, title: str) -> None:
     cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
     surface = pv.PolyData(_sunk(mandrel, result), cells)
     focus = laid if len(laid) >= 3 else np.asarray(mandrel.vertices, dtype=np.float64)
-    centre, axis, across, third = view_axes(focus)
+    centre, axis, across, third = part_axes(focus, result.centerline)
     along = (focus - centre) @ axis
     lo, hi = float(along.min()), float(along.max())
     spread = float(np.max(np.abs((focus - centre) @ across)))
@@ -154,21 +184,35 @@ def render_braided_mandrel(result, path, title: str) -> None:
     whole_up = np.cross(whole_view, axis)
     whole_centre = centre + 0.5 * (lo + hi) * axis
     mid, tangent, up, front, radius = _close_up(result, laid, centre, axis, across, third)
+    cl = result.centerline
+    tip = np.asarray(cl.frames_at(np.array([0.0]))[0])[0] if cl is not None else None
+    # the tip on the left in every view, as in the other pictures and the unrolled map
+    whole_up = tip_left(whole_centre, whole_view, whole_up, tip)
+    up = tip_left(mid, front, up, tip)
     w, h = WINDOW_SIZE
     plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 2),
-                         groups=[(0, np.s_[:])], border=False)
+                         groups=[(0, np.s_[:])], border=True, border_color="black", border_width=2)
     plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
     blocks = [_yarn_polylines(yarns, group) for group in (0, 1)]
+    whole_half_w = 0.5 * (hi - lo) + 0.1 * spread
+    whole_half_h = max(spread, depth)
+    stride = whole_stride(result, radius, whole_half_w, w)
     # the close-ups show a box 3 section radii wide around the middle: their lines are cut to it
     # (llvmpipe draws every line sent, visible or not)
     scale = _VIEW_MARGIN * max(1.5 * radius, 3.0 * radius / (w / h))
-    cut = [_clipped(b, mid, np.cross(front, up), up, scale * w / h, scale) for b in blocks]
-    whole = [_lines(b) for b in blocks]
+    close_stride = whole_stride(result, radius, 3.0 * radius, w // 2)
+    cut = [_clipped(b[::close_stride], mid, np.cross(front, up), up, scale * w / h, scale) for b in blocks]
+    whole = [_lines(b[::stride]) for b in blocks]
     close = [_lines(b) for b in cut]
-    views = [((0, 0), whole_view, whole_up, whole_centre, 0.5 * (hi - lo) + 0.1 * spread,
-              max(spread, depth), 2.0 * w / h, f"{title}: braided part"),
-             ((1, 0), front, up, mid, 3.0 * radius, 1.5 * radius, w / h, "middle of the braid, front"),
-             ((1, 1), -front, up, mid, 3.0 * radius, 1.5 * radius, w / h, "middle of the braid, back")]
+    drawn = "" if stride == 1 else f" (every {_ordinal(stride)} yarn drawn: the pixels cannot show them all)"
+    # the back close-up is the part turned over about its axis: view and up reversed, the
+    # screen's right (up x view) kept, so the tip stays on the left (a rotation, not a mirror)
+    views = [((0, 0), whole_view, whole_up, whole_centre - 0.2 * whole_half_h * whole_up, whole_half_w,
+              1.4 * whole_half_h, 2.0 * w / h, f"{title}: braided part{drawn}"),
+             ((1, 0), front, up, mid, 3.0 * radius, 1.5 * radius, w / h,
+              "middle of the braid, front" + ("" if close_stride == 1 else f" (every {_ordinal(close_stride)} yarn)")),
+             ((1, 1), -front, -up, mid, 3.0 * radius, 1.5 * radius, w / h,
+              "middle of the braid, back (turned over about its axis)")]
     try:
         for (row, col), view, view_up, look_at, half_w, half_h, aspect, label in views:
             plotter.subplot(row, col)
@@ -178,18 +222,90 @@ def render_braided_mandrel(result, path, title: str) -> None:
                 if poly is not None:
                     plotter.add_mesh(poly, color=COLOURS[group], line_width=1.5 if row else 1.0)
             plotter.add_text(label, font_size=10 if row else 11, color="black", position="upper_left")
+            if row == 0 and cl is not None:
+                add_ruler(plotter, cl, whole_centre, view, view_up, whole_half_w, whole_half_h)
             _camera(plotter, look_at, view, view_up, half_w, half_h, aspect)
         plotter.screenshot(str(path))
     finally:
         plotter.close()
 
 
-def frame_parallel(plotter, points, centre, view, up, aspect, margin=1.08):
-    """Parallel projection along ``-view`` (unit) with ``up``, fitting ``points`` in a viewport of
-    width / height ``aspect``."""
-    right = np.cross(view, up)
-    rel = points - centre
-    half_w = float(np.max(np.abs(rel @ right)))
-    half_h = float(np.max(np.abs(rel @ up)))
-    _camera(plotter, centre, view, up, half_w, half_h, aspect)
-    plotter.camera.parallel_scale = margin * max(half_h, half_w / aspect)
+#: the least distance (pixels) between neighbouring yarns of a family in the whole part's view:
+#: closer lines alias into a moire; every k-th yarn is drawn to keep them this far apart
+MIN_YARN_SPACING_PX = 5.0
+
+
+def whole_stride(result, radius, half_w, width_px) -> int:
+    """k: draw every k-th yarn of a family in the whole part's view (see MIN_YARN_SPACING_PX).
+    Neighbouring yarns of a family lie ``2 pi r cos(alpha) / n`` apart on a section of radius r
+    (n yarns a family, alpha the braid angle at the end of the run)."""
+    n = max(1, int(result.yarns.n_yarns) // 2)
+    alpha = 0.0
+    if result.steps:
+        alpha = np.radians(float(np.nanmean([result.history["braid_angle_warp_deg"][-1],
+                                             result.history["braid_angle_weft_deg"][-1]])))
+    spacing = 2.0 * np.pi * radius * max(np.cos(alpha), 0.05) / n
+    px = spacing * width_px / (2.0 * _VIEW_MARGIN * max(half_w, 1e-9))
+    return max(1, int(np.ceil(MIN_YARN_SPACING_PX / max(px, 1e-9))))
+
+
+def _ordinal(k: int) -> str:
+    return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
+
+
+#: the colour of the tip's label in every 3-D view (none of viridis' colours, so a test can find it)
+TIP_COLOUR = "#ff7f0e"
+
+
+def nice_length(span: float, ticks: int = 6) -> float:
+    """A round step (1, 2 or 5 times a power of ten) giving about ``ticks`` steps over ``span``."""
+    if not span > 0:
+        return 1.0
+    raw = span / ticks
+    power = 10.0 ** np.floor(np.log10(raw))
+    return float(next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw * (1 - 1e-9)))
+
+
+def tip_left(centre, view, up, tip):
+    """``up`` (or its opposite) such that the tip lies on the left of a camera looking along
+    ``-view``: screen right is ``up x view``. Turning ``up`` over turns the part about the
+    viewing direction (a rotation, never a mirror image)."""
+    if tip is not None and float(np.dot(np.asarray(tip) - centre, np.cross(up, view))) > 0:
+        return -up
+    return up
+
+
+def add_ruler(plotter, centerline, centre, view, up, half_w, half_h, s_range=None):
+    """Arc-length marks under the part: a ruler along the screen's horizontal below the part,
+    a tick and a label ``s (m)`` where the centerline reaches each round arc length, and the tip
+    labelled (in TIP_COLOUR). ``half_w``, ``half_h``: the part's half extents across the screen."""
+    import pyvista as pv
+
+    right = np.cross(up, view)
+    length = float(centerline.length)
+    lo, hi = (0.0, length) if s_range is None else s_range
+    step = nice_length(2.0 * half_w, 5)     # round marks over what the view shows
+    s = np.arange(np.ceil(lo / step - 1e-9) * step, hi + 1e-9, step)
+    points = np.asarray(centerline.frames_at(s)[0]) if len(s) else np.zeros((0, 3))
+    x = (points - centre) @ right
+    keep = np.abs(x) <= _VIEW_MARGIN * half_w   # what the view shows
+    s, x = s[keep], x[keep]
+    base = centre - 1.15 * half_h * up
+    if len(s) >= 2:
+        ends = [base + x.min() * right, base + x.max() * right]
+        ticks = [p for xi in x for p in (base + xi * right, base + xi * right + 0.18 * half_h * up)]
+        pts = np.array(ends + ticks)
+        n = len(pts)
+        lines = np.concatenate([[2, 0, 1], *([2, k, k + 1] for k in range(2, n, 2))])
+        plotter.add_mesh(pv.PolyData(pts, lines=lines), color="black", line_width=2)
+        digits = max(0, -int(np.floor(np.log10(step))))
+        labels = [f"{abs(v) if abs(v) < 0.5 * step else v:.{digits}f} m" for v in s]
+        plotter.add_point_labels(base[None, :] + x[:, None] * right[None, :] - 0.12 * half_h * up,
+                                 labels, font_size=14, text_color="black", shape=None,
+                                 show_points=False, always_visible=True, justification_horizontal="center",
+                                 justification_vertical="top")
+    tip = np.asarray(centerline.frames_at(np.array([0.0]))[0])[0]
+    if abs(float((tip - centre) @ right)) <= 1.05 * half_w:
+        plotter.add_point_labels(tip[None, :], ["tip"], font_size=14, text_color="white",
+                                 shape="rounded_rect", shape_color=TIP_COLOUR, shape_opacity=1.0,
+                                 show_points=False, always_visible=True)

@@ -10,7 +10,8 @@
   its cells; the sets' values (thickness, porosity, K1, alpha, reference direction) are in
   ``rtmsim_sets.csv`` beside it, one row per set under the same id (column ``pid``), for
   RTMsim's patch table. The cells are binned into at most four sets by K1
-  (:func:`preform.rtm.bin_cells`), and the binning error is reported (docs/guide/results.md).
+  (``preform.analysis.rtm.solver_properties``), and the binning error is reported
+  (docs/guide/results.md).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path, atomic_write_text
+from .atomic import atomic_path, atomic_write_text, safe_folder
 
 #: Nastran small-field width and large-field width (characters)
 SMALL, LARGE = 8, 16
@@ -107,75 +108,12 @@ def write_rtmsim_bdf(path, vertices, cells, set_index, set_values) -> list[Path]
 RTM_DIR = "rtm"
 
 
-def write_rtm(fields, out_dir, n_sets=None, cavity_thickness=None,
-              settings=None) -> tuple[list[Path], dict]:
-    """The solver files of the RTM fields in ``<out_dir>/rtm/`` and what the summary says of them.
-
-    Cells with no preform (``rtm_valid`` 0: no yarn, or a resin channel) are an open gap: the
-    Hele-Shaw permeability ``h^2 / 12`` of the cavity ``h`` (or, without a cavity thickness, the
-    largest K1 of the preform), isotropic. For RTMsim's few property sets they form a set of their
-    own and the preform's cells the other ``n_sets - 1`` (or all ``n_sets`` where every cell is
-    preform), grouped by K1 so that the area-weighted binning error is small
-    (:func:`preform.rtm.bin_cells`). The summary gives that error (``k1_binning``), the preform's
-    fibre volume fraction and, with a cavity, its compression (:func:`preform.rtm.compression`);
-    a cavity that packs fibres beyond :data:`preform.rtm.MAX_COMPACTED_VF` is warned about.
-    ``settings``: the binning's (``preform.rtm.BinningSettings``; None: ``rtm.BINNING``), whose
-    ``sets`` ``n_sets`` overrides where given.
-    """
-    import warnings
-
-    from ..rtm import BINNING, MAX_COMPACTED_VF, bin_cells, compression
-    from .atomic import safe_folder
-
+def write_rtm(properties, out_dir) -> list[Path]:
+    """``<out_dir>/rtm/lcmsim.h5``, ``rtmsim.bdf`` and ``rtmsim_sets.csv`` of ``properties``
+    (``preform.analysis.rtm.SolverProperties``); returns the paths."""
+    p = properties
     folder = safe_folder(out_dir, RTM_DIR)
-    cd = fields.cell_data
-    valid = cd["rtm_valid"] > 0
-    if not np.any(valid):
-        return [], {"written": False, "reason": "no face carries preform (no yarn reached the mandrel)"}
-    V, F = np.asarray(fields.vertices, dtype=float), np.asarray(fields.faces)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    thickness = np.full(len(valid), cavity_thickness) if cavity_thickness else cd["thickness_m"]
-    channel = cavity_thickness ** 2 / 12.0 if cavity_thickness else float(np.max(cd["permeability_k1_m2"][valid]))
-    k1 = np.where(valid, cd["permeability_k1_m2"], channel)
-    alpha = np.where(valid, np.divide(cd["permeability_k2_m2"], k1, out=np.ones_like(k1), where=k1 > 0), 1.0)
-    direction = cd["permeability_direction"]
-    written = [write_lcmsim_h5(folder / "lcmsim.h5", fields.vertices, fields.faces, thickness,
-                               cd["porosity"], k1, alpha, direction)]
-    settings = BINNING if settings is None else settings
-    n_sets = settings.sets if n_sets is None else int(n_sets)
-    sets = n_sets - 1 if np.any(~valid) else n_sets
-    binning = bin_cells(k1[valid], sets, weights=area[valid], settings=settings)
-    index = np.full(len(k1), len(binning.values), dtype=np.int64)
-    index[valid] = binning.index
-    values = []
-    for k in range(len(binning.values)):
-        members = index == k
-        values.append((float(np.mean(thickness[members])), float(np.mean(cd["porosity"][members])),
-                       float(binning.values[k]), float(np.mean(alpha[members])),
-                       _mean_direction(direction[members])))
-    if np.any(~valid):
-        values.append((float(np.mean(thickness[~valid])), float(np.mean(cd["porosity"][~valid])),
-                       channel, 1.0, (1.0, 0.0, 0.0)))
-    written += write_rtmsim_bdf(folder / "rtmsim.bdf", fields.vertices, fields.faces, index, values)
-    # faces packed to V_f 1 or more are no preform to the fields (rtm_valid 0), but the most
-    # compressed: they count here
-    packed = valid | (cd["fibre_volume_fraction"] >= MAX_COMPACTED_VF)
-    squeeze = compression(cd["fibre_volume_fraction"][packed], cd["thickness_m"][packed], area[packed],
-                          cavity_thickness)
-    for text in squeeze.pop("warnings"):
-        warnings.warn(text, UserWarning, stacklevel=3)
-    said = {"written": True, "sets": len(values), "preform_faces": int(np.count_nonzero(valid)),
-            "faces": int(len(k1)),
-            "faces_per_set": [int(n) for n in np.bincount(index, minlength=len(values))],
-            "k1_binning": {"rms_factor": binning.rms_factor, "max_factor": binning.max_factor,
-                           "sets_k1_m2": [float(v) for v in binning.values]},
-            **squeeze}
-    return written, said
-
-
-def _mean_direction(d):
-    """A sign-free mean of unit directions (principal axis of sum d d^T)."""
-    if len(d) == 0:
-        return (1.0, 0.0, 0.0)
-    w, v = np.linalg.eigh(d.T @ d)
-    return tuple(float(x) for x in v[:, -1])
+    written = [write_lcmsim_h5(folder / "lcmsim.h5", p.vertices, p.cells, p.thickness, p.porosity,
+                               p.k1, p.alpha, p.direction)]
+    written += write_rtmsim_bdf(folder / "rtmsim.bdf", p.vertices, p.cells, p.set_index, p.set_values)
+    return written

@@ -28,8 +28,13 @@ INPUT_VTU = "surface_input.vtu"
 XDMF = "surface.xdmf"
 H5 = "surface.h5"
 PLOTS = "plots"
-#: picture size, pixels (width, height): two views stacked, each wide like a long part
-WINDOW_SIZE = (1400, 1000)
+#: picture width, pixels; the height follows the part (two views stacked, each as tall as the
+#: part's outline and its ruler need at this width, between VIEW_HEIGHT_PX) and the colour bar
+WIDTH_PX = 1400
+VIEW_HEIGHT_PX = (240, 520)
+BAR_HEIGHT_PX = 110
+#: a view's half height is the part's times this: the ruler and its labels below, the title above
+VIEW_ROOM = (1.9, 1.45)
 #: (file name, cell array, scalar-bar title with units, scale to the shown unit)
 PICTURES = (
     ("surface_braid_angle.png", "braid_angle_deg", "braid angle (deg)", 1.0),
@@ -56,7 +61,7 @@ def surface_mesh(fields):
 def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> list[Path]:
     """Write ``surface.vtu``, ``surface.xdmf`` + ``surface.h5`` and the pictures into ``out_dir``.
 
-    fields : preform.fields.SurfaceFields
+    fields : preform.analysis.fields.SurfaceFields
     out_dir : str or Path, created if missing
     pictures : also render the pictures (:func:`write_surface_pictures`) into ``out_dir/plots``
     returns : the paths written (pictures only if rendering worked)
@@ -81,36 +86,35 @@ def write_surface(fields, out_dir, title: str = "", pictures: bool = True) -> li
     return written + (write_surface_pictures(fields, out_dir / PLOTS, title) if pictures else [])
 
 
-def write_input_mesh_fields(fields, mandrel, out_dir) -> Path:
-    """``surface_input.vtu``: the fields carried over to the mandrel's own triangles (the STL's,
-    after repair; ``fields.fields_on_input``, area-weighted), written atomically."""
+def write_input_mesh_fields(input_fields, out_dir) -> Path:
+    """``surface_input.vtu``: the fields on the mandrel's own triangles (the STL's, after repair;
+    ``analysis.fields.fields_on_input``, area-weighted), written atomically."""
     import meshio
-
-    from ..fields import fields_on_input
 
     path = Path(out_dir) / INPUT_VTU
     with atomic_path(path) as tmp:
-        meshio.write(tmp, surface_mesh(fields_on_input(fields, mandrel)), file_format="vtu",
-                     compression=None)
+        meshio.write(tmp, surface_mesh(input_fields), file_format="vtu", compression=None)
     return path
 
 
-def write_surface_pictures(fields, plots_dir, title: str = "") -> list[Path]:
+def write_surface_pictures(fields, plots_dir, title: str = "", centerline=None) -> list[Path]:
     """Off-screen renders of the braid angle, the cover factor and the thickness on the mandrel.
 
-    Each picture shows the braided part from two opposite sides (all four sides of a square
-    section), titled with ``title`` (case, model, status); faces no yarn reached are drawn grey
-    and the colour range is that of the braided faces only. The three pictures are drawn by one
-    plotter whose surface only changes its colours (a new plotter or actor compiles its shaders
-    again: about 0.5 s a picture). Returns the PNG paths written; on a rendering failure returns
-    [] and warns.
+    Each picture shows the braided part from the front and, turned over about its axis, from
+    the back (all four sides of a square section), tip on the left in both (and in the unrolled
+    map), filling the frame's width, with a ruler of arc length from the tip under each view
+    (``centerline``: preform.geometry.Centerline, else no ruler); titled with ``title`` (case,
+    model, status); faces no yarn reached are grey and the colour range is that of the braided
+    faces only, on round limits. The three pictures are drawn by one plotter whose surface only
+    changes its colours (a new plotter or actor compiles its shaders again: about 0.5 s a
+    picture). Returns the PNG paths written; on a rendering failure returns [] and warns.
     """
     plots_dir = Path(plots_dir)
     plots_dir.mkdir(parents=True, exist_ok=True)
     written = []
     scene = None
     try:
-        scene = _SurfaceScene(fields)
+        scene = _SurfaceScene(fields, centerline)
         for file_name, array, label, scale in PICTURES:
             path = plots_dir / file_name
             # atomic_path leaves the temporary name free, so the renderer creates the file with
@@ -132,30 +136,61 @@ SHOWN = "shown"
 
 
 class _SurfaceScene:
-    """One off-screen plotter of the field mesh in two views (front on top, back below), each
-    with one actor of the whole surface: faces with a NaN value are drawn in the grey
-    ``UNREACHED_COLOR``, the others through the colour map."""
+    """One off-screen plotter of the field mesh in two views (front on top, back below, then a
+    row for the colour bar), each with one actor of the whole surface: faces with a NaN value
+    are drawn in the grey ``UNREACHED_COLOR``, the others through the colour map. The cameras
+    frame the braided faces (``fields.reached()``), the same for every picture."""
 
-    def __init__(self, fields):
+    def __init__(self, fields, centerline=None):
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
         import pyvista as pv
+
+        from .render3d import add_ruler, part_axes, tip_left
 
         self.fields = fields
         self.vertices = np.asarray(fields.vertices, dtype=np.float64)
         self.faces = np.asarray(fields.faces, dtype=np.int64)
+        reached = fields.reached()
+        focus = self.vertices[np.unique(self.faces[reached])] if reached.any() else self.vertices
+        centre, _, across, third = part_axes(focus, centerline)
+        front = (across + third) / np.sqrt(2.0)
+        tip = np.asarray(centerline.frames_at(np.array([0.0]))[0])[0] if centerline is not None else None
+        up = tip_left(centre, front, (third - across) / np.sqrt(2.0), tip)
+        right = np.cross(up, front)
+        rel = focus - centre
+        half_w = max(float(np.max(np.abs(rel @ right))), 1e-9)
+        half_h = max(float(np.max(np.abs(rel @ up))), 1e-9)
+        below, above = VIEW_ROOM
+        scale = 1.04 * half_w / WIDTH_PX            # metres per pixel across the frame
+        h = int(np.clip(round((below + above) * half_h / scale), *VIEW_HEIGHT_PX))
+        self.window_size = (WIDTH_PX, 2 * h + BAR_HEIGHT_PX)
         cells = np.column_stack([np.full(len(self.faces), 3), self.faces]).ravel()
         self.surface = pv.PolyData(self.vertices, cells)
         self.surface.cell_data[SHOWN] = np.zeros(len(self.faces))
-        self.plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 1), border=False)
+        self.plotter = pv.Plotter(off_screen=True, window_size=self.window_size, shape=(3, 1),
+                                  row_weights=[h, h, BAR_HEIGHT_PX], border=False)
         self.plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
         self.actors, self.texts = [], [None, None]
-        for row in range(2):
+        # the back view is the part turned over about its axis: view and up both reversed, so
+        # the screen's right (up x view) and with it the tip's side stay
+        self.views = [(front, up), (-front, -up)]
+        for row, (view, view_up) in enumerate(self.views):
             self.plotter.subplot(row, 0)
             self.plotter.set_background(BACKGROUND)
             self.actors.append(self.plotter.add_mesh(
                 self.surface, scalars=SHOWN, cmap="viridis", nan_color=UNREACHED_COLOR,
                 show_scalar_bar=False, ambient=0.5, diffuse=0.5))   # colours readable on shaded faces
-        self.bar = None
+            if centerline is not None:
+                add_ruler(self.plotter, centerline, centre, view, view_up, half_w, half_h)
+            look_at = centre - 0.5 * (below - above) * half_h * view_up
+            self.plotter.camera_position = [tuple(look_at + 10.0 * max(half_w, half_h) * view),
+                                            tuple(look_at), tuple(view_up)]
+            self.plotter.enable_parallel_projection()
+            self.plotter.camera.parallel_scale = max(0.5 * (below + above) * half_h, 1.04 * half_w * h / WIDTH_PX)
+            self.plotter.reset_camera_clipping_range()
+        self.plotter.subplot(2, 0)
+        self.plotter.set_background(BACKGROUND)
+        self.bar = self.bar_title = None
 
     def close(self):
         self.plotter.close()
@@ -163,12 +198,10 @@ class _SurfaceScene:
 
 def _render(scene, array, label, path, title="", scale=1.0):
     """One picture: reached faces coloured by ``array`` (times ``scale``), the rest grey, the
-    braided part from the front (top) and the back (bottom).
+    braided part from the front (top) and the back (below, turned over about its axis).
 
     Grey: no yarn reached the face (or, for the braid angle, the angle is undefined there).
     """
-    from .render3d import frame_parallel, view_axes
-
     fields, plotter = scene.fields, scene.plotter
     values = np.asarray(fields.cell_data[array], dtype=np.float64) * scale
     reached = fields.reached()
@@ -178,32 +211,37 @@ def _render(scene, array, label, path, title="", scale=1.0):
             label = "braid angle of layer 1 (deg)"
     scene.surface.cell_data[SHOWN] = np.where(reached, values, np.nan)
     if reached.any():
-        lo, hi = float(values[reached].min()), float(values[reached].max())
-        if hi - lo < 1e-9 * max(1.0, abs(hi)):
-            lo, hi = lo - 0.5 * max(1e-3, abs(lo) * 1e-2), hi + 0.5 * max(1e-3, abs(hi) * 1e-2)
+        from .maps import NON_NEGATIVE, rounded_limits
+
+        lo, hi = rounded_limits(float(values[reached].min()), float(values[reached].max()),
+                                zero=array in NON_NEGATIVE)
     else:
         lo, hi = 0.0, 1.0
     for actor in scene.actors:
         actor.mapper.scalar_range = (lo, hi)
-    focus = scene.vertices[np.unique(scene.faces[reached])] if reached.any() else scene.vertices
-    centre, _, across, third = view_axes(focus)
-    w, h = WINDOW_SIZE
-    for row, sign in enumerate((1.0, -1.0)):
+    from .maps import BAR_TICKS
+    from .render3d import nice_length
+
+    ticks = int(round((hi - lo) / nice_length(hi - lo, BAR_TICKS))) + 1
+    for row in range(2):
         plotter.subplot(row, 0)
-        side = "front" if sign > 0 else "back; grey: no yarn"
-        text = f"{title}: {label} ({side})" if row == 0 and title else side if row else label
+        side = "front" if row == 0 else "back (turned over about its axis); grey: no yarn"
+        text = f"{title}: {label}, {side}" if row == 0 and title else side if row else f"{label}, {side}"
         if scene.texts[row] is not None:
             plotter.remove_actor(scene.texts[row], render=False)
-        scene.texts[row] = plotter.add_text(text, font_size=11, color="black", position="upper_left",
+        scene.texts[row] = plotter.add_text(text, font_size=10, color="black", position="upper_left",
                                             render=False)
-        frame_parallel(plotter, focus, centre, sign * (across + third) / np.sqrt(2.0),
-                       (third - across) / np.sqrt(2.0), w / (h / 2))
-    if scene.bar is None:        # one colour bar under the back view, retitled for each field
-        plotter.subplot(1, 0)
-        scene.bar = plotter.add_scalar_bar(title=label, mapper=scene.actors[1].mapper, color="black",
-                                           vertical=False, position_x=0.3, position_y=0.02, width=0.4,
-                                           height=0.1, title_font_size=18, label_font_size=14)
-    scene.bar.SetTitle(label)
+    plotter.subplot(2, 0)
+    if scene.bar is None:        # one colour bar in its own row; its title a text above it
+        scene.bar = plotter.add_scalar_bar(title=" ", mapper=scene.actors[1].mapper, color="black",
+                                           vertical=False, position_x=0.3, position_y=0.05, width=0.4,
+                                           height=0.55, label_font_size=14, n_labels=ticks, fmt="%g")
+        scene.bar.SetTextPositionToPrecedeScalarBar()   # tick labels under the bar
+    scene.bar.SetNumberOfLabels(ticks)
     scene.bar.SetVisibility(bool(reached.any()))
+    if scene.bar_title is not None:
+        plotter.remove_actor(scene.bar_title, render=False)
+    scene.bar_title = plotter.add_text(label, font_size=11, color="black", position="upper_edge",
+                                       render=False)
     plotter.render()             # a screenshot alone may return the last frame drawn
     plotter.screenshot(str(path))

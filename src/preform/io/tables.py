@@ -1,5 +1,7 @@
 """``summary.json`` and ``history.csv`` (docs/guide/results.md, result files).
 
+The summary's figures are computed by ``preform.analysis.derived``; this module writes them.
+
 ``history.csv`` has exactly :data:`preform.result.HISTORY_COLUMNS` as header, one row per step,
 floats written with :func:`repr` (shortest text that reads back to the same float64). Non-finite
 values are refused: a NaN in a result file would look like data.
@@ -7,15 +9,14 @@ values are refused: a NaN in a result file would look like data.
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SimulationError
-from ..result import FLAG_NAMES, HISTORY_COLUMNS
+from ..plain import jsonable
+from ..result import HISTORY_COLUMNS
 from .atomic import atomic_write_text
 
 #: history columns that count things; written as integers
@@ -72,151 +73,8 @@ def write_history(result, path) -> Path:
 
 # ---------------------------------------------------------------- summary.json
 
-def _jsonable(value):
-    """Plain JSON types: Paths -> str, tuples -> lists, numpy -> Python, non-finite -> None."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if value is None or isinstance(value, str):
-        return value
-    return str(value)
-
-
-def echo_inputs(config):
-    """The config as JSON-able data: ``preform.config.dump_config`` when it exists, else the
-    dataclass fields (SI units, angular speed in rad/s) as a best effort."""
-    if config is None:
-        return None
-    try:
-        from ..config import dump_config
-    except ImportError:
-        dump_config = None
-    if dump_config is not None:
-        return _jsonable(dump_config(config))
-    return _jsonable(config)
-
-
-def _final(result, name):
-    column = np.asarray(result.history.get(name, ()), dtype=np.float64)
-    return float(column[-1]) if len(column) else None
-
-
-def _steady_state(result, settings):
-    from ..steady import steady_state
-
-    if not result.steps:
-        return None
-    return steady_state(result.history, settings)
-
-
-def _quality(result, settings, fields_reasons=(), interlacing=False):
-    from ..quality import assess, verdict
-
-    q = assess(result, settings, interlacing=interlacing)
-    return verdict([*q["reasons"], *fields_reasons])
-
-
-def flag_counts(yarns) -> dict:
-    """Number of deposited points carrying each flag: {"bridge": n, "catch": n, "slip": n}."""
-    flags = np.asarray(yarns.flags, dtype=np.int64)
-    return {name: int(np.count_nonzero(flags & bit)) for bit, name in FLAG_NAMES.items()}
-
-
-def _snapshot_checks(result, settings):
-    """The written snapshots against the re-balance that checks each (the written state is the
-    run's own): the largest distance of a crossing from its re-balanced place (m), the tolerance
-    the verdict holds it to (``QualitySettings.max_snapshot_shift_widths`` yarn widths), the
-    times of the snapshots beyond it and of those whose re-balance failed; None where no
-    snapshot was checked; ``settings``: the verdict's (``quality.QualitySettings``)."""
-    shifts = [s.rebalance_shift_m for s in result.snapshots if np.isfinite(s.rebalance_shift_m)]
-    failed = [s.time_s for s in result.snapshots if s.rebalance_error]
-    if not shifts and not failed:
-        return None
-    tolerance = (settings.max_snapshot_shift_widths * float(result.config.yarn.width)
-                 if result.config is not None else None)
-    beyond = [s.time_s for s in result.snapshots if tolerance is not None
-              and np.isfinite(s.rebalance_shift_m) and s.rebalance_shift_m > tolerance]
-    return {"rebalance_shift_max_m": max(shifts) if shifts else None,
-            "rebalance_shift_tolerance_m": tolerance, "beyond_tolerance_at_s": beyond,
-            "rebalance_failed_at_s": failed}
-
-
-def _interlacing(il):
-    """Warp-weft crossings of the laid yarns against the pattern's (``preform.interlacing``;
-    ``il``: ``quality.run_interlacing``'s)."""
-    if il is None:
-        return None
-    return {"band_m": [il.s_start, il.s_end], "crossings": il.measured,
-            "pattern_crossings": il.pattern, "ratio": il.ratio,
-            "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
-
-
-def summary_dict(result, extra=None, settings=None) -> dict:
-    """Everything summary.json holds, as JSON-able data (non-finite numbers become null);
-    ``settings``: the run's ``preform.Settings`` (None: the defaults), whose ``steady``,
-    ``interlacing`` and ``quality`` read the run."""
-    from .._version import __version__
-    from ..settings import resolved
-
-    settings = resolved(settings)
-    config = result.config
-    model = config.model.kind if config is not None else None
-    extra = dict(extra or {})
-    steady = _steady_state(result, settings.steady) or {}
-    from ..quality import run_interlacing
-
-    interlaced = run_interlacing(result, settings.interlacing)
-    summary = {
-        "preform_version": __version__,
-        "model": model,
-        "status": result.status,
-        "message": result.message,
-        "steps": int(result.steps),
-        "wall_time_s": float(result.wall_time_s),
-        "braided_length_m": _final(result, "braided_length_m"),
-        "braid_angle_deg": {
-            "final": {"warp": _final(result, "braid_angle_warp_deg"),
-                      "weft": _final(result, "braid_angle_weft_deg")},
-            # only where the run reached it (steady_state says how far from it the run ended)
-            "steady": steady["braid_angle_deg"] if steady.get("reached") else None,
-        },
-        "convergence_length_m": {
-            "final": {"mean": _final(result, "convergence_length_mean_m"),
-                      "min": _final(result, "convergence_length_min_m"),
-                      "max": _final(result, "convergence_length_max_m")},
-            "steady": steady["convergence_length_m"] if steady.get("reached") else None,
-        },
-        "steady_state": steady or None,
-        "quality": _quality(result, settings.quality, (extra or {}).pop("quality_reasons", ()),
-                            interlaced),
-        "mandrel_repairs": list(result.mandrel.repairs) if result.mandrel is not None else [],
-        "yarns": {"count": int(result.yarns.n_yarns), "points": int(len(result.yarns.points)),
-                  "flags": flag_counts(result.yarns)},
-        "snapshots": len(result.snapshots),
-        "snapshot_checks": _snapshot_checks(result, settings.quality),
-        "interlacing": _interlacing(interlaced),
-        "inputs": echo_inputs(config),
-    }
-    if extra:
-        summary.update(extra)
-    return _jsonable(summary)
-
-
-def write_summary(result, path, extra=None, settings=None) -> Path:
-    """Write ``summary.json`` atomically; ``extra`` (dict) is merged in at the top level
-    (``write_results`` passes ``{"files": [...]}``); ``settings``: :func:`summary_dict`'s."""
-    text = json.dumps(summary_dict(result, extra, settings), indent=2, allow_nan=False)
+def write_summary(summary: dict, path) -> Path:
+    """Write ``summary.json`` atomically: the dict ``summary`` (``preform.analysis.derived``'s
+    figures and what the writing adds), with numbers, arrays and paths as JSON types."""
+    text = json.dumps(jsonable(summary), indent=2, allow_nan=False)
     return atomic_write_text(path, text + "\n")

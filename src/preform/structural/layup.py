@@ -10,7 +10,7 @@ family: warp, weft and, in a triaxial braid, axial. A ply's
   ``+alpha`` and ``-alpha`` or the other way round, as the machine turns, axial at 0;
 * **thickness** is its share of the layer's thickness ``t_k`` in proportion to its fibre volume
   per area, ``L_g tex_g / sum_h L_h tex_h`` (``L`` the yarn length per area): the layer's
-  thickness is the one its fibre volume fraction is computed over (``preform.rtm``: the preform's
+  thickness is the one its fibre volume fraction is computed over (``preform.analysis.rtm``: the preform's
   own, or its share of the mould's cavity), so the plies hold the layer's fibre and fill its
   thickness;
 * **fibre volume fraction** is the layer's at the face (the plies of a layer share it, since
@@ -29,9 +29,13 @@ binned plies form a group. The largest change binning makes is reported.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..analysis.fields import face_geometry, local_frames, surface_tangent
+from ..analysis.rtm import missing_material
 
 FAMILIES = ("warp", "weft", "axial")
 
@@ -82,13 +86,11 @@ def layer_prefixes(cell_data, n_layers: int) -> list[str]:
 def face_plies(fields, configs, tangent) -> Plies:
     """The plies of every preform face (see module docstring).
 
-    fields : preform.fields.SurfaceFields with the RTM arrays (``preform.rtm.rtm_fields`` or, for
+    fields : preform.analysis.fields.SurfaceFields with the RTM arrays (``preform.analysis.rtm.rtm_fields`` or, for
         a stack, ``stacked_rtm_fields``)
     configs : each layer's Config, from the mandrel outwards (one for a single layer)
     tangent : (nf, 3), the surface projection of the centerline tangent (0 where undefined)
     """
-    from ..fields import face_geometry, local_frames
-
     cd = fields.cell_data
     normals, _, _ = face_geometry(fields.vertices, fields.faces)
     keep = np.nonzero(cd["rtm_valid"] > 0)[0]
@@ -177,3 +179,86 @@ def bin_plies(plies: Plies, settings: BinSettings = BinSettings()) -> Groups:
                                                        - 1.0)[present])),
                   "vf": float(np.max(np.abs(plies.vf - g_vf[index])[present]))}
     return Groups(index=index, angle_deg=g_angle, thickness_m=g_thick, vf=g_vf, errors=errors)
+
+
+def largest_component(faces) -> np.ndarray:
+    """(nf,) bool: the faces of the largest edge-connected piece of the triangles ``faces``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    F = np.asarray(faces, dtype=np.int64)
+    if len(F) == 0:
+        return np.zeros(0, dtype=bool)
+    edges = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, edge_id = np.unique(edges, axis=0, return_inverse=True)
+    owner = np.repeat(np.arange(len(F)), 3)
+    graph = coo_matrix((np.ones(len(owner)), (owner, edge_id.ravel() + len(F))),
+                       shape=(len(F) + edge_id.max() + 1,) * 2)
+    _, label = connected_components(graph, directed=False)
+    biggest = np.bincount(label[:len(F)]).argmax()
+    return label[:len(F)] == biggest
+
+
+# ------------------------------------------------------------------------------ a run's layup
+
+@dataclass(frozen=True)
+class StructuralLayup:
+    """What ``fe/preform.inp`` and ``fe/layup.csv`` hold (``io.fe_files.write_structural``
+    writes them): the fields, the plies of the preform faces of the braided part and their
+    groups, the fibre and matrix, the centerline the deck's tip and end are found along, the
+    deck's title and how many faces were left out."""
+
+    fields: object
+    plies: Plies
+    groups: Groups
+    constituents: object
+    centerline: object
+    title: str
+    left_out_faces: int
+
+
+def missing_inputs(result, fields) -> str:
+    """Why the structural files cannot be written for this run ("" if they can)."""
+    config = result.config
+    if config is None or getattr(config, "material", None) is None:
+        return ("no [material] section: give preset = \"AS4/3501-6\" (or another preset) or the fibre's "
+                "and matrix's elastic constants for the composite shell deck")
+    reason = missing_material(config)
+    if reason:
+        return reason + " (the plies' fibre volume fraction)"
+    if fields is None or "rtm_valid" not in fields.cell_data:
+        return "no surface fields"
+    if result.centerline is None:
+        return "no centerline (the plies' angles are measured from the mandrel's axis)"
+    if not np.any(fields.cell_data["rtm_valid"] > 0):
+        return "no face carries preform (no yarn reached the mandrel)"
+    return ""
+
+
+def structural_layup(result, fields, layer_results=(), settings: BinSettings = BinSettings()
+                     ) -> tuple[StructuralLayup | None, str]:
+    """(the layup of a run's structural deck, "") or (None, why there is none).
+
+    result : the Result of the (first) layer; layer_results : those of layers 2, 3, ...
+    fields : its SurfaceFields with the RTM arrays (``preform.analysis.rtm``), stacked for
+        several layers. The plies are those of the largest connected piece of preform faces.
+    """
+    reason = missing_inputs(result, fields)
+    if reason:
+        return None, reason
+    cd = fields.cell_data
+    configs = [result.config, *(r.config for r in layer_results)]
+    stacked = sum(1 for k in range(1, len(configs) + 1) if f"layer{k}_thickness_m" in cd)
+    configs = configs[:stacked] if stacked > 1 else configs[:1]
+    normals, _, centroids = face_geometry(fields.vertices, fields.faces)
+    tangent = surface_tangent(result, centroids, normals)
+    plies = face_plies(fields, configs, tangent)
+    connected = largest_component(np.asarray(fields.faces)[plies.faces])
+    plies = dataclasses.replace(plies, **{name: getattr(plies, name)[connected] for name in
+                                          ("faces", "angle_deg", "thickness_m", "vf", "axis", "normal")})
+    source = getattr(result.config, "source", None)
+    title = f"preform: {source.stem if source is not None else 'run'}"
+    return StructuralLayup(fields=fields, plies=plies, groups=bin_plies(plies, settings),
+                           constituents=result.config.material.constituents,
+                           centerline=result.centerline, title=title,
+                           left_out_faces=int(len(fields.faces) - len(plies.faces))), ""

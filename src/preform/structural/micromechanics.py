@@ -13,7 +13,7 @@ NASA TM-83320), with ``k_f`` the fibre volume fraction and ``k_m = 1 - k_f``:
 The square roots come from a square array of fibres: a strip across the ply meets fibre over a
 width ``sqrt(k_f)`` of it, the rest is matrix in series. No fitted parameter is needed (unlike
 Halpin-Tsai's ``xi``); against measured plies ``E22`` and ``G12`` fall within some 10-25 %,
-``E11`` and ``nu12`` within 10 % (``tests/test_structural_materials.py``).
+``E11`` and ``nu12`` within 10 % (``tests/unit/test_structural_materials.py``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .materials import FibreMatrix
+from ..materials import FibreMatrix
 
 
 @dataclass(frozen=True)

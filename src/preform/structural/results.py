@@ -70,7 +70,7 @@ def displacements(path, node_set: str) -> tuple[np.ndarray, np.ndarray]:
 
 def read_mesh(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(node numbers (n,), coordinates (n, 3) m, elements (ne, 6) node numbers) of a deck written
-    by :func:`preform.structural.deck.write_deck` (its ``*NODE`` and ``*ELEMENT`` blocks)."""
+    by :func:`preform.io.fe_files.write_deck` (its ``*NODE`` and ``*ELEMENT`` blocks)."""
     lines = Path(path).read_text().splitlines()
     blocks = {"*NODE": [], "*ELEMENT": []}
     current = None
