@@ -18,6 +18,7 @@ import numpy as np
 
 from . import analytic
 from .errors import ConfigError, MandrelError
+from .stepping import end_message, end_passed
 from .tolerances import tol
 
 #: a mandrel that does not fit the spool circle and whose bounding-box diagonal exceeds this many
@@ -139,33 +140,6 @@ def _check_length(config, length: float) -> None:
             terms += f" plus [machine] guide_ring offset = {offset:g}"
         raise ConfigError(f"{terms} is {need:.4g} m: expected at most the centerline length "
                           f"{length:.4g} m of the mandrel")
-
-
-def end_passed(travel: float, length: float, lead: float) -> bool:
-    """Whether the mandrel's end has passed the machine once its tip is ``travel`` m past the
-    spool plane: the pose holds the centerline point ``lead`` m ahead of the supply plane on the
-    machine axis (``geometry.pose_at``), and past ``length + lead`` there is no centerline left
-    for it. The run stops there (``stepping.Stepper.run``); ``preform check`` asks the same of the
-    travel the run will need (:func:`mandrel_end_problem`)."""
-    return travel - lead > length
-
-
-def end_message(config, length: float, lead: float, h: float, offset: float) -> str:
-    """Why the mandrel's end passes the machine before ``braid_length`` is braided, and what the
-    part can do about it: the fell points reach braid_length with the tip about
-    ``braid_length + h + offset`` past the spool plane (``h`` the convergence length then,
-    ``offset`` the guide ring's from the spool plane), which must not exceed ``length + lead``."""
-    p = config.process
-    need = p.braid_length + h + offset
-    most = length + lead - h - offset
-    ring = f" plus the guide ring's offset {offset:.3g} m" if offset else ""
-    lead_text = f" plus the pose lead {lead:.3g} m" if lead else ""
-    fix = (f"shorten [process] braid_length to at most about {most:.3g} m or lengthen the mandrel"
-           if most > 0 else "lengthen the mandrel")
-    return (f"the mandrel's end passes the machine before [process] braid_length = {p.braid_length:g} m "
-            f"is braided: the fell points get there with the tip {need:.3g} m past the spool plane "
-            f"(braid_length plus the convergence length, about {h:.3g} m by then{ring}), beyond the "
-            f"{length:.4g} m centerline{lead_text}; {fix}")
 
 
 def mandrel_end_problem(config, length: float, radius: float, lead: float = 0.0,

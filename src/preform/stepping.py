@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import plain
-from .checks import end_message, end_passed
 from .config import DEFAULT_SNAPSHOTS
 from .laid import CenterlineProjector, mandrel_friction
 from .errors import PreformError, SimulationError
@@ -87,6 +86,33 @@ def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tole
             f"could not tie {np.sum(~hit)} yarn(s) to the mandrel at {s_tie[0]:.4g} m from the tip: "
             "the centerline there does not lie inside the mandrel")
     return point, face.astype(np.int64)
+
+
+def end_passed(travel: float, length: float, lead: float) -> bool:
+    """Whether the mandrel's end has passed the machine once its tip is ``travel`` m past the
+    spool plane: the pose holds the centerline point ``lead`` m ahead of the supply plane on the
+    machine axis (``geometry.pose_at``), and past ``length + lead`` there is no centerline left
+    for it. The run stops there (:meth:`Stepper.run`); ``preform check`` asks the same of the
+    travel the run will need (``checks.mandrel_end_problem``)."""
+    return travel - lead > length
+
+
+def end_message(config, length: float, lead: float, h: float, offset: float) -> str:
+    """Why the mandrel's end passes the machine before ``braid_length`` is braided, and what the
+    part can do about it: the fell points reach braid_length with the tip about
+    ``braid_length + h + offset`` past the spool plane (``h`` the convergence length then,
+    ``offset`` the guide ring's from the spool plane), which must not exceed ``length + lead``."""
+    p = config.process
+    need = p.braid_length + h + offset
+    most = length + lead - h - offset
+    ring = f" plus the guide ring's offset {offset:.3g} m" if offset else ""
+    lead_text = f" plus the pose lead {lead:.3g} m" if lead else ""
+    fix = (f"shorten [process] braid_length to at most about {most:.3g} m or lengthen the mandrel"
+           if most > 0 else "lengthen the mandrel")
+    return (f"the mandrel's end passes the machine before [process] braid_length = {p.braid_length:g} m "
+            f"is braided: the fell points get there with the tip {need:.3g} m past the spool plane "
+            f"(braid_length plus the convergence length, about {h:.3g} m by then{ring}), beyond the "
+            f"{length:.4g} m centerline{lead_text}; {fix}")
 
 
 class Stepper:
