@@ -2,8 +2,8 @@
 
 A value can be valid on its own and still ask for unbounded work on a given mandrel:
 ``[output] field_edge_length = 1e-9`` m asks for ~1e17 field faces, ``[model] time_step = 1e-300`` s
-for ~1e300 steps, and 10 000 yarns of 4 mm cannot lie side by side on a 40 mm tube at any braid
-angle. :func:`estimate_work` gives the face and step counts and the size of the results;
+for ~1e300 steps, and 10 000 yarns narrowed to 2 mm cannot lie side by side on a 40 mm tube at any
+braid angle. :func:`estimate_work` gives the face and step counts and the size of the results;
 :func:`check_work` refuses them above :data:`LIMITS` (each with its reason) unless ``force``.
 """
 
@@ -135,11 +135,14 @@ def check_work(config, estimate: WorkEstimate, max_radius: float, *, force=False
             f"{step} makes about {estimate.steps:.3g} steps over the braided length at [process] "
             f"take_up_speed (limit {limits.max_steps:.3g}): expected {expected}{fix}")
     n = config.machine.carriers
-    width = config.yarn.width
+    # the model narrows each yarn down to its least width ([yarn] min_width, paper §2.4.2) where
+    # the perimeter is short: the bound is on that width, not on the nominal one
+    width = config.yarn.least_width
     if n * width > 4.0 * math.pi * max_radius:
         # one group of n/2 yarns side by side at braid angle 0 covers n w / 2 of the perimeter
         raise ConfigError(
-            f"[machine] carriers = {n}: {n // 2} yarns of {width:g} m per group need "
-            f"{n * width / 2:.4g} m of perimeter even laid along the mandrel, and its largest "
-            f"perimeter is {2 * math.pi * max_radius:.4g} m: expected at most "
-            f"{int(4 * math.pi * max_radius / width)} carriers")
+            f"[machine] carriers = {n}: {n // 2} yarns per group, each narrowed to its least width "
+            f"{width:g} m ([yarn] min_width), need {n * width / 2:.4g} m of perimeter even laid "
+            f"along the mandrel, and its largest perimeter is {2 * math.pi * max_radius:.4g} m: "
+            f"expected at most {int(4 * math.pi * max_radius / width)} carriers, or a smaller "
+            "[yarn] min_width")

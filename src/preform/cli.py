@@ -68,7 +68,8 @@ def written_summary(out_dir) -> dict | None:
 
 def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     """The three lines ``preform run`` prints at the end, from the written ``summary`` (whose wall
-    time is the command's, with its stages), else from the result."""
+    time is the command's, with its stages), else from the result; then one line per layer of a
+    run with [[layer]] tables."""
     from .analysis.derived import summary_dict
 
     s = summary if summary is not None else summary_dict(result)
@@ -83,6 +84,7 @@ def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
     else:
         steady_line = "steady state not reached in this run"
     status = s["status"] + (f" ({s['message']})" if s["message"] else "")
+    layers = [_layer_line(e) for e in s.get("layers") or []]
     return [
         f"results: {out_dir} ({n_files} files)",
         f"status: {status}; {s['steps']} steps, {s['wall_time_s']:.1f} s wall{stage_text}, "
@@ -90,7 +92,19 @@ def summary_lines(result, out_dir, n_files, summary=None) -> list[str]:
         f"final braid angle: warp {_fmt(angle['warp'], '.2f')} deg, weft {_fmt(angle['weft'], '.2f')} deg; "
         f"convergence length {_fmt(conv['mean'])} m (min {_fmt(conv['min'])}, max {_fmt(conv['max'])}); "
         + steady_line,
+        *layers,
     ]
+
+
+def _layer_line(entry) -> str:
+    """One console line of a layer of a run with [[layer]] tables (summary.json's entry)."""
+    angle = (entry.get("braid_angle_deg") or {}).get("final") or {}
+    quality = (entry.get("quality") or {}).get("verdict") or "not judged"
+    status = entry.get("status") or "not run"
+    return (f"layer {entry.get('layer')} ({entry.get('direction')}): {status}; {entry.get('steps')} steps, "
+            f"braided length {_fmt(entry.get('braided_length_m'))} m, final braid angle warp "
+            f"{_fmt(angle.get('warp'), '.2f')} deg, weft {_fmt(angle.get('weft'), '.2f')} deg; "
+            f"quality {quality}")
 
 
 #: the exit code of a run stopped by a signal: 128 + the signal number, as shells report it
@@ -110,9 +124,33 @@ COMPILING = ("note: compiling the numba kernels (a first run in this environment
              "later runs load them from the cache)")
 
 
+def _compile_note_marker():
+    """The file whose presence says :data:`COMPILING` was printed in this environment (the
+    interpreter's prefix and the versions of preform and numba, hashed), in the preform cache
+    folder (``io.cache.cache_dir``); None with the cache off."""
+    import hashlib
+
+    from ._version import __version__
+    from .io.cache import cache_dir
+
+    folder = cache_dir()
+    if folder is None:
+        return None
+    try:
+        import numba
+
+        numba_version = numba.__version__
+    except ImportError:   # pragma: no cover - numba is a dependency
+        numba_version = ""
+    key = hashlib.sha256("\0".join((sys.prefix, __version__, numba_version)).encode()).hexdigest()[:16]
+    return folder / f"compile-note-{key}"
+
+
 class _CompileNote:
     """Prints :data:`COMPILING` on stderr at numba's first compilation while registered (numba's
-    ``numba:compile`` event, raised for a compilation, not for a cache load)."""
+    ``numba:compile`` event, raised for a compilation, not for a cache load), once per
+    environment: a run that compiles kernels for a new config in an environment that already
+    compiled some says nothing (:func:`_compile_note_marker`)."""
 
     def __enter__(self):
         self.listener = None
@@ -128,9 +166,21 @@ class _CompileNote:
                 self.say()
 
             def say(self):
-                if not self.said:
-                    self.said = True
-                    print(COMPILING, file=sys.stderr, flush=True)
+                if self.said:
+                    return
+                self.said = True
+                marker = _compile_note_marker()
+                if marker is not None and marker.exists():
+                    return
+                print(COMPILING, file=sys.stderr, flush=True)
+                if marker is not None:
+                    try:
+                        from .io.atomic import atomic_write_text
+
+                        marker.parent.mkdir(parents=True, exist_ok=True)
+                        atomic_write_text(marker, "the numba compile note was printed\n")
+                    except OSError:   # a cache that cannot be written: the note comes again
+                        pass
 
             def on_end(self, ev):
                 pass
@@ -173,8 +223,8 @@ def _cmd_run(args) -> int:
         _print_notes(loaded.notes)
         outcome = run_case(config, out_dir, progress=not args.no_progress, resume=args.resume,
                            force=args.force, geometry=(loaded.mandrel, loaded.centerline, []),
-                           started=started, background_pictures=True, startup_s=startup)
-    _print_notes(outcome.notes)
+                           started=started, background_pictures=True, startup_s=startup,
+                           say=lambda note: print(note, file=sys.stderr, flush=True))
     result = outcome.result
     summary = written_summary(out_dir)
     for line in summary_lines(result, out_dir, len(outcome.written), summary):

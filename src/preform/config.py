@@ -118,11 +118,24 @@ class ModelConfig:
     frontal_iterations: int = 1
 
 
+#: convergence-zone snapshots a run writes where ``[output] snapshots`` is not given: the
+#: interaction model's zone (crossings, friction, bridges) is what its snapshots are read for; the
+#: kinematic zone is straight yarns from the carriers to the fell points, fully told by the
+#: history, so it writes none unless asked
+DEFAULT_SNAPSHOTS = {"interaction": 20, "kinematic": 0}
+
+
 @dataclass(frozen=True)
 class OutputConfig:
     dir: Path                       # absolute path
     field_edge_length: float | None = None   # m; None: a few yarn widths
-    snapshots: int = 20             # number of convergence-zone snapshots written
+    #: convergence-zone snapshots written; None: DEFAULT_SNAPSHOTS of the model (the interaction
+    #: model's zone is worth looking at, the kinematic one's straight lines are not)
+    snapshots: int | None = None
+
+    def snapshot_count(self, kind: str) -> int:
+        """The snapshots a run of ``[model] kind`` writes."""
+        return DEFAULT_SNAPSHOTS.get(kind, 0) if self.snapshots is None else self.snapshots
     #: also write the fields on the mandrel's own (STL) triangles, surface_input.vtu
     #: (``fields.fields_on_input``, area-weighted), for a next tool that needs its mesh
     input_mesh_fields: bool = False
@@ -802,8 +815,8 @@ def _output(sec: _Section, base_dir: Path, name: str) -> OutputConfig:
     return OutputConfig(
         dir=_resolve(value, base_dir),
         field_edge_length=sec.number("field_edge_length", "m", default=None, positive=True),
-        snapshots=sec.integer("snapshots", "a non-negative integer", default=OutputConfig.snapshots,
-                              minimum=0),
+        snapshots=None if "snapshots" not in sec.table else sec.integer(
+            "snapshots", "a non-negative integer", minimum=0),
         input_mesh_fields=_flag(sec, "input_mesh_fields", OutputConfig.input_mesh_fields),
         pictures=_flag(sec, "pictures", OutputConfig.pictures),
     )
@@ -872,7 +885,7 @@ def _dump_sections(config: Config) -> dict:
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed,
                   "solver": mo.solver, "frontal_iterations": mo.frontal_iterations},
         "output": None if out is None else {"dir": str(out.dir), "field_edge_length": out.field_edge_length,
-                                            "snapshots": out.snapshots,
+                                            "snapshots": out.snapshot_count(mo.kind),
                                             "input_mesh_fields": out.input_mesh_fields,
                                             "pictures": out.pictures},
         "axial_yarn": {"width": config.axial_yarn.width, "thickness": config.axial_yarn.thickness,

@@ -139,7 +139,7 @@ def reference_lines(config, mandrel, centerline) -> list[str]:
     ok = perimeter > 0
     if np.count_nonzero(ok) < 2:
         return []
-    return check_lines(config, references(config, s[ok], perimeter[ok]))
+    return check_lines(config, references(config, s[ok], perimeter[ok]), float(centerline.length))
 
 
 # ------------------------------------------------------------------------------ 2. check
@@ -476,7 +476,8 @@ def write_results(result, fields, out_dir, *, background=False, settings=None) -
 # ------------------------------------------------------------------------------ the run
 
 def run_case(config, out_dir, *, progress=False, resume=False, force=False, geometry=None,
-             started=None, background_pictures=False, startup_s=None, settings=None) -> CaseOutcome:
+             started=None, background_pictures=False, startup_s=None, settings=None,
+             say=None) -> CaseOutcome:
     """Simulate ``config`` and write its results into ``out_dir``: the five stages of the module
     docstring, for one layer or a stack.
 
@@ -492,6 +493,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         listed as the stage ``start`` when given
     settings : the numerical settings of every stage (``preform.Settings``; None: the defaults);
         its ``offset`` for the surfaces of a stack
+    say : called with each note as it arises (the check stage's work estimate before the
+        simulation starts), or None; the notes are in the outcome either way
     Raises PreformError for bad input or an unusable folder (before simulating) and
     ResultsWriteError when writing fails after the simulation (the checkpoints are kept).
     """
@@ -499,6 +502,7 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
     settings = resolved(settings)
     out_dir = Path(out_dir)
     checked = check(load(config, geometry, settings), out_dir, force=force, settings=settings)
+    _said(say, checked.notes)
     with RunLock(out_dir):
         stages = {} if startup_s is None else {"start": float(startup_s)}
         stages["load_and_check"] = time.perf_counter() - t0
@@ -525,8 +529,16 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         if simulated.result.status == "done":
             for layer in checked.layers:
                 Checkpoint(layer.checkpoint, layer.config).remove()
-    notes = [*checked.notes, *simulated.notes]
+    notes = [*checked.notes, *_said(say, simulated.notes)]
     return CaseOutcome(result=simulated.result, out_dir=out_dir, written=written, notes=notes)
+
+
+def _said(say, notes):
+    """``notes``, each passed to ``say`` first (when given): the caller shows them now."""
+    if say is not None:
+        for note in notes:
+            say(note)
+    return notes
 
 
 def run_layers(config, out_dir, **kwargs) -> CaseOutcome:

@@ -81,8 +81,10 @@ def end_convergence_length(config, radius: float) -> float | None:
                                                        omega, radius, v, R))
 
 
-def check_lines(config, refs: References) -> list[str]:
-    """What ``preform check`` says of the references over the part to braid."""
+def check_lines(config, refs: References, length: float | None = None) -> list[str]:
+    """What ``preform check`` says of the references over the part to braid; ``length``: the
+    centerline's (m), so that advice to braid longer is given only where the mandrel can hold
+    it (the braid plus the convergence zone ahead of it)."""
     end = min(config.process.braid_length, refs.s[-1])
     inside = (refs.s >= 0.0) & (refs.s <= end)
     if not np.any(inside) or not np.any(np.isfinite(refs.h_inf[inside])):
@@ -93,11 +95,18 @@ def check_lines(config, refs: References) -> list[str]:
              "radius, quasi-static)"]
     need = float(np.nanmax(settle))
     if config.process.braid_length < need:
+        h_start = float(np.nanmedian(h))
+        start = f"start nearer H_inf: [process] initial_position = {h_start:.3g} m"
+        if length is not None and need + float(np.nanmax(h)) > length:
+            advice = (f"the {length:.3g} m mandrel cannot hold {need:.2f} m of braid and its "
+                      f"convergence zone, so {start} (the median H_inf over the part, from where "
+                      "the transient has little to settle)")
+        else:
+            advice = f"braid at least {need:.2f} m, or {start}"
         lines.append(f"braid_length = {config.process.braid_length:g} m is shorter than the "
                      f"{need:.2f} m the start-up transient needs to settle within {SETTLED_FRACTION:.0%} "
                      f"of H_inf from initial_position = {config.process.initial_position:g} m (Du & "
-                     "Popper): this run will not reach steady state; braid longer, or start nearer "
-                     "H_inf ([process] initial_position)")
+                     f"Popper): this run will not reach steady state; {advice}")
     return lines
 
 

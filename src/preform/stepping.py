@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import plain
+from .config import DEFAULT_SNAPSHOTS
 from .laid import CenterlineProjector, mandrel_friction
 from .errors import PreformError, SimulationError
 from .geometry.pose import pose_at
@@ -87,6 +88,33 @@ def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tole
     return point, face.astype(np.int64)
 
 
+def end_passed(travel: float, length: float, lead: float) -> bool:
+    """Whether the mandrel's end has passed the machine once its tip is ``travel`` m past the
+    spool plane: the pose holds the centerline point ``lead`` m ahead of the supply plane on the
+    machine axis (``geometry.pose_at``), and past ``length + lead`` there is no centerline left
+    for it. The run stops there (:meth:`Stepper.run`); ``preform check`` asks the same of the
+    travel the run will need (``checks.mandrel_end_problem``)."""
+    return travel - lead > length
+
+
+def end_message(config, length: float, lead: float, h: float, offset: float) -> str:
+    """Why the mandrel's end passes the machine before ``braid_length`` is braided, and what the
+    part can do about it: the fell points reach braid_length with the tip about
+    ``braid_length + h + offset`` past the spool plane (``h`` the convergence length then,
+    ``offset`` the guide ring's from the spool plane), which must not exceed ``length + lead``."""
+    p = config.process
+    need = p.braid_length + h + offset
+    most = length + lead - h - offset
+    ring = f" plus the guide ring's offset {offset:.3g} m" if offset else ""
+    lead_text = f" plus the pose lead {lead:.3g} m" if lead else ""
+    fix = (f"shorten [process] braid_length to at most about {most:.3g} m or lengthen the mandrel"
+           if most > 0 else "lengthen the mandrel")
+    return (f"the mandrel's end passes the machine before [process] braid_length = {p.braid_length:g} m "
+            f"is braided: the fell points get there with the tip {need:.3g} m past the spool plane "
+            f"(braid_length plus the convergence length, about {h:.3g} m by then{ring}), beyond the "
+            f"{length:.4g} m centerline{lead_text}; {fix}")
+
+
 class Stepper:
     """Holds the run's state; ``run`` advances it, ``result`` packs it (also after a stop).
 
@@ -118,7 +146,8 @@ class Stepper:
         rng = np.random.default_rng(config.model.seed)
         self.F, self.face = tie_points(config, machine, mandrel, centerline, pose, rng, s)
         self.recording = Recording(len(self.F))
-        n_snap = config.output.snapshots if config.output is not None else 20
+        n_snap = (config.output.snapshot_count(config.model.kind) if config.output is not None
+                  else DEFAULT_SNAPSHOTS[config.model.kind])
         self.snapshot_stride = 0 if n_snap <= 0 else self._snapshot_stride(n_snap)
         self.zone = zone
         self.zone.start(0.0, pose.to_machine(self.F), pose)
@@ -160,11 +189,13 @@ class Stepper:
                 if self.step % self.tolerances.braided_length_every == 0:
                     self.braided = self.braided_length_estimate()
                     bar(self.braided)
-                if self.clock.travel - self.lead > L:
+                if end_passed(self.clock.travel, L, self.lead):
+                    # the convergence length now: the tip's travel past the supply plane less
+                    # the braided length
+                    h = self.clock.travel - self.machine.supply_z - self.braided
                     raise SimulationError(
-                        f"the mandrel's end passed the machine at t = {self.clock.t:.4g} s before "
-                        f"{target} m were braided ({self.braided:.4g} m): shorten [process] braid_length "
-                        "or lengthen the mandrel")
+                        end_message(cfg, L, self.lead, h, self.machine.supply_z)
+                        + f" (the run stopped at t = {self.clock.t:.4g} s with {self.braided:.4g} m braided)")
                 if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every_s:
                     self.save_checkpoint(checkpoint)
                     last_save = _time.perf_counter()
@@ -337,8 +368,9 @@ STARTING = "starting (compiling the kernels on a first run)"
 def progress_bar(total, enabled, start=0.0):
     """A callable updated with the braided length; None closes it.
 
-    ``start``: the braided length a resumed run starts from; the remaining time is estimated from
-    the length braided since (tqdm's ``initial``), not as if the resumed part took no time.
+    ``start``: the braided length a resumed run starts from. The remaining time is estimated from
+    the length braided since the first steps (tqdm's ``initial`` and start time, reset there): not
+    as if the resumed part took no time, and not slowed by the kernels' compilation.
     """
     if not enabled:
         return lambda value: None
@@ -354,9 +386,12 @@ def progress_bar(total, enabled, start=0.0):
             bar.close()
             return
         calls[0] += 1
+        bar.n = round(min(value, total), 6)
         if calls[0] == 2:   # the first steps are done: kernels compiled, braiding under way
             bar.set_description_str("braiding", refresh=False)
-        bar.n = round(min(value, total), 6)
+            # the rate counts from here: the compilation and the tie-up before it are no part of
+            # the braiding pace, and counted in they make the first ETAs hours for a run of minutes
+            bar.start_t, bar.initial = bar._time(), bar.n
         bar.refresh()
 
     update.bar = bar

@@ -321,8 +321,10 @@ def test_mandrel_info_missing_centerline_csv(stubbed_geometry, tmp_path, capsys)
     assert "no.csv" in capsys.readouterr().err
 
 
-def test_the_run_says_when_numba_compiles(capsys):
-    """The note comes once, at numba's first compilation (not for a call of compiled code)."""
+def test_the_run_says_when_numba_compiles(capsys, tmp_path, monkeypatch):
+    """The note comes once, at numba's first compilation (not for a call of compiled code), and
+    once per environment: a later compilation (a new config's kernels) says nothing."""
+    monkeypatch.setenv("PREFORM_CACHE_DIR", str(tmp_path / "cache"))
     import numba
     import numpy as np
 
@@ -340,3 +342,6 @@ def test_the_run_says_when_numba_compiles(capsys):
         twice(np.float32(1.5))
     err = capsys.readouterr().err
     assert err.count(COMPILING) == 1
+    with _CompileNote():
+        twice(np.int8(3))               # compiles again, in an environment that was told
+    assert COMPILING not in capsys.readouterr().err

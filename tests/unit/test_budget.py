@@ -61,9 +61,25 @@ def test_a_tiny_time_step_is_refused_unless_forced(case_a):
 def test_more_yarns_than_fit_the_perimeter_are_refused_even_when_forced(case_a):
     cfg = _with(case_a, "machine", carriers=10_000)
     est = estimate_work(cfg, 1.0, time_step=0.05)
-    # 5000 yarns x 4 mm = 20 m against a perimeter of 0.47 m
-    with pytest.raises(ConfigError, match=r"carriers = 10000: .* at most 235 carriers"):
+    least = cfg.yarn.least_width
+    # 5000 yarns narrowed to their least width against a perimeter of 0.47 m: at most
+    # floor(4 pi r / w) carriers
+    with pytest.raises(ConfigError, match=rf"carriers = 10000: .* at most {int(4 * math.pi * RADIUS / least)} "
+                                          r"carriers.*min_width"):
         check_work(cfg, est, RADIUS, force=True)
+
+
+def test_the_carriers_fit_at_the_least_width_the_model_narrows_to(case_a):
+    """96 yarns of 4 mm on a 0.189 m perimeter do not fit side by side at their width
+    (0.192 m a group) but do at the 2 mm the model narrows them to (0.096 m); 200 of 2 mm
+    (0.2 m a group) do not."""
+    radius = 0.189 / (2 * math.pi)
+    cfg = _with(_with(case_a, "machine", carriers=96), "yarn", width=4e-3, min_width=2e-3)
+    est = estimate_work(cfg, 1.0, time_step=0.05)
+    check_work(cfg, est, radius)
+    with pytest.raises(ConfigError, match=r"carriers = 200: 100 yarns per group, each narrowed to its "
+                                          r"least width 0.002 m \(\[yarn\] min_width\), need 0.2 m"):
+        check_work(_with(cfg, "machine", carriers=200), est, radius)
 
 
 @pytest.mark.parametrize("width", [1e-9, 1e-170, 5e-324])

@@ -71,7 +71,9 @@ def test_minimal_config_defaults(tmp_path):
     assert cfg.model.kind == "kinematic" and cfg.model.time_step is None
     assert (cfg.model.start, cfg.model.seed) == ("tip", 0)
     assert cfg.output.dir == (tmp_path / "results" / "case").resolve()
-    assert cfg.output.field_edge_length is None and cfg.output.snapshots == 20
+    assert cfg.output.field_edge_length is None and cfg.output.snapshots is None
+    # unset: the interaction model's 20 snapshots, none for the kinematic model
+    assert (cfg.output.snapshot_count("interaction"), cfg.output.snapshot_count("kinematic")) == (20, 0)
     assert cfg.source == (tmp_path / "case.toml").resolve()
 
 

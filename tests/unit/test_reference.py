@@ -43,6 +43,13 @@ def test_check_says_when_the_braid_is_too_short_to_settle(case_a):
     lines = check_lines(case_a, references(case_a, s, per))
     assert lines[0].startswith("Ko's braid angle 60.0-60.0 deg") and "H_inf 0.797-0.797 m" in lines[0]
     assert "will not reach steady state" in lines[1]
+    # the settling length from 0.4 m: 0.797 ln(0.397 / 0.00797) = 3.11 m
+    assert "braid at least 3.11 m, or start nearer H_inf: [process] initial_position = 0.797 m" in lines[1]
+    # a mandrel that cannot hold that braid (3.11 m + H_inf 0.797 m > 2 m) is only told what it can do
+    (_, short) = check_lines(case_a, references(case_a, s, per), length=2.0)
+    assert "braid at least" not in short
+    assert ("the 2 m mandrel cannot hold 3.11 m of braid and its convergence zone, so start nearer "
+            "H_inf: [process] initial_position = 0.797 m") in short
     # started at H_inf, the transient has nothing to settle
     near = dataclasses.replace(case_a, process=dataclasses.replace(case_a.process, initial_position=0.797))
     assert len(check_lines(near, references(near, s, per))) == 1

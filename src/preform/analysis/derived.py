@@ -21,6 +21,7 @@ from ..result import FLAG_NAMES
 from ..settings import resolved
 from ..structural.layup import StructuralLayup, structural_layup
 from .fields import fields_on_input
+from .key_numbers import key_numbers
 from .quality import QUALITY, assess, run_interlacing, surface_reasons, verdict
 from .rtm import SolverProperties, solver_properties
 from .steady import steady_state
@@ -80,7 +81,8 @@ def analyse_run(result, fields, layer_results=(), layers=None, settings=None) ->
     if fields is not None and output is not None and output.input_mesh_fields and result.mandrel is not None:
         on_input = fields_on_input(fields, result.mandrel)
     return Analysed(result=result, fields=fields, layer_results=tuple(layer_results),
-                    summary=summary_dict(result, quality_reasons=reasons, settings=settings), rtm=rtm,
+                    summary=summary_dict(result, key_numbers(result, fields), quality_reasons=reasons,
+                                         settings=settings), rtm=rtm,
                     rtm_reason=rtm_reason, structural=structural,
                     structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input,
                     settings=settings)
