@@ -15,8 +15,8 @@ import pytest
 
 from preform.cli import main
 from preform.io.report import REPORT, VERDICT_STYLE, verdict_of, write_sweep_report
+from support.simcase import write_cone_case
 
-ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (Debian: "
                                     "apt-get install chromium): the page cannot be checked in a browser")
@@ -26,26 +26,7 @@ needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not in
 def run_folder(tmp_path_factory):
     """A short kinematic run with its pictures (the 1 m cone, 16 carriers, 0.4 m braided)."""
     folder = tmp_path_factory.mktemp("report")
-    cfg = folder / "short_cone.toml"
-    cfg.write_text(f"""
-[mandrel]
-stl = "{ROOT / 'mandrels' / 'cone.stl'}"
-centerline = "{ROOT / 'mandrels' / 'cone_centerline.csv'}"
-[machine]
-carriers = 16
-spool_radius = 0.25
-angular_speed = 20.0
-[yarn]
-width = 4e-3
-thickness = 2.5e-4
-[process]
-take_up_speed = 0.01
-initial_position = 0.15
-braid_length = 0.4
-[output]
-dir = "results/short_cone"
-snapshots = 0
-""")
+    cfg = write_cone_case(folder, name="short_cone", braid_length=0.4)
     assert main(["run", str(cfg), "--no-progress"]) == 0
     return folder / "results" / "short_cone"
 

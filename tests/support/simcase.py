@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 import trimesh
 
 from preform.config import (Config, GuideRingConfig, MachineConfig, MandrelConfig, ModelConfig,
@@ -197,3 +199,36 @@ def snapshot_solves(st, bc, centre, newton_only):
                               mode="final")
         out.append((x, report))
     return out
+
+
+def write_cone_case(folder, *, name, braid_length, pictures=True) -> Path:
+    """``folder/<name>.toml``: a short kinematic run on the shipped 1 m cone (16 carriers, from
+    0.15 m at 10 mm/s), results in ``folder/results/<name>``, no snapshots; about a second."""
+    path = Path(folder) / f"{name}.toml"
+    path.write_text(f"""
+[mandrel]
+stl = "{ROOT / 'mandrels' / 'cone.stl'}"
+centerline = "{ROOT / 'mandrels' / 'cone_centerline.csv'}"
+[machine]
+carriers = 16
+spool_radius = 0.25
+angular_speed = 20.0
+[yarn]
+width = 4e-3
+thickness = 2.5e-4
+[process]
+take_up_speed = 0.01
+initial_position = 0.15
+braid_length = {braid_length}
+[output]
+dir = "results/{name}"
+snapshots = 0
+{"" if pictures else "pictures = false"}
+""")
+    return path
+
+
+#: the larger validations (48 carriers, the bent tube's snapshots) of cases the suite also checks
+#: at 16 carriers: run with ``PREFORM_FULLSIZE=1``, like ``tests/validation/test_fullsize.py``
+FULL_SIZE = pytest.mark.skipif(os.environ.get("PREFORM_FULLSIZE") != "1",
+                               reason="a larger case of a validation the suite runs small: set PREFORM_FULLSIZE=1")

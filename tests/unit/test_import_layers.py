@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-SRC = Path(__file__).resolve().parents[2] / "src"
+from support.modules import SRC, module_names
 
 #: the layers, lowest first: (name, the modules and packages in it). A module belongs to the layer
 #: of the longest entry that is it or a package holding it; ``preform`` stands for the package's
@@ -45,17 +45,6 @@ def layer_of(module: str, layers=LAYERS) -> tuple[int, str] | None:
             if inside and (best is None or len(entry) > best[0]):
                 best = (len(entry), rank, name)
     return None if best is None else best[1:]
-
-
-def module_names(src: Path) -> dict[str, Path]:
-    """Dotted module name -> file, for every module of the ``preform`` package under ``src``."""
-    out = {}
-    for path in sorted((src / "preform").rglob("*.py")):
-        parts = list(path.relative_to(src).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts.pop()
-        out[".".join(parts)] = path
-    return out
 
 
 def imports_in(name: str, path: Path, modules) -> list[tuple[int, str]]:

@@ -18,18 +18,7 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
-SRC = Path(__file__).resolve().parents[2] / "src"
-
-
-def module_names(src: Path) -> dict[str, Path]:
-    """Dotted module name -> file, for every module of the ``preform`` package under ``src``."""
-    out = {}
-    for path in sorted((src / "preform").rglob("*.py")):
-        parts = list(path.relative_to(src).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts.pop()
-        out[".".join(parts)] = path
-    return out
+from support.modules import SRC, module_names
 
 
 def imports_of(name: str, path: Path, modules) -> set[str]:

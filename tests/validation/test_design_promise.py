@@ -13,34 +13,13 @@ import pytest
 import preform as pf
 from preform.cli import main
 from preform.studies.design import DESIGN_CSV_COLUMNS
+from support.simcase import write_cone_case
 
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def cone_case(folder: Path) -> Path:
     """A short run on the 1 m cone (16 carriers): about a second a forward run."""
-    path = folder / "cone.toml"
-    path.write_text(f"""
-[mandrel]
-stl = "{ROOT / 'mandrels' / 'cone.stl'}"
-centerline = "{ROOT / 'mandrels' / 'cone_centerline.csv'}"
-[machine]
-carriers = 16
-spool_radius = 0.25
-angular_speed = 20.0
-[yarn]
-width = 4e-3
-thickness = 2.5e-4
-[process]
-take_up_speed = 0.01
-initial_position = 0.15
-braid_length = 0.6
-[output]
-dir = "results/cone"
-snapshots = 0
-pictures = false
-""")
-    return path
+    return write_cone_case(folder, name="cone", braid_length=0.6, pictures=False)
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ import pytest
 import preform as pf
 from preform import simulate
 from preform.geometry import shapes
-from support.simcase import make_config, write_centerline, write_stl
+from support.simcase import FULL_SIZE, make_config, write_centerline, write_stl
 from support.snapshot_checks import checked_snapshot_files
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,7 +50,8 @@ def _compare(a, b):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("carriers, mu", [(16, 0.0), (16, 0.25), (48, 0.25)])
+@pytest.mark.parametrize("carriers, mu", [(16, 0.0), (16, 0.25),
+                                         pytest.param(48, 0.25, marks=FULL_SIZE)])
 def test_case_a_runs_agree_with_newton(carriers, mu, tmp_path):
     """Measured: H within 1.3e-7, angles within 0.001 deg (both solvers to 1e-7 of the
     tensions; the relaxation's Newton fallback took 1-7 steps of 221-331)."""
