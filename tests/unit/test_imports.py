@@ -18,37 +18,12 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
-from support.modules import SRC, module_names
+from support.modules import SRC, imports_in, module_names
 
 
 def imports_of(name: str, path: Path, modules) -> set[str]:
     """The modules of ``modules`` that module ``name`` (file ``path``) imports, anywhere in it."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-
-    def add(target):
-        # the deepest of our modules that the dotted name ``target`` names
-        while target and target not in modules:
-            target = target.rpartition(".")[0]
-        if target:
-            found.add(target)
-
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                add(alias.name)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[:len(base) - (node.level - 1)]
-                source = ".".join(base + ([node.module] if node.module else []))
-            else:
-                source = node.module or ""
-            for alias in node.names:
-                sub = f"{source}.{alias.name}"
-                add(sub if sub in modules else source)
-    found.discard(name)
-    return found
+    return {target for _, target in imports_in(name, path, modules)}
 
 
 def import_graph(src: Path) -> dict[str, set[str]]:
