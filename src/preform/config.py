@@ -703,6 +703,7 @@ def _yarn(sec: _Section) -> YarnConfig:
 
 
 #: a yarn type's name: a letter, then letters, digits and "_" (it names fields, coverage_<type>)
+RESERVED_TYPE_NAMES = ("warp", "weft", "axial")
 TYPE_NAME_CHARS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_"
 
 
@@ -728,6 +729,9 @@ def _yarn_types(raw, data: dict) -> tuple[YarnTypeConfig, ...]:
                 or any(ch not in TYPE_NAME_CHARS for ch in name)):
             raise ConfigError(f"{prefix}name = {_fmt(name)}: expected a name of letters, digits "
                               'and "_", starting with a letter (it names fields: coverage_<name>)')
+        if name in RESERVED_TYPE_NAMES:
+            raise ConfigError(f'{prefix}name = "{name}": reserved (the fields of the groups and the '
+                              f"axial yarns are named {', '.join(RESERVED_TYPE_NAMES)}); choose another")
         if name in seen:
             again = ("the type [yarn] describes; give its keys in [yarn]" if name == BASE_TYPE
                      else f"a type named twice (also {seen[name]})")
