@@ -479,8 +479,9 @@ def _check_layout(data: dict) -> None:
 def _unknown_top_level(name, value) -> None:
     sections = ", ".join(f"[{s}]" for s in KEYS)
     if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-        close = _suggest(name, ARRAYS_OF_TABLES)
-        raise ConfigError(f"unknown array of tables [[{name}]]: {close}expected [[layer]] (one "
+        close = difflib.get_close_matches(name, ARRAYS_OF_TABLES, n=1, cutoff=0.6)
+        hint = f"did you mean [[{close[0]}]]? " if close else ""
+        raise ConfigError(f"unknown array of tables [[{name}]]: {hint}expected [[layer]] (one "
                           "table per braided layer), [[yarn_type]] (a named yarn) or "
                           "[[friction_pair]] (the friction of two yarn types)")
     if not isinstance(value, dict):
