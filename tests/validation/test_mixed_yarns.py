@@ -181,6 +181,32 @@ def test_yarns_vtp_carries_every_yarns_type(mixed):
         res.config.machine, carrier_yarns=("yarn",)))) is None
 
 
+def test_every_yarn_pulls_at_its_types_tension_and_slides_at_its_pairs_friction(geometry):
+    """The zones' per-yarn arrays: spool tension and ring friction of every yarn's type, the
+    pair's coefficient at every crossing (``contact.crossing_friction``), the kinematic
+    snapshot's tensions."""
+    from preform.interaction.model import InteractionZone
+    from preform.kinematic import KinematicZone
+    from preform.machine import Machine
+
+    b = YarnTypeConfig("b", (("tension", 3.0), ("ring_friction", 0.3), ("friction", 0.5)))
+    cfg = _config(geometry, types=[b], pattern=("yarn", "b", "b", "yarn"),
+                  pairs=[FrictionPair("b", "yarn", 0.35)])
+    machine = Machine.from_config(cfg.machine)
+    n = machine.n_yarns
+    kinds = np.tile([0, 1, 1, 0], n // 4)
+    np.testing.assert_array_equal(cfg.carrier_types(), kinds)
+    zone = InteractionZone(cfg, machine)
+    bc = zone.boundary(0.0, np.zeros((n, 3)))
+    np.testing.assert_array_equal(bc.spool_tensions(), np.where(kinds == 1, 3.0, 4.7))
+    np.testing.assert_array_equal(zone.f_top, np.where(kinds == 1, 3.0, 4.7))
+    np.testing.assert_array_equal(bc.ring_frictions(), np.where(kinds == 1, 0.3, 0.0))
+    yarn = np.array([[0, n // 2], [1, n // 2 + 1], [0, n // 2 + 1], [3, n // 2 + 2]])
+    np.testing.assert_array_equal(bc.crossing_mu(yarn), [0.2, 0.5, 0.35, 0.35])
+    snap = KinematicZone(cfg, machine).snapshot(0.0, np.zeros((n, 3)))
+    np.testing.assert_array_equal(snap.tension_N, np.where(kinds == 1, 3.0, 4.7))
+
+
 # ----- a mix of equal types is the uniform run ------------------------------------------------
 
 SAME = YarnTypeConfig("same", ())       # every key [yarn]'s
