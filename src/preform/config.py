@@ -845,6 +845,10 @@ def mix_lines(config: Config) -> list[str]:
     unused = [n_ for i, n_ in enumerate(names) if i not in used]
     if unused:
         lines.append(f"yarn types on no carrier: {', '.join(unused)}")
+    shapes = {(config.types[i].width, config.types[i].thickness) for i in used}
+    if config.model.kind == "interaction" and len(shapes) > 1:
+        lines.append("the interaction model's crossings take [yarn]'s width and thickness for "
+                     "every type (each type's own in the fields and the kinematic deposition)")
     return lines
 
 

@@ -27,7 +27,7 @@ def case(tmp_path, types=(POLYESTER,), pairs=(), carrier_yarns=("yarn", "yarn", 
                                                                 "polyester"), **sections):
     doc = copy.deepcopy(BASE)
     for sec, changes in sections.items():
-        doc[sec].update(changes)
+        doc.setdefault(sec, {}).update(changes)
     if carrier_yarns is not None:
         doc["machine"]["carrier_yarns"] = (list(carrier_yarns) if isinstance(carrier_yarns, tuple)
                                            else carrier_yarns)
@@ -81,6 +81,14 @@ def test_a_pair_not_listed_takes_the_mean_and_check_says_so(tmp_path):
     assert "friction yarn-polyester: 0.15 (not listed: the mean of the two types' own friction)" in lines
     assert "friction yarn-yarn: 0.2 (the type's own friction)" in lines
     assert "friction polyester-polyester: 0.1 (the type's own friction)" in lines
+
+
+def test_check_says_the_interaction_zone_takes_yarns_shape(tmp_path):
+    cfg = load_config(case(tmp_path, model={"kind": "interaction"}))
+    assert mix_lines(cfg)[-1].startswith("the interaction model's crossings take [yarn]'s width")
+    same = {**POLYESTER, "width": 4e-3, "thickness": 2.5e-4}
+    assert "crossings" not in " ".join(mix_lines(load_config(case(
+        tmp_path, types=(same,), model={"kind": "interaction"}))))
 
 
 def test_uniform_config_echoes_and_checks_as_before(tmp_path):
