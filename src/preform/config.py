@@ -1177,9 +1177,9 @@ def _dump_sections(config: Config) -> dict:
         echo["machine"]["carrier_yarns"] = list(ma.carrier_yarns)
     if config.yarn_types:
         echo["yarn_types"] = {t.name: dict(t.own) for t in config.yarn_types}
-    if config.friction_pairs:
-        echo["friction_pairs"] = [{"types": [p_.a, p_.b], "friction": p_.friction}
-                                  for p_ in config.friction_pairs]
+    if config.friction_pairs:   # numbered from "1" as the file lists them, like "layers"
+        echo["friction_pairs"] = {str(k): {"types": [p_.a, p_.b], "friction": p_.friction}
+                                  for k, p_ in enumerate(config.friction_pairs, start=1)}
     if config.material is not None:   # echoed when given (a run without it hashes as before)
         echo["material"] = {"preset": config.material.preset,
                             **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}

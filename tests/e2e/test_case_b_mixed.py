@@ -35,3 +35,47 @@ def test_check_prints_the_mix_and_every_pairs_friction(capsys):
                          ("yarn-polyester", "[[friction_pair]]"),
                          ("polyester-polyester", "the type's own friction")):
         assert f"note: friction {pair}: 0.25 ({source})" in err
+
+
+MIX = """
+[[yarn_type]]
+name = "polyester"
+width = 2e-3
+thickness = 1.5e-4
+linear_density_tex = 110.0
+fibre_density = 1380.0
+fibre_radius = 1.0e-5
+
+[[friction_pair]]
+types = ["yarn", "polyester"]
+friction = 0.15
+"""
+
+
+def test_preform_run_of_a_mix_writes_every_yarns_type(tmp_path):
+    """A small mixed cylinder through ``preform run`` (kinematic, 16 carriers, 30 mm): done, the
+    mix echoed in summary.json, yarns.vtp with each yarn's type, the per-type fields written."""
+    import json
+
+    from support.simcase import write_cylinder_case
+
+    out = tmp_path / "out"
+    path = write_cylinder_case(tmp_path, braid=0.03, out=out, extra=MIX,
+                               yarn_extra="linear_density_tex = 300.0\nfibre_density = 2550.0\n"
+                                          "fibre_radius = 6.5e-6",
+                               output_extra="pictures = false")
+    text = path.read_text().replace("angular_speed = 13.232", "angular_speed = 13.232\n"
+                                    'carrier_yarns = ["yarn", "polyester"]')
+    path.write_text(text)
+    assert cli.main(["run", str(path)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "done"
+    inputs = summary["inputs"]
+    assert inputs["machine"]["carrier_yarns"] == ["yarn", "polyester"]
+    assert inputs["friction_pairs"] == {"1": {"types": ["yarn", "polyester"], "friction": 0.15}}
+    vtp = (out / "yarns.vtp").read_bytes()
+    for name in (b'Name="yarn_type"', b'Name="yarn_type_yarn"', b'Name="yarn_type_polyester"'):
+        assert name in vtp
+    surface = (out / "surface.vtu").read_bytes()
+    for name in (b"coverage_polyester", b"yarn_length_yarn_m_per_m2", b"areal_weight_kg_m2"):
+        assert name in surface

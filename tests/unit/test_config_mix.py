@@ -104,7 +104,14 @@ def test_echo_names_the_types_and_pairs(tmp_path):
     echo = json.loads(json.dumps(dump_config(cfg)))
     assert echo["machine"]["carrier_yarns"] == ["yarn", "yarn", "yarn", "polyester"]
     assert echo["yarn_types"]["polyester"]["width"] == 2e-3
-    assert echo["friction_pairs"] == [{"types": ["polyester", "yarn"], "friction": 0.3}]
+    assert echo["friction_pairs"] == {"1": {"types": ["polyester", "yarn"], "friction": 0.3}}
+    # the checkpoint's record of the inputs takes every echoed table
+    from preform.checkpoint import input_record
+
+    (tmp_path / "m.stl").write_text("solid m\nendsolid m\n")
+    record = input_record(cfg)
+    assert record["[friction_pairs] 1"] == {"types": ["polyester", "yarn"], "friction": 0.3}
+    assert record["[yarn_types] polyester"]["width"] == 2e-3
 
 
 def test_unknown_type_on_the_carriers(tmp_path):
