@@ -140,3 +140,18 @@ def test_the_transient_note_gives_advice_the_part_can_follow(tmp_path, capsys):
     assert "braid at least" not in note
     assert "the 0.15 m mandrel cannot hold 0.21 m of braid" in note and "initial_position = 0.0541 m" in note
 
+
+
+def test_a_run_started_beyond_h_inf_needs_less_than_its_start_plus_its_braid(tmp_path, capsys):
+    """From 0.12 m (beyond H_inf = 0.054 m) the zone shrinks as the braid grows: 0.2 m of braid
+    needs the tip about 0.2 + 0.056 m past the spool plane, less than initial_position +
+    braid_length = 0.32 m, which exceeds the 0.3 m mandrel. check passes (the stepper's own
+    rule, ``stepping.end_passed``), and the run is done."""
+    path = cylinder_case(tmp_path, 0.2)
+    path.write_text(path.read_text().replace(START, "initial_position = 0.12"))
+    assert main(["check", str(path)]) == 0
+    assert "mandrel's end" not in capsys.readouterr().err
+    cfg = pf.load_config(path)
+    assert cfg.process.initial_position + cfg.process.braid_length > 0.3
+    mandrel, centerline = load_geometry(cfg)
+    assert pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=centerline).status == "done"
