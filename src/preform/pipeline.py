@@ -509,7 +509,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         simulated = simulate(checked, progress=progress, resume=resume, settings=settings)
         stages.update(simulated.stages)
         # the 3-D pictures start now, on the second core, beside the analysis and the data files
-        pictures = io.start_pictures(simulated.result, out_dir) if background_pictures else None
+        pictures = (io.start_pictures(simulated.result, out_dir, settings, simulated.results[1:])
+                    if background_pictures else None)
         try:
             analysed, analysis_stages = analyse(checked, simulated)
         except BaseException:
