@@ -214,8 +214,9 @@ class _SurfaceScene:
                 self.surface, scalars=SHOWN, cmap="viridis", nan_color=UNREACHED_COLOR,
                 show_scalar_bar=False, ambient=0.5, diffuse=0.5))   # colours readable on shaded faces
             if centerline is not None:
+                # marks over the part's extent only: the frame's margin is too narrow for a label
                 add_ruler(self.plotter, centerline, centre, view, view_up, half_w, half_h,
-                          pixel=per_px)
+                          pixel=per_px, margin=1.0)
             # the view's middle: the title's rows above the part, the ruler's below
             look_at = centre + 0.5 * (above - below) * per_px * view_up
             self.plotter.camera_position = [tuple(look_at + 10.0 * max(half_w, half_h) * view),
