@@ -55,6 +55,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
         raise MandrelError(f"{config.mandrel.stl}: the mandrel has no vertices")
     s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
     _check_unit(config, float(mandrel.diagonal), float(distance.max()))
+    _check_braid_length(config, float(centerline.length))
     _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
     reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
@@ -124,6 +125,17 @@ def _check_centerline_inside(config, mandrel, centerline) -> None:
             f"[mandrel] centerline = {config.mandrel.centerline}: the centerline leaves the mandrel at "
             f"{bad:.4g} m from the tip (point {p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g} m in the STL frame); "
             "expected a centerline inside the mandrel, tip first, in the STL's frame and unit")
+
+
+def _check_braid_length(config, length: float) -> None:
+    """The braided length is centerline arc length from the tip: braid_length cannot exceed the
+    centerline, whatever the convergence zone (how much less the mandrel holds is
+    :func:`mandrel_end_problem`'s)."""
+    p = config.process
+    if p.braid_length > length:
+        raise ConfigError(f"[process] braid_length = {p.braid_length:g}: expected at most the "
+                          f"centerline length {length:.4g} m of the mandrel (less its convergence "
+                          "zone at the end)")
 
 
 def _check_start(config, length: float, lead: float = 0.0) -> None:

@@ -271,3 +271,10 @@ def test_a_braid_the_mandrel_cannot_last_for_is_refused_or_warned_before_running
                          *cylinder())
     assert any(w.startswith("likely: the mandrel's end passes the machine before") for w in warnings)
     assert not any("mandrel's end" in w for w in preflight(config(machine=ring), *cylinder()))
+
+
+def test_a_braid_longer_than_the_centerline_is_refused_naming_braid_length():
+    for kind in ("kinematic", "interaction"):
+        with pytest.raises(ConfigError, match=r"\[process\] braid_length = 5: expected at most the "
+                                              r"centerline length 1.6 m"):
+            preflight(config(process={"braid_length": 5.0}, model={"kind": kind}), *cylinder(length=1.6))
