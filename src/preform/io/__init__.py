@@ -16,7 +16,7 @@ from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_fol
 from .fe_files import write_structural
 from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
 from .rtm_files import write_rtm
-from ..settings import PICTURES as PICTURE_SETTINGS, resolved
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .surface import INPUT_VTU, layer_pictures, write_input_mesh_fields, write_surface
 from .tables import write_history, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp, yarn_types_of
@@ -43,6 +43,11 @@ def plot_yarns_3d(result, path, pictures=None, layer=None, frame=None):
     return plot(result, path, pictures or PICTURE_SETTINGS, layer, frame)
 
 
+def _drawing(settings):
+    """The pictures' branch of ``settings`` (``preform.Settings``; None: the defaults)."""
+    return PICTURE_SETTINGS if settings is None else settings.pictures
+
+
 def mandrel_pictures(result, layer_results=()) -> list[tuple]:
     """(file name, Result, (k, direction) or None) of each braided-mandrel picture of a run:
     ``braided_mandrel.png`` for a single layer; for a stack (``layer_results``: the layers above
@@ -64,8 +69,8 @@ def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
     plots mark, and how every picture is drawn (``settings.pictures``); ``layer_results``: a
     stack's layers above the first (their lines, their braided-mandrel pictures)."""
     plots = out_dir / PLOTS
-    tree = resolved(settings)
-    steady, pictures = tree.steady, tree.pictures
+    steady = None if settings is None else settings.steady
+    pictures = _drawing(settings)
     drawn, rendered = [], []
     output = getattr(result.config, "output", None)
     if output is not None and not output.pictures:    # [output] pictures = false
@@ -156,7 +161,7 @@ def start_pictures(result, out_dir, settings=None, layer_results=()):
     except OSError:
         return None
     _, rendered, later = _picture_jobs(result, None, out_dir, settings, layer_results)
-    return PictureWorker(rendered, later=later, timeout_s=resolved(settings).pictures.worker_timeout_s)
+    return PictureWorker(rendered, later=later, timeout_s=_drawing(settings).worker_timeout_s)
 
 
 def _relative(path, out_dir) -> str:
@@ -200,7 +205,7 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
             pictures.send(fields_arrays(fields) if fields is not None else None)
         else:
             pictures = PictureWorker(rendered if background else [],
-                                     timeout_s=resolved(analysed.settings).pictures.worker_timeout_s)
+                                     timeout_s=_drawing(analysed.settings).worker_timeout_s)
             if background:             # the worker's (drawn by its finish() where it cannot fork)
                 rendered = []
         written = [write_history(result, out_dir / HISTORY),

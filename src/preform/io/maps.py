@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..settings import PICTURES as PICTURE_SETTINGS
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .atomic import atomic_path
 
 MAP = "surface_map.png"

@@ -38,7 +38,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..settings import PICTURES as PICTURE_SETTINGS
+from ..drawing import PICTURES as PICTURE_SETTINGS
 
 
 @dataclass(frozen=True)
@@ -140,6 +140,8 @@ class PictureWorker:
                 with os.fdopen(os.dup(self._memory), "wb") as file:
                     np.savez(file, **arrays)
                 os.write(self._ready, b"1")
+        except BrokenPipeError:
+            pass    # the child is gone already: finish() reports these pictures with its end
         except Exception as error:  # noqa: BLE001 - costs those pictures, reported by finish()
             names = ", ".join(n for job in self.later for n in job.names)
             self.unsent = f"{names} not drawn (could not hand their arrays to the picture worker: " \

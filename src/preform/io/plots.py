@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..settings import PICTURES as PICTURE_SETTINGS
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .atomic import atomic_path
 
 GROUP_COLOURS = {0: "tab:blue", 1: "tab:red"}   # warp, weft

@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from ..settings import PICTURES as PICTURE_SETTINGS
+from ..drawing import PICTURES as PICTURE_SETTINGS
 
 COLOURS = {0: "#1f77b4", 1: "#d62728"}   # warp, weft: matplotlib's tab:blue, tab:red
 MANDREL_COLOUR = "#c8c8c8"
