@@ -185,7 +185,13 @@ def estimate(config, mandrel, centerline, *, force=False, settings=None):
     tri = np.asarray(mandrel.vertices)[np.asarray(mandrel.faces)]
     area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
     distance = centerline.project(mandrel.vertices)[1]
-    work = estimate_work(config, area, dt, end_convergence_length(config, float(np.median(distance))))
+    h_end = end_convergence_length(config, float(np.median(distance)))
+    if h_end is not None and config.model.kind == "interaction":
+        # the interaction model's zone, shortened by its friction, stays near where it started
+        # instead of growing to the kinematic H (docs/decisions.md, "The interaction model's
+        # step estimate"): its fell travel is braid_length plus at most initial_position
+        h_end = min(h_end, float(config.process.initial_position))
+    work = estimate_work(config, area, dt, h_end)
     max_radius = float(np.max(distance))
     check_work(config, work, max_radius, force=force, limits=settings.limits)
     return work
@@ -513,7 +519,8 @@ def run_case(config, out_dir, *, progress=False, resume=False, force=False, geom
         simulated = simulate(checked, progress=progress, resume=resume, settings=settings)
         stages.update(simulated.stages)
         # the 3-D pictures start now, on the second core, beside the analysis and the data files
-        pictures = io.start_pictures(simulated.result, out_dir) if background_pictures else None
+        pictures = (io.start_pictures(simulated.result, out_dir, settings, simulated.results[1:])
+                    if background_pictures else None)
         try:
             analysed, analysis_stages = analyse(checked, simulated)
         except BaseException:

@@ -56,7 +56,7 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
         path.write_text("stub")
         return [path]
 
-    def write_surface_pictures(fields, plots_dir, title="", centerline=None):
+    def write_surface_pictures(fields, plots_dir, title="", centerline=None, pictures=None):
         calls.append((fields, plots_dir, title))
         assert "kinematic model" in title
         return []

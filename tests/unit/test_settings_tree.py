@@ -42,6 +42,11 @@ from preform.simulation import load_geometry, make_stepper, make_zone
 from preform.analysis.steady import STEADY, steady_state
 from preform.structural.layup import BinSettings, bin_plies
 from preform.tolerances import tol
+from preform.io.maps import write_surface_map
+from preform.io.plots import plot_history
+from preform.io.render3d import render_braided_mandrel
+from preform.io.surface import write_surface_pictures
+from preform.settings import PICTURES
 from support.simcase import write_cylinder_case
 
 
@@ -69,6 +74,8 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.binning == BinSettings() == _default(bin_plies, "settings")
     assert s.rtm == BINNING == _default(bin_cells, "settings")
     assert _default(solver_properties, "settings") is None and _default(solver_properties, "n_sets") is None
+    assert s.pictures == PICTURES == _default(plot_history, "pictures") == _default(write_surface_pictures, "pictures")
+    assert s.pictures == _default(render_braided_mandrel, "pictures") == _default(write_surface_map, "pictures")
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.interaction.relax.max_iter = 1
@@ -316,3 +323,22 @@ def test_the_rtm_sets_reach_the_rtm_files(strict_run):
     _, summary, out = strict_run
     assert summary["rtm"]["written"] and (out / "rtm" / "rtmsim.bdf").is_file()
     assert summary["rtm"]["sets"] == 2
+
+
+def test_the_picture_settings_reach_the_pictures(strict_run, tmp_path):
+    """History figures at 50 dots per inch through the tree: 7.2 in x 50 = 360 px wide (the
+    default 150 dpi: 1080 px), drawn by the job the results' writer runs."""
+    from PIL import Image
+
+    from preform.io import _picture_jobs
+
+    result = strict_run[0]
+    result = dataclasses.replace(result, config=dataclasses.replace(
+        result.config, output=dataclasses.replace(result.config.output, pictures=True)))
+    tree = Settings(pictures=dataclasses.replace(PICTURES, history_dpi=50))
+    (plot,) = [job for job in _picture_jobs(result, None, tmp_path,
+                                                      pictures=tree.pictures)[0]
+               if "plots/braid_angle.png" in job.names]
+    paths = plot.draw()
+    assert Image.open(paths[0]).size[0] == 360
+    assert PICTURES.history_dpi * PICTURES.history_size_in[0] == 1080

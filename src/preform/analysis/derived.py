@@ -46,6 +46,8 @@ class Analysed:
     steady : the steady state of the run's history (``analysis.steady.steady_state`` with the
         settings' ``steady``), which summary.json gives and the history plots mark; None for a
         run without steps
+    pictures : how the run's pictures are drawn (the settings' ``pictures``,
+        ``preform.settings.PictureSettings``; None: the defaults)
     """
 
     result: object
@@ -59,6 +61,7 @@ class Analysed:
     layers: list | None = None
     input_mesh_fields: object = None
     steady: dict | None = None
+    pictures: object = None
 
 
 def analyse_run(result, fields, layer_results=(), layers=None, settings=None) -> Analysed:
@@ -88,7 +91,7 @@ def analyse_run(result, fields, layer_results=(), layers=None, settings=None) ->
                                          settings=settings, steady=steady), rtm=rtm,
                     rtm_reason=rtm_reason, structural=structural,
                     structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input,
-                    steady=steady)
+                    steady=steady, pictures=settings.pictures)
 
 
 # ---------------------------------------------------------------- the summary's figures
