@@ -57,7 +57,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
     _check_length(config, float(centerline.length))
     _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
-    reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
+    reach = float(np.max(distance[passing], initial=0.0)) + config.process.largest_eccentricity
     warnings = _check_fit(config, reach)
     warnings += _braid_angle_warnings(config, s[passing], distance[passing])
     _check_time_step(config)

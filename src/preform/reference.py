@@ -162,7 +162,33 @@ def resolve_pose_lead(config, mandrel, centerline):
     """``config`` with ``[process] pose_lead`` a number (the automatic one where it is "auto")."""
     import dataclasses
 
+    if config.process.trajectory is not None:
+        return resolve_trajectory(config, centerline)
     if config.process.pose_lead is not None:
         return config
     lead = automatic_pose_lead(config, mandrel, centerline)
     return dataclasses.replace(config, process=dataclasses.replace(config.process, pose_lead=lead))
+
+
+def resolve_trajectory(config, centerline):
+    """``config`` of a run driven by ``[process] trajectory``, checked against the mandrel: its
+    tip never behind the supply plane (ConfigError naming the row); ``initial_position`` the
+    tip's distance ahead of the supply plane at the path's first row (for the estimates made
+    before the run: Du and Popper's transient, the work)."""
+    import dataclasses
+
+    from .config import MAX_ANGULAR_SPEED_DEG, MAX_TAKE_UP_SPEED
+    from .errors import ConfigError
+    from .trajectory import quaternion_to_rotation, read_trajectory, tip_behind_problem
+
+    path = read_trajectory(config.process.trajectory, max_take_up_speed=MAX_TAKE_UP_SPEED,
+                           max_angular_speed_deg=MAX_ANGULAR_SPEED_DEG)
+    ring = config.machine.guide_ring
+    supply_z = 0.0 if ring is None else float(ring.offset)
+    tip = np.asarray(centerline.frame_values(0.0)[0], dtype=float)
+    problem = tip_behind_problem(path, tip, supply_z)
+    if problem:
+        raise ConfigError(problem)
+    z0 = float((quaternion_to_rotation(path.quaternion[0]) @ tip)[2] + path.position[0, 2])
+    return dataclasses.replace(config, process=dataclasses.replace(
+        config.process, initial_position=z0 - supply_z))
