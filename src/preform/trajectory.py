@@ -179,7 +179,8 @@ def read_trajectory(path, *, max_take_up_speed: float, max_angular_speed_deg: fl
     back = np.flatnonzero(np.diff(time) <= 0.0)
     if len(back):
         k = int(back[0]) + 1
-        raise ConfigError(f"{_where(path, k)}: time_s = {time[k]!r} after {time[k - 1]!r}: "
+        raise ConfigError(f"{_where(path, k)}: time_s = {float(time[k])!r} after "
+                          f"{float(time[k - 1])!r}: "
                           "expected times strictly increasing")
     q = table[:, 7:11]
     norm = np.linalg.norm(q, axis=1)
@@ -199,11 +200,13 @@ def read_trajectory(path, *, max_take_up_speed: float, max_angular_speed_deg: fl
             k = int(bad[0])
             why = ("must be greater than zero" if values[k] <= 0.0 else
                    f"above {limit:g} {unit} is implausible ({hint})")
-            raise ConfigError(f"{_where(path, k)}: {column} = {values[k]!r}: expected {unit}; {why}")
+            raise ConfigError(f"{_where(path, k)}: {column} = {float(values[k])!r}: expected "
+                              f"{unit}; {why}")
     negative = np.flatnonzero(col["braided_length_m"] < 0.0)
     if len(negative):
         k = int(negative[0])
-        raise ConfigError(f"{_where(path, k)}: braided_length_m = {col['braided_length_m'][k]!r}: "
+        raise ConfigError(f"{_where(path, k)}: braided_length_m = "
+                          f"{float(col['braided_length_m'][k])!r}: "
                           "expected a braided length >= 0 (m)")
     return Trajectory(path=path, time=time.copy(), braided=col["braided_length_m"].copy(),
                       take_up=col["take_up_speed_m_s"].copy(),
@@ -256,7 +259,12 @@ class PathInterpolant:
         return slerp(self._q[k], self._q[k + 1], float(np.clip(u, 0.0, 1.0)))
 
     def pose(self, t: float):
-        return quaternion_to_rotation(self.quaternion(t)), np.asarray(self._position(t), dtype=float)
+        k = int(np.searchsorted(self.time, t))
+        if k < len(self.time) and self.time[k] == t:    # at a row: its own position, to the bit
+            origin = self.trajectory.position[k].copy()
+        else:
+            origin = np.asarray(self._position(t), dtype=float)
+        return quaternion_to_rotation(self.quaternion(t)), origin
 
     def speeds(self, t: float) -> tuple[float, float]:
         return float(self._take_up(t)), float(self._angular(t))
