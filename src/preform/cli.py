@@ -274,6 +274,10 @@ def _cmd_check(args) -> int:
     from .pipeline import check, load   # the stages' imports (numba, SciPy): after the config
     # the run's load and check stages, without a results folder: every layer's checks and estimate
     _print_notes(check(load(config), None, force=args.force).notes)
+    from .checks import setting_ranges
+
+    for line in setting_ranges(config):
+        print(f"process: {line}")
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 
