@@ -19,6 +19,7 @@ from preform.analysis.derived import summary_dict
 from preform.analysis.steady import STEADY, setting_changes
 from preform.geometry import shapes
 from preform.simulation import simulate
+from preform.tolerances import tol
 from support.simcase import make_config, write_centerline, write_stl
 
 R, r, V = 0.3, 0.075, 0.01              # spool radius, cylinder radius (m), take-up speed (m/s)
@@ -138,3 +139,73 @@ def test_an_eccentricity_table_moves_the_mandrel_with_the_braided_length(eccentr
     np.testing.assert_allclose(p[last, 3:5], [[0.02, -0.01]] * int(last.sum()), atol=1e-12)
     mid = (L > 0.06) & (L < 0.08)
     assert np.all((p[mid, 3] > 0.0) & (p[mid, 3] < 0.02))
+
+
+def test_a_run_with_tables_resumed_from_its_state_goes_on_to_the_same_bits(tmp_path):
+    """The carriers' clock and the process rows are state: a stepper restored mid-change (the
+    angular speed and the eccentricity changing) steps on exactly as the one never stopped."""
+    from preform.simulation import load_geometry, make_stepper
+
+    verts, faces = shapes.cylinder(radius=r, length=0.4, n_around=48)
+    stl = write_stl(tmp_path / "cyl.stl", verts, faces)
+    cl = write_centerline(tmp_path / "cyl.csv", [[0, 0, 0], [0, 0, 0.4]])
+    cfg = make_config(stl, cl, carriers=8, spool_radius=R, angular_speed=OMEGA1, take_up_speed=V,
+                      initial_position=0.05, braid_length=0.2, snapshots=0)
+    cfg = dataclasses.replace(
+        cfg, machine=dataclasses.replace(cfg.machine, angular_speed_table=(
+            (0.0, OMEGA1), (0.1, OMEGA2))),
+        process=dataclasses.replace(cfg.process, eccentricity_table=(
+            (0.0, 0.0, 0.0), (0.1, 0.004, 0.0))))
+    mandrel, centerline = load_geometry(cfg)
+
+    def steps(s, n):
+        for _ in range(n):
+            s.advance(*s.speeds())
+            if s.step % s.tolerances.braided_length_every == 0:
+                s.braided = s.braided_length_estimate()
+
+    once = make_stepper(cfg, mandrel, centerline)
+    steps(once, 120)
+    assert OMEGA1 < once.speeds()[1] < OMEGA2        # stopped inside the change
+    state = once.state_arrays()
+    again = make_stepper(cfg, mandrel, centerline)
+    again.restore(state)
+    steps(once, 60)
+    steps(again, 60)
+    assert again.clock == once.clock and again.clock.carrier_t != again.clock.t
+    np.testing.assert_array_equal(again.F, once.F)
+    np.testing.assert_array_equal(again.process_array(), once.process_array())
+
+
+@pytest.fixture(scope="module")
+def stepped_interaction(tmp_path_factory):
+    """The interaction model through the same step (16 carriers, yarn friction 0.2): friction
+    shortens its convergence zone, not the steady braid angle, which is Ko's on a cylinder."""
+    d = tmp_path_factory.mktemp("step_interaction")
+    verts, faces = shapes.cylinder(radius=r, length=1.6, n_around=64)
+    stl = write_stl(d / "cyl.stl", verts, faces)
+    cl = write_centerline(d / "cyl.csv", [[0, 0, 0], [0, 0, 1.6]])
+    cfg = make_config(stl, cl, carriers=16, spool_radius=R, angular_speed=OMEGA1, take_up_speed=V,
+                      initial_position=0.15, braid_length=1.2, snapshots=0, friction=0.2)
+    table = ((0.0, OMEGA1), (STEP_AT, OMEGA1), (STEP_END, OMEGA2))
+    return simulate(dataclasses.replace(
+        cfg, model=dataclasses.replace(cfg.model, kind="interaction"),
+        machine=dataclasses.replace(cfg.machine, angular_speed_table=table)), progress=False)
+
+
+def test_the_interaction_model_settles_on_ko_of_each_speed(stepped_interaction):
+    res = stepped_interaction
+    assert res.status == "done"
+    h, omega = res.history, res.process[:, 2]
+    L = h["braided_length_m"]
+    # the speed of the braided length the stepper last read: every braided_length_every steps,
+    # of about 3 mm each here
+    lag = res.config.process.braid_length / res.steps * tol.braided_length_every
+    assert np.all(omega[L < STEP_AT] == OMEGA1) and np.all(omega[L > STEP_END + lag] == OMEGA2)
+    # before the step and at the end (0.74 m, ~4.4 H after it): Ko's angle of the speed then,
+    # within the steady-state tolerance on an angle (measured: 54.85 and 59.95 deg)
+    before = np.flatnonzero(L < STEP_AT)[-1]
+    for group in ("warp", "weft"):
+        angle = h[f"braid_angle_{group}_deg"]
+        assert angle[before] == pytest.approx(ALPHA1, abs=STEADY.angle_deg)
+        assert angle[-1] == pytest.approx(ALPHA2, abs=STEADY.angle_deg)
