@@ -284,6 +284,7 @@ GUIDE_RING_KEYS = ("radius", "offset")
 #: the braided length is kept beside the key's first value)
 KEY_FIELDS = {("machine", "angular_speed"): ("angular_speed", "angular_speed_table"),
               ("process", "eccentricity"): ("eccentricity", "eccentricity_table")}
+COMPANION_FIELDS = frozenset(name for names in KEY_FIELDS.values() for name in names[1:])
 #: the sections a ``[[layer]]`` table may override, and its own keys
 LAYER_SECTIONS = ("machine", "yarn", "process", "model", "axial_yarn")
 LAYER_KEYS = ("direction",)
@@ -971,7 +972,8 @@ def _dump_layer(config: Config, k: int) -> dict:
     echoed = _dump_sections(config.layer_config(k))
     out = {"direction": layer.direction}
     for sec in LAYER_SECTIONS:
-        own = layer.fields(sec)
+        # a table's companion field is echoed under its key's name (KEY_FIELDS)
+        own = [key for key in layer.fields(sec) if key not in COMPANION_FIELDS]
         if own:
             out[sec] = {key: echoed[sec][key] for key in own}
     return out

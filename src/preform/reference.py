@@ -53,7 +53,9 @@ def references(config, s, perimeter) -> References:
     """The references at centerline arc lengths ``s`` (m) of sections of ``perimeter`` (m)."""
     s = np.asarray(s, dtype=float)
     r = np.asarray(perimeter, dtype=float) / (2.0 * math.pi)
-    omega = float(config.machine.angular_speed)
+    speeds = np.asarray(config.machine.angular_speeds, dtype=float)   # braided length ~ s
+    omega = (float(speeds[0, 1]) if len(speeds) == 1
+             else np.interp(s, speeds[:, 0], speeds[:, 1]))
     table = np.asarray(config.process.take_up_speed, dtype=float)
     v = np.full_like(s, table[0, 1]) if len(table) == 1 else np.interp(s, table[:, 0], table[:, 1])
     R = supply_radius(config.machine)

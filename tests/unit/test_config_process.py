@@ -122,6 +122,9 @@ def test_a_layer_sets_an_angular_speed_table(tmp_path):
     assert cfg.layer_config(0).machine.angular_speed_table == ()
     second = cfg.layer_config(1).machine
     assert second.angular_speed_table == ((0.0, math.radians(18.0)), (0.5, math.radians(20.0)))
+    echo = dump_config(cfg)["layers"]["2"]["machine"]
+    assert list(echo) == ["angular_speed"]
+    np.testing.assert_allclose(echo["angular_speed"], [[0.0, 18.0], [0.5, 20.0]], rtol=1e-14)
 
 
 # ----- trajectories -------------------------------------------------------------------------
@@ -242,3 +245,16 @@ def test_the_interpolant_passes_through_the_rows_and_integrates_the_turn(tmp_pat
         assert f.turn(t) == pytest.approx(math.radians(18.0 * t + 2.0 * t * t), rel=1e-12)
     # between rows the straight feed stays straight (PCHIP of a linear series is linear)
     assert f.pose(0.75)[1][2] == pytest.approx(0.2075, rel=1e-14)
+
+
+def test_the_references_before_the_run_read_the_angular_speed_table(tmp_path):
+    from preform.reference import references
+
+    table = [[0.0, 18.0], [0.4, 18.0], [0.6, 24.0]]
+    cfg = load_config(make_case(tmp_path, machine={"angular_speed": table}))
+    s = np.array([0.2, 0.5, 1.0])
+    r = 0.075
+    refs = references(cfg, s, np.full(3, 2 * math.pi * r))
+    # Ko's angle atan(omega r / v) with the table's speed at each arc length (braided length ~ s)
+    omega = np.radians([18.0, 21.0, 24.0])
+    np.testing.assert_allclose(refs.ko_deg, np.degrees(np.arctan(omega * r / 0.0263)), rtol=1e-12)
