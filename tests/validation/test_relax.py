@@ -161,9 +161,10 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     assert np.allclose(W, diag, rtol=1e-13)   # the stiffness the wall residual uses
     # friction bounds against the Newton reference's twin
     gb, psi = np.empty((m, 2)), np.empty((m, 2))
-    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top, bc.mu, gb,
-                       psi)
-    assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, bc.mu),
+    # every crossing its own coefficient (mixed yarns), against the twin
+    mu = np.random.default_rng(3).uniform(0.0, 0.5, m)
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top, mu, gb, psi)
+    assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, mu),
                        rtol=1e-9, atol=1e-12)
 
 

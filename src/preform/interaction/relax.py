@@ -174,7 +174,8 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
-    (held unless ``consistent``), f_spool N, mu, h m half the yarn thickness,
+    (held unless ``consistent``), f_spool N, mu (m,) every crossing's yarn-yarn friction (a
+    number: the same at every crossing), h m half the yarn thickness,
     width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
@@ -434,7 +435,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     g_new = np.empty((m, 2))
     psi = np.zeros((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, seg.d_below, seg.l_below, seg.d_top, tension,
-                       x.prob.f_top, float(mu), g_new, psi)
+                       x.prob.f_top, _per_crossing(mu, m), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
@@ -489,8 +490,9 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
                               **({} if tol is None else dict(tol=float(tol))))
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rsc, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
+                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
+                settings=rsc, model=settings,
                 top_tensions=ring_top_tensions(state, bc), consistent=True)
     if not res.residual < rsc.tol:
         return None
@@ -504,6 +506,11 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
 
 
 # -- adapter from the zone's state ------------------------------------------------------------
+
+def _per_crossing(mu, m) -> np.ndarray:
+    """(m,) float64 of a per-crossing friction array or one coefficient for every crossing."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (m,)))
+
 
 def lattice_of(state) -> Lattice:
     """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
@@ -523,8 +530,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     lat = lattice_of(state)
     f_top = np.empty(ny)
     FK.top_tensions(ny, state.highest, state.pos, state.normal, state.over, bc.fell, bc.top,
-                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, *bc.capstan_arguments(),
-                    f_top)
+                    bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                    *bc.capstan_arguments(), f_top)
     d_below = np.empty((m, 2, 3))
     l_below = np.empty((m, 2))
     d_top = np.empty((ny, 3))
@@ -537,7 +544,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     g0 = np.empty((m, 2))
     psi = np.empty((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top,
-                       np.ascontiguousarray(state.tension[:m]), f_top, bc.mu, g0, psi)
+                       np.ascontiguousarray(state.tension[:m]), f_top,
+                       bc.crossing_mu(lat.yarn), g0, psi)
     old = state.bound[:m]
     return np.where(np.isfinite(old), old, g0), f_top
 
@@ -562,7 +570,8 @@ def ring_top_tensions(state, bc):
     def f(pos):
         out = np.empty(ny)
         FK.top_tensions(ny, state.highest, pos, state.normal, state.over, fell, bc.top,
-                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, capstan, f_hold, out)
+                        bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                        capstan, f_hold, out)
         return out
     return f
 
@@ -637,8 +646,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rs, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
+                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
+                settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
                 fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
     if not (res.residual < rs.tol if passes else res.converged):
