@@ -63,6 +63,7 @@ from .settings import resolved
 from .simulation import load_geometry as _load_geometry
 from .simulation import simulate as _simulate
 from .stepping import default_time_step
+from .zone import zone_class
 
 class ResultsWriteError(PreformError):
     """The results could not be written; the simulation is kept in the checkpoint."""
@@ -123,11 +124,12 @@ def checked_geometry(config, settings=None):
     notes += [f"note: {line}" for line in mix_lines(config)]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
-    if config.model.kind == "interaction" and not config.layers:
+    cost = zone_class(config.model.kind).cost_note
+    if cost and not config.layers:
         # the model's cost for this run (the work estimate's steps), before it starts; the
         # estimate's limits are checked in the check stage
-        line = estimate(config, mandrel, centerline, force=True, settings=settings).model_line()
-        notes += [f"note: {line}"] if line else []
+        steps = estimate(config, mandrel, centerline, force=True, settings=settings).steps
+        notes.append(f"note: {cost.format(steps=steps)}")
     return mandrel, centerline, notes
 
 

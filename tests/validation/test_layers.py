@@ -59,6 +59,7 @@ kind = "kinematic"
 
 [output]
 snapshots = 0
+pictures = false    # the files' numbers are checked here; pictures: tests/e2e
 {layers}
 """
 

@@ -100,6 +100,13 @@ class InteractionZone:
     (failure-injection tests).
     """
 
+    #: said before a run starts (``Zone.cost_note``)
+    cost_note = ('[model] kind = "interaction": about {steps:,} time steps, each a solve of every '
+                 "crossing of the convergence zone; a step that does not converge stops the run, "
+                 "which keeps the results up to it")
+    #: the first-run worker's jobs are the kinematic run's kernels (``Zone.first_run_worker``)
+    first_run_worker = False
+
     def __init__(self, config, machine, mandrel=None, *, distance=None,
                  settings: InteractionSettings | None = None, solve_zone=None):
         self.config = config

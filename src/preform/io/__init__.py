@@ -28,11 +28,11 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()):
+def plot_history(result, plots_dir, refs=None, steady=None, layers=()):
     """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs, steady_settings, layers)
+    return plot(result, plots_dir, refs, steady, layers)
 
 
 def plot_yarns_3d(result, path):
@@ -42,15 +42,14 @@ def plot_yarns_3d(result, path):
     return plot(result, path)
 
 
-def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
+def _picture_jobs(result, fields, out_dir, steady=None, layer_results=()):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
     the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped.
-    ``settings``: ``preform.Settings`` (None: the defaults), the steady state the history
-    plots mark."""
+    ``steady``: the run's steady state (``Analysed.steady``), which the history plots mark
+    (None: no mark)."""
     plots = out_dir / PLOTS
-    steady = None if settings is None else settings.steady
     drawn, rendered = [], []
     output = getattr(result.config, "output", None)
     if output is not None and not output.pictures:    # [output] pictures = false
@@ -68,7 +67,7 @@ def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots, steady_settings=steady,
+                                lambda: plot_history(result, plots, steady=steady,
                                                      layers=layer_results)))
 
     def surface_pictures(shown):
@@ -181,7 +180,7 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
     result, fields = analysed.result, analysed.fields
     try:
         out_dir = _prepare_folder(out_dir)
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings,
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.steady,
                                            analysed.layer_results)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []

@@ -349,18 +349,16 @@ def history_references(result, n=60):
     return references(result.config, s[ok], perimeter[ok])
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()) -> list[Path]:
+def plot_history(result, plots_dir, refs=None, steady=None, layers=()) -> list[Path]:
     """Write ``braid_angle.png`` and ``convergence_length.png`` in ``plots_dir``; return the paths.
 
     refs : preform.reference.References, or None to compute them from the result's geometry.
-    steady_settings : the steady-state reading's (``steady.SteadySettings``; None: the defaults)
+    steady : the run's steady state as the analysis read it (``Analysed.steady``: the dict of
+        ``analysis.steady.steady_state``), marked on both plots; None: no mark
     layers : the Results of the layers above the first (a line each)
     """
-    from ..analysis.steady import STEADY, steady_state
-
     plots_dir = Path(plots_dir)
     refs = refs if refs is not None else history_references(result)
-    steady = steady_state(result.history, steady_settings or STEADY) if result.steps else None
     return [_save(braid_angle_figure(result, refs, steady, layers), plots_dir / "braid_angle.png"),
             _save(convergence_length_figure(result, refs, steady, layers),
                   plots_dir / "convergence_length.png")]
