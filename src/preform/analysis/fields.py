@@ -401,34 +401,13 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
         A, L, M = areas, length, planar
     data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width,
                          float(result.config.yarn.least_width))
-    for name in GROUPS:  # directions shown in the facet's plane (the angle is the smooth frame's)
-        d = data[f"{name}_direction"]
-        d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
-        norm = np.linalg.norm(d, axis=1)
-        data[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
-                                              where=norm[:, None] > 0)
-    jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
-    k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
-    hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
-    n_present = hit_warp.astype(float) + hit_weft
-    data["braid_angle_deg"] = np.divide(
-        data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
-        n_present, out=np.zeros(len(F)), where=n_present > 0)
+    jammed, hit = _in_plane(data, normals)
     # a narrowed yarn keeps its cross-section w t, so it gets thicker: the thickness is the yarn
     # volume per area, t w L / A per group (= t k where the yarns leave gaps, t k w / w_eff where
     # they narrowed side by side)
     data["thickness_m"] = thickness * width * np.divide(L[:, 0] + L[:, 1], A, out=np.zeros(len(F)), where=A > 0)
-    k_axial = _add_axial_yarns(data, result, V[F], centroids, areas, normals, tangent, hit_warp | hit_weft, h)
-    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft) * (1.0 - k_axial)
-    data["jammed"] = jammed.astype(np.uint8)
-    for g, name in enumerate(GROUPS):
-        data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
-    data["source_face"] = source.copy()
-    for name, values in data.items():
-        if not np.all(np.isfinite(values)):  # a bug, not a user error
-            raise AssertionError(f"non-finite values in surface field {name}")
-    return SurfaceFields(vertices=V, faces=F, source_faces=source, cell_data=data, jammed=jammed,
-                         unmapped_length_m=unmapped, edge_length_m=h, pool_radius_m=rho)
+    _cover_and_lengths(data, result, V, F, centroids, areas, normals, tangent, hit, h, jammed, L, A)
+    return _checked(data, V, F, source, jammed, unmapped, h, rho)
 
 
 # ------------------------------------------------------------------------------- mixed yarns
@@ -521,6 +500,23 @@ def _map_mixed(result, V, F, source, h, normals, areas, centroids, pool_radius_m
             w_min[:, None] > w[:, None] * share[None, :] * (1.0 + JAM_RTOL)), axis=0)
         k_type[:, :, g] = np.minimum(1.0, np.divide(w_eff * Lt[:, :, g], A, out=np.zeros((nt, nf)),
                                                     where=A > 0))
+    jammed, hit = _in_plane(data, normals)
+    section = np.array([y.thickness * y.width for y in yarns])   # every type's cross-section
+    data["thickness_m"] = np.divide(np.einsum("t,tf->f", section, Lt.sum(axis=2)), A,
+                                    out=np.zeros(nf), where=A > 0)
+    _cover_and_lengths(data, result, V, F, centroids, areas, normals, tangent, hit, h, jammed, L, A)
+    for i, name in enumerate(names):
+        data[f"coverage_{name}"] = 1.0 - (1.0 - k_type[i, :, 0]) * (1.0 - k_type[i, :, 1])
+        data[f"yarn_length_{name}_m_per_m2"] = np.divide(Lt[i].sum(axis=1), A, out=np.zeros(nf),
+                                                         where=A > 0)
+    return _checked(data, V, F, source, jammed, unmapped, h, rho)
+
+
+
+def _in_plane(data, normals):
+    """Each group's direction turned into the facet's plane (the angle is the smooth frame's),
+    the faces' braid angle (the mean of the groups that reached them); returns (jammed (nf,)
+    bool, reached by either group (nf,) bool), the groups' ``_jammed_*`` taken out of data."""
     for name in GROUPS:
         d = data[f"{name}_direction"]
         d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
@@ -528,24 +524,27 @@ def _map_mixed(result, V, F, source, h, normals, areas, centroids, pool_radius_m
         data[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
                                               where=norm[:, None] > 0)
     jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
-    k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
     hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
     n_present = hit_warp.astype(float) + hit_weft
     data["braid_angle_deg"] = np.divide(
         data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
-        n_present, out=np.zeros(nf), where=n_present > 0)
-    section = np.array([y.thickness * y.width for y in yarns])   # every type's cross-section
-    data["thickness_m"] = np.divide(np.einsum("t,tf->f", section, Lt.sum(axis=2)), A,
-                                    out=np.zeros(nf), where=A > 0)
-    k_axial = _add_axial_yarns(data, result, V[F], centroids, areas, normals, tangent, hit_warp | hit_weft, h)
-    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft) * (1.0 - k_axial)
+        n_present, out=np.zeros(len(normals)), where=n_present > 0)
+    return jammed, hit_warp | hit_weft
+
+
+def _cover_and_lengths(data, result, V, F, centroids, areas, normals, tangent, hit, h, jammed, L, A):
+    """The axial yarns' fields, the cover factor 1 - (1 - k_warp)(1 - k_weft)(1 - k_axial), the
+    jammed flag and each group's yarn length per area (L (nf, 2) m, A (nf,) m^2), into data."""
+    k_axial = _add_axial_yarns(data, result, V[F], centroids, areas, normals, tangent, hit, h)
+    data["cover_factor"] = (1.0 - (1.0 - data["coverage_warp"]) * (1.0 - data["coverage_weft"])
+                            * (1.0 - k_axial))
     data["jammed"] = jammed.astype(np.uint8)
     for g, name in enumerate(GROUPS):
-        data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(nf), where=A > 0)
-    for i, name in enumerate(names):
-        data[f"coverage_{name}"] = 1.0 - (1.0 - k_type[i, :, 0]) * (1.0 - k_type[i, :, 1])
-        data[f"yarn_length_{name}_m_per_m2"] = np.divide(Lt[i].sum(axis=1), A, out=np.zeros(nf),
-                                                         where=A > 0)
+        data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
+
+
+def _checked(data, V, F, source, jammed, unmapped, h, rho) -> "SurfaceFields":
+    """The SurfaceFields of data, with each face's ``source_face``; every value must be finite."""
     data["source_face"] = source.copy()
     for name, values in data.items():
         if not np.all(np.isfinite(values)):  # a bug, not a user error
