@@ -3,7 +3,8 @@
 Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
 arrays in creation order as the kernels do), segments are vectors, the energy is written term by
 term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from docs/theory.md §4
-§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``). The model's constants are
+§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, with Howell's law ``F^t <= a N^n`` in
+place of ``mu N`` where the law is given). The model's constants are
 arguments (``preform.interaction.settings``).
 """
 
@@ -76,8 +77,30 @@ def tensions(st, fell, EA, compression, h, eps2):
     return out
 
 
-def bounds(st, fell, top, tension, f_top, h, mu):
-    """Friction bound mu (f_int + f_ext) tan(delta/2) per crossing and yarn (m, 2)."""
+def howell_bound(load, delta, mu, index, n_ref, n_lin):
+    """The largest friction force ``F^t`` (N) of Howell's law ``F^t <= a N^n``, ``a = mu
+    n_ref^(1 - n)``, at the normal force ``N = load sin(delta/2)`` (``load = f_int + f_ext``),
+    continued below ``n_lin`` by the straight line through 0 and its value there (index 1:
+    Amontons' ``mu N``); vectorised."""
+    N = np.asarray(load, float) * np.sin(0.5 * np.asarray(delta, float))
+    a = mu * n_ref ** (1.0 - index)
+    return np.where(N >= n_lin, a * np.abs(N) ** index, a * n_lin ** index * (N / n_lin))
+
+
+def law_arguments(law):
+    """(mu, index, n_ref, n_lin) of a ``contact.CrossingFriction`` with one coefficient, or of
+    a plain number (Amontons' coefficient)."""
+    if isinstance(law, (int, float)):
+        return float(law), 1.0, 1.0, 1e-3
+    assert law.yarn_type is None
+    return law.coefficient, law.index, law.reference_force, law.n_lin
+
+
+def bounds(st, fell, top, tension, f_top, h, law):
+    """Friction bound per crossing and yarn (m, 2): the largest |f_int - f_ext|, Howell's
+    ``F^t`` (:func:`howell_bound`) over cos(delta/2) (Amontons: mu (f_int + f_ext) tan(delta/2)).
+    ``law``: a ``contact.CrossingFriction`` with one coefficient, or Amontons' coefficient."""
+    mu, index, n_ref, n_lin = law_arguments(law)
     out = np.zeros((st.m, 2))
     for k, (side, chain) in enumerate(chains(st)):
         pts = polyline(st, k, side, chain, fell, top, h)
@@ -87,5 +110,6 @@ def bounds(st, fell, top, tension, f_top, h, mu):
             u_int = (lo - p) / np.linalg.norm(lo - p)
             u_ext = (hi - p) / np.linalg.norm(hi - p)
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
-            out[c, side] = mu * (ten[i] + ten[i + 1]) * np.tan(delta / 2)
+            load = ten[i] + ten[i + 1]
+            out[c, side] = howell_bound(load, delta, mu, index, n_ref, n_lin) / np.cos(delta / 2)
     return out

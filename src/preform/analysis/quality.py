@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..interaction.contact import CrossingFriction
 from ..result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
 from .interlacing import INTERLACING, InterlacingSettings
 
@@ -249,7 +250,7 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
                          2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
-def snapshot_checks(snap, mu: float) -> tuple[float, float]:
+def snapshot_checks(snap, law) -> tuple[float, float]:
     """(largest imbalance / the snapshot's largest tension, largest Psi / tension) of a
     convergence-zone snapshot, from its own arrays as a reader of ``convergence.pvd`` sees them.
 
@@ -258,7 +259,10 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     the neighbouring points; the crossing's two points (one per yarn, the same contact id) and
     their ``external_force_N`` must sum to zero. The friction law: with cos(beta) =
     u_lo . u_hi, ``Psi = |f_lo - f_hi| sqrt((1 - cos beta) / 2) - mu (f_lo + f_hi) sqrt((1 + cos
-    beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone)."""
+    beta) / 2) <= 0``, ``mu`` the crossings' law (``law``: an
+    ``interaction.contact.CrossingFriction``, or Amontons' coefficient) at the yarn's normal
+    force ``(f_lo + f_hi) sqrt((1 + cos beta) / 2)``. (0, 0) for a snapshot without crossings
+    (the kinematic zone)."""
     P = np.asarray(snap.points, dtype=float)
     off = np.asarray(snap.offsets, dtype=np.int64)
     cid = np.asarray(snap.contact_id, dtype=np.int64)
@@ -279,12 +283,24 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     np.add.at(net, at, force)
     imbalance = np.linalg.norm(net, axis=1) / float(np.max(ten))
     cb = np.clip(np.einsum("ij,ij->i", u_lo, u_hi), -1.0, 1.0)
-    psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0)
-           - mu * (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)) / np.maximum(f_lo, f_hi)
+    normal = (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)
+    mu = law if isinstance(law, (int, float)) else law.coefficient_at(normal, _contact_pairs(
+        at, k) if law.yarn_type is not None else None)
+    psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0) - mu * normal) / np.maximum(f_lo, f_hi)
     return float(imbalance.max()), float(psi.max())
 
 
-def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
+def _contact_pairs(at, yarn) -> np.ndarray:
+    """(k, 2) the two yarns of the contact of each of k crossing points (``at``: its contact's
+    index, ``yarn``: its own yarn), lower yarn first."""
+    lo = np.full(int(at.max()) + 1, np.iinfo(np.int64).max)
+    hi = np.full(int(at.max()) + 1, -1)
+    np.minimum.at(lo, at, yarn)
+    np.maximum.at(hi, at, yarn)
+    return np.stack([lo[at], hi[at]], axis=1)
+
+
+def snapshot_reasons(snapshots, law, settings: QualitySettings = QUALITY,
                      width: float | None = None) -> list[str]:
     """Reasons to doubt the written convergence-zone snapshots, one a kind (the worst snapshot
     and how many): crossings out of balance beyond ``max_snapshot_imbalance``
@@ -292,12 +308,13 @@ def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
     (``Snapshot.rebalanced``): the re-balanced copy outside the friction cone
     (``max_snapshot_psi``), the re-balance failing, or the written crossings further than
     ``max_snapshot_shift_widths`` yarn widths (``width``, m) from the re-balanced ones. A
-    snapshot without a re-balanced copy is checked for the friction cone itself."""
+    snapshot without a re-balanced copy is checked for the friction cone itself. ``law``: the
+    crossings' friction law (``snapshot_checks``)."""
     found = {"imbalance": [], "psi": [], "slack": [], "failed": [], "shift": []}
     for snap in snapshots:
-        imbalance, psi = snapshot_checks(snap, mu)
+        imbalance, psi = snapshot_checks(snap, law)
         if snap.rebalanced is not None:
-            psi = snapshot_checks(snap.rebalanced, mu)[1]
+            psi = snapshot_checks(snap.rebalanced, law)[1]
         ten = np.asarray(snap.tension_N, dtype=float)
         shift = float(snap.rebalance_shift_m)
         t = snap.time_s
@@ -367,6 +384,7 @@ def assess(result, settings: QualitySettings = QUALITY, interlacing=False) -> di
     reasons += interlacing_reasons(run_interlacing(result) if interlacing is False else interlacing,
                                    settings)
     if result.snapshots and result.config is not None:
-        reasons += snapshot_reasons(result.snapshots, float(result.config.yarn.friction), settings,
+        reasons += snapshot_reasons(result.snapshots, CrossingFriction.of_yarn(result.config.yarn),
+                                    settings,
                                     width=float(result.config.yarn.width))
     return verdict(reasons)

@@ -7,7 +7,7 @@ Every yarn carries a material coordinate (m of yarn from a point of its deposite
 that material does not move through it during the step (``material = centre``, its friction
 centre): for inextensible yarns with fixed neighbours this is the paper's "Eulerian angles fixed
 while sticking", and it holds the crossing where it was on its yarns. A yarn *slips* when material
-passes; the friction force then is on the Amontons bound, opposing the sliding. The paper's
+passes; the friction force then is on the bound of its friction law, opposing the sliding. The paper's
 force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
 iteration diverges on realistic machines (``docs/decisions.md``).
 
@@ -25,7 +25,9 @@ of slack segments, see there). The constants below are fields of
 * the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(-mu_r
   eta)`` times it behind the guide ring, paper eq. 9);
 * friction at every crossing and yarn is ``bound |u - centre|``, the work of the friction force
-  against the sliding, with the bound ``mu (f_int + f_ext) tan(delta/2)`` held fixed: its
+  against the sliding, with the bound ``mu (f_int + f_ext) tan(delta/2)`` held fixed (``mu`` the
+  crossing's law at its normal force, ``Boundary.friction``: Amontons' constant or Howell's
+  ``friction (N / N_ref)^(n - 1)``): its
   stationarity ``f_int - f_ext in bound d|u - centre|`` *is* the discrete Capstan law of
   docs/theory.md §4 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
   side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps`` (``eps =
@@ -93,7 +95,7 @@ import scipy.sparse as sp
 from .._kernels import frontal as frontal_kernels
 from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
-from .contact import bound_change, bound_scale
+from .contact import CrossingFriction, bound_change, bound_scale
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
 
@@ -103,7 +105,9 @@ class Boundary:
     """What the zone hangs from at the end of a step, machine frame.
 
     fell : (2n, 3) float64, m, fell points; top : (2n, 3) ring points (guide ring) or spool points;
-    spool : (2n, 3) spool points; f_spool : N; mu, mu_r : friction; has_ring : bool; h : m, half
+    spool : (2n, 3) spool points; f_spool : N; friction : the law at the crossings
+    (:class:`~preform.interaction.contact.CrossingFriction`); mu_r : yarn-ring friction
+    (Amontons); has_ring : bool; h : m, half
     the yarn thickness; plane : (m, 6) or None, per crossing a point and the outward unit normal
     of the mandrel surface nearest to it (the crossings may not pass behind it); width : m, the
     yarn width, the least distance of two crossings along a yarn (jamming; 0: none); capstan :
@@ -117,7 +121,7 @@ class Boundary:
     top: np.ndarray
     spool: np.ndarray
     f_spool: float
-    mu: float
+    friction: CrossingFriction
     mu_r: float
     has_ring: bool
     h: float
@@ -284,8 +288,8 @@ class _Network:
                                      bc.top, bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring,
                                      *bc.capstan_arguments(), f_top)
         frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
-                                        bc.fell, bc.top, self.tension, f_top, bc.h, bc.mu, bound,
-                                        psi)
+                                        bc.fell, bc.top, self.tension, f_top, bc.h,
+                                        *bc.friction.kernel_arguments(st.yarn[:st.m]), bound, psi)
         return bound, psi, f_top
 
     def balance(self, tol, max_steps):

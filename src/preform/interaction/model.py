@@ -78,6 +78,7 @@ from ..kinematic import KinematicZone
 from ..result import Snapshot
 from ..zone import ZoneStep, solver_of
 from . import frontal, step_check
+from .contact import CrossingFriction
 from .ring import ring_arguments, ring_point
 from .mandrel_distance import MandrelDistance
 from .settings import DEFAULT, InteractionSettings
@@ -113,7 +114,7 @@ class InteractionZone:
         y = config.yarn
         self.h = 0.5 * float(y.thickness)
         self.width = float(y.width)
-        self.mu = float(y.friction)
+        self.friction = CrossingFriction.of_yarn(y)   # the crossings' friction law
         self.mu_r = float(y.ring_friction)
         self.f_spool = float(y.tension)
         self.state = ZoneState(machine.n_yarns)
@@ -205,7 +206,8 @@ class InteractionZone:
             if m.has_ring and self.ring_capstan is not None else {}
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
                                 top=top, spool=m.spool_points(t),
-                                f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
+                                f_spool=self.f_spool, friction=self.friction,
+                                mu_r=self.mu_r,
                                 has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:

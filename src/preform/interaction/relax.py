@@ -168,13 +168,14 @@ class RelaxResult:
     posed: object = None
 
 
-def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
+def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, friction, h,
           width, plane=None, settings: RelaxSettings = DEFAULT.relax,
           model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
-    (held unless ``consistent``), f_spool N, mu, h m half the yarn thickness,
+    (held unless ``consistent``), f_spool N, friction the crossings' law
+    (``contact.CrossingFriction``), h m half the yarn thickness,
     width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
@@ -189,7 +190,7 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     bounds (and ring top tensions) are taken anew from its converged geometry and tensions, and
     the step is solved again from there until they change by less than ``friction_tol``
     relative to the tensions."""
-    kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
+    kw = dict(f_spool=f_spool, friction=friction, h=h, width=width, plane=plane, settings=settings,
               model=model)
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
@@ -213,7 +214,7 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
             break
         bounds = res.bounds
         res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
-                                  f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
+                                  f_spool=f_spool, friction=friction, h=h, width=width, plane=plane,
                                   settings=settings, model=model)
         iterations += res.iterations
         history.append(res.history)
@@ -313,8 +314,8 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
     return bound_change(lat.up, lat.yarn, tension, f_top, new, old, floor)
 
 
-def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
-                h, width, plane, settings, model):
+def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool,
+                friction, h, width, plane, settings, model):
     """The iteration with the bounds and top tensions held (``relax``): sweep, forces and
     residual, then the preconditioner's update, wall step and mixing (``preconditioners``)."""
     st = settings
@@ -434,7 +435,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     g_new = np.empty((m, 2))
     psi = np.zeros((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, seg.d_below, seg.l_below, seg.d_top, tension,
-                       x.prob.f_top, float(mu), g_new, psi)
+                       x.prob.f_top, *friction.kernel_arguments(lat.yarn), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
@@ -489,7 +490,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
                               **({} if tol is None else dict(tol=float(tol))))
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rsc, model=settings,
                 top_tensions=ring_top_tensions(state, bc), consistent=True)
     if not res.residual < rsc.tol:
@@ -537,7 +538,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     g0 = np.empty((m, 2))
     psi = np.empty((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top,
-                       np.ascontiguousarray(state.tension[:m]), f_top, bc.mu, g0, psi)
+                       np.ascontiguousarray(state.tension[:m]), f_top,
+                       *bc.friction.kernel_arguments(lat.yarn), g0, psi)
     old = state.bound[:m]
     return np.where(np.isfinite(old), old, g0), f_top
 
@@ -637,7 +639,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
                 width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
                 fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
