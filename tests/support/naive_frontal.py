@@ -87,20 +87,25 @@ def howell_bound(load, delta, mu, index, n_ref, n_lin):
     return np.where(N >= n_lin, a * np.abs(N) ** index, a * n_lin ** index * (N / n_lin))
 
 
-def law_arguments(law):
-    """(mu, index, n_ref, n_lin) of a ``contact.CrossingFriction`` with one coefficient, or of
-    a plain number (Amontons' coefficient)."""
+def law_arguments(law, st):
+    """(mu (m,), index (m,), n_ref, n_lin) of the crossings of ``st`` under a
+    ``contact.CrossingFriction`` (its pair tables looked up crossing by crossing where it has
+    them), or under a plain number (Amontons' coefficient)."""
     if isinstance(law, (int, float)):
-        return float(law), 1.0, 1.0, 1e-3
-    assert law.yarn_type is None
-    return law.coefficient, law.index, law.reference_force, law.n_lin
+        return np.full(st.m, float(law)), np.ones(st.m), 1.0, 1e-3
+    mu, index = np.full(st.m, float(law.coefficient)), np.full(st.m, float(law.index))
+    if law.yarn_type is not None:
+        for c in range(st.m):
+            a, b = (int(law.yarn_type[st.yarn[c, side]]) for side in range(2))
+            mu[c], index[c] = law.pair_coefficient[a][b], law.pair_index[a][b]
+    return mu, index, law.reference_force, law.linear_below * law.reference_force
 
 
 def bounds(st, fell, top, tension, f_top, h, law):
     """Friction bound per crossing and yarn (m, 2): the largest |f_int - f_ext|, Howell's
     ``F^t`` (:func:`howell_bound`) over cos(delta/2) (Amontons: mu (f_int + f_ext) tan(delta/2)).
-    ``law``: a ``contact.CrossingFriction`` with one coefficient, or Amontons' coefficient."""
-    mu, index, n_ref, n_lin = law_arguments(law)
+    ``law``: a ``contact.CrossingFriction``, or Amontons' coefficient."""
+    mu, index, n_ref, n_lin = law_arguments(law, st)
     out = np.zeros((st.m, 2))
     for k, (side, chain) in enumerate(chains(st)):
         pts = polyline(st, k, side, chain, fell, top, h)
@@ -111,5 +116,6 @@ def bounds(st, fell, top, tension, f_top, h, law):
             u_ext = (hi - p) / np.linalg.norm(hi - p)
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
             load = ten[i] + ten[i + 1]
-            out[c, side] = howell_bound(load, delta, mu, index, n_ref, n_lin) / np.cos(delta / 2)
+            out[c, side] = howell_bound(load, delta, mu[c], index[c], n_ref, n_lin) / np.cos(
+                delta / 2)
     return out

@@ -444,7 +444,13 @@ def test_linear_solver_auto_is_cholmod_when_cvxopt_imports_else_superlu():
 LAWS = {"amontons": CrossingFriction(coefficient=0.3),
         "howell": CrossingFriction(law="howell", coefficient=0.3, index=0.8),
         "howell linear": CrossingFriction(law="howell", coefficient=0.3, index=0.7,
-                                          reference_force=2.0, linear_below=0.15)}
+                                          reference_force=2.0, linear_below=0.15),
+        # per pair: the warp yarns alternate between two types, each pair its own law
+        "howell pairs": CrossingFriction(
+            law="howell", coefficient=0.3, index=0.8,
+            yarn_type=np.array([k % 2 for k in range(8)] + [0] * 8),
+            pair_coefficient=np.array([[0.6, 0.45], [0.45, 0.8]]),
+            pair_index=np.array([[0.8, 0.9], [0.9, 1.0]]))}
 
 
 @pytest.mark.parametrize("law", list(LAWS))
@@ -480,13 +486,21 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins(law):
             load = ten[i] + ten[i + 1]
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1.0, 1.0))
             normal[c, side] = load * np.sin(delta / 2)
+            if law.yarn_type is not None:
+                a, b = law.yarn_type[st.yarn[c]]
+                mu, index = law.pair_coefficient[a, b], law.pair_index[a, b]
+            else:
+                mu, index = law.coefficient, law.index
             if law.law == "amontons":
                 psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext,
                                                      law.coefficient) / load
             else:
                 psi_ref[c, side] = (abs(ten[i] - ten[i + 1]) * np.cos(delta / 2) - naive.howell_bound(
-                    load, delta, law.coefficient, law.index, law.reference_force, law.n_lin)) / load
+                    load, delta, mu, index, law.reference_force, law.n_lin)) / load
     assert np.any(psi_ref > 0) and np.any(psi_ref < 0)     # both sides of the cone seen
+    if law.yarn_type is not None:
+        # more than one pair's law among the crossings
+        assert len(np.unique(law.per_crossing(st.yarn[: st.m])[0])) >= 2
     if law.linear_below > 0.01:
         # both branches of the law seen
         assert 0.1 < np.mean(normal < law.n_lin) < 0.9
