@@ -65,7 +65,7 @@ class YarnConfig:
     width: float                    # m
     thickness: float                # m
     tension: float = 4.7            # N, spool tension
-    friction: float = 0.0           # yarn-yarn mu_y (Howell: the coefficient at the reference force)
+    friction: float = 0.0           # yarn-yarn mu_y (Howell: at howell_reference_force)
     ring_friction: float = 0.0      # yarn-ring mu_r
     #: the yarn-yarn friction law at the crossings (docs/theory.md §4): "amontons" F^t <= mu N,
     #: or "howell" F^t <= a N^n with a = friction * howell_reference_force^(1 - n)

@@ -7,8 +7,8 @@ Every yarn carries a material coordinate (m of yarn from a point of its deposite
 that material does not move through it during the step (``material = centre``, its friction
 centre): for inextensible yarns with fixed neighbours this is the paper's "Eulerian angles fixed
 while sticking", and it holds the crossing where it was on its yarns. A yarn *slips* when material
-passes; the friction force then is on the bound of its friction law, opposing the sliding. The paper's
-force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
+passes; the friction force then is on the bound of its friction law, opposing the sliding. The
+paper's force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
 iteration diverges on realistic machines (``docs/decisions.md``).
 
 One time step is the minimum of an energy over the crossing positions ``C`` and the material

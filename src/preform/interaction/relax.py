@@ -490,8 +490,8 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
                               **({} if tol is None else dict(tol=float(tol))))
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rsc, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction,
+                h=bc.h, width=bc.width, plane=bc.plane, settings=rsc, model=settings,
                 top_tensions=ring_top_tensions(state, bc), consistent=True)
     if not res.residual < rsc.tol:
         return None
@@ -639,8 +639,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rs, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction,
+                h=bc.h, width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
                 fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
     if not (res.residual < rs.tol if passes else res.converged):
