@@ -16,11 +16,19 @@ import dataclasses
 import numpy as np
 import pytest
 
+from support import naive_frontal
 from preform import simulate
 from preform.analysis.quality import snapshot_checks
 from preform.geometry import shapes
+from preform.interaction import relax as R
 from preform.interaction.contact import CrossingFriction
-from support.simcase import make_config, write_centerline, write_stl
+from preform.interaction.model import InteractionZone
+from preform.interaction.settings import DEFAULT
+from preform.machine import Machine
+from preform.reference import resolve_pose_lead
+from preform.simulation import load_geometry
+from preform.stepping import Stepper, take_up_speed
+from support.simcase import case_b_like_config, make_config, write_centerline, write_stl
 
 MU = 0.25
 HOWELL = dict(friction_law="howell", howell_index=0.8)
@@ -119,3 +127,63 @@ def test_snapshots_lie_in_the_friction_cone_of_the_law(runs):
     # coefficient at their normal forces, 8-30 mN, is 0.50-0.66): against Amontons' cone the
     # verdict would flag them (measured Psi 2.5e-3 tension)
     assert max(snapshot_checks(s, MU)[1] for s in snaps) > 1e-3
+
+
+#: time steps of the run behind a guide ring: the first crossings form below the ring by step
+#: ~60, rows are deposited from step ~250 (``test_ring_steps.py``); the first 300 cover both
+RING_STEPS = 300
+
+
+@pytest.fixture(scope="module")
+def ring_steps(tmp_path_factory):
+    """Every time step's solve of a case-B-like run behind a guide ring (``simcase.
+    case_b_like_config``: 16 carriers, ring friction 0.17) under Howell's law, n = 0.8,
+    friction 0.25 at 1 N, by the default solver (the relaxation, with the posed iteration)."""
+    cfg = case_b_like_config(tmp_path_factory.mktemp("ring"), 0.17)
+    cfg = dataclasses.replace(cfg, yarn=dataclasses.replace(cfg.yarn, friction=MU, **HOWELL))
+    mandrel, cl = load_geometry(cfg)
+    cfg = resolve_pose_lead(cfg, mandrel, cl)
+    machine = Machine.from_config(cfg.machine)
+    steps = []
+
+    def solve(st, bc, **kw):
+        report = R.solve_zone(st, bc, **kw)
+        if kw.get("mode", "step") == "step" and st.m:
+            steps.append((report, st.copy(), bc))
+        return report
+
+    zone = InteractionZone(cfg, machine, mandrel, solve_zone=solve)
+    s = Stepper(cfg, machine, mandrel, cl, zone)
+    for _ in range(RING_STEPS):
+        s.advance(take_up_speed(cfg.process.take_up_speed, s.braided))
+    return steps
+
+
+def test_every_step_behind_a_ring_meets_howells_bound_of_its_converged_geometry(ring_steps):
+    """Every crossing's tension jump stays inside Howell's cone at its converged normal force
+    (``naive_frontal.bounds`` with the run's law, written as a N^n), to the step's residual, as
+    ``test_ring_steps.py`` checks Amontons' runs; and the bound is Howell's, not Amontons' at
+    friction (the crossings press with less than N_ref, so Howell's is the larger)."""
+    assert len(ring_steps) > RING_STEPS // 2
+    worst, above = -np.inf, 0.0
+    for rep, st, bc in ring_steps:
+        assert bc.friction.law == "howell" and bc.friction.index == 0.8
+        g = naive_frontal.bounds(st, bc.fell, bc.top, st.tension[: st.m], rep.f_top, bc.h,
+                                 bc.friction)
+        g_amontons = naive_frontal.bounds(st, bc.fell, bc.top, st.tension[: st.m], rep.f_top,
+                                          bc.h, MU)
+        up, yarn = st.up[: st.m], st.yarn[: st.m]
+        ten = st.tension[: st.m]
+        above_t = np.where(up >= 0, ten[np.maximum(up, 0), np.arange(2)], rep.f_top[yarn])
+        jump = np.abs(above_t - ten)
+        # the scale of the iteration's change (``contact.bound_scale``)
+        scale = np.maximum(above_t + ten, DEFAULT.frontal.change_scale_floor * rep.f_top[yarn])
+        step_worst = float(np.max((jump - g) / scale))
+        # the step's residual and the balance tolerance (1e-7 of the four tensions, 1e-6 of two)
+        assert step_worst <= rep.residual + 1e-6
+        worst = max(worst, step_worst)
+        above = max(above, float(np.max((jump - g_amontons) / scale)))
+    # the posed iteration's fixed point (``test_ring_steps.LIMIT``)
+    assert worst < 1e-3
+    # some crossings slide with a jump Amontons' bound at friction would not allow
+    assert above > 1e-3
