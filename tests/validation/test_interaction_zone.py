@@ -495,8 +495,8 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins(law):
                 psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext,
                                                      law.coefficient) / load
             else:
-                psi_ref[c, side] = (abs(ten[i] - ten[i + 1]) * np.cos(delta / 2) - naive.howell_bound(
-                    load, delta, mu, index, law.reference_force, law.n_lin)) / load
+                bound = naive.howell_bound(load, delta, mu, index, law.reference_force, law.n_lin)
+                psi_ref[c, side] = (abs(ten[i] - ten[i + 1]) * np.cos(delta / 2) - bound) / load
     assert np.any(psi_ref > 0) and np.any(psi_ref < 0)     # both sides of the cone seen
     if law.yarn_type is not None:
         # more than one pair's law among the crossings

@@ -8,10 +8,10 @@ one function here: :func:`crossing_coefficient` gives the coefficient at ``N``, 
 friction bounds of ``_kernels.frontal`` and ``_kernels.relax`` multiply by their own ``N``.
 For ``n = 1`` it is ``mu`` exactly (returned as it is; ``x ** 0.0 == 1.0`` for every ``x``
 too), so Howell's law at index 1 gives Amontons' bounds to the bit. Below ``n_lin`` the
-coefficient is held at its value there: the bound ``coefficient * N`` then is linear in ``N``, goes to 0 with ``N`` and keeps a
-finite slope, where ``a N^n`` would have an infinite one at ``N = 0`` (a straight yarn) and the
-coefficient itself would blow up. The slow NumPy twin is ``tests/support/naive_frontal.py``
-(``howell_bound``).
+coefficient is held at its value there: the bound ``coefficient * N`` then is linear in ``N``,
+goes to 0 with ``N`` and keeps a finite slope, where ``a N^n`` would have an infinite one at
+``N = 0`` (a straight yarn) and the coefficient itself would blow up. The slow NumPy twin is
+``tests/support/naive_frontal.py`` (``howell_bound``).
 """
 
 from __future__ import annotations
