@@ -921,7 +921,10 @@ def _dump_sections(config: Config) -> dict:
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
                  "friction": y.friction, "ring_friction": y.ring_friction,
                  "friction_law": y.friction_law, "howell_index": y.howell_index,
-                 "howell_reference_force": y.howell_reference_force, "min_width": y.min_width,
+                 # Howell's keys only under Howell's law (an echo reads back as a config)
+                 "howell_reference_force": (y.howell_reference_force
+                                            if y.friction_law == "howell" else None),
+                 "min_width": y.min_width,
                  "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
                  "fibre_radius": y.fibre_radius},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,

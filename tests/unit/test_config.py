@@ -294,6 +294,18 @@ def test_howell_friction_law_is_read_and_echoed(tmp_path):
     assert load_config(make_case(tmp_path)).yarn.friction_law == "amontons"
 
 
+@pytest.mark.parametrize("law", [{}, {"friction_law": "howell", "howell_index": 0.85,
+                                      "howell_reference_force": 0.5}])
+def test_the_friction_law_echo_reads_back_as_the_same_yarn(tmp_path, law):
+    """The echo written as a config (as ``preform design`` writes one, absent values left out)
+    loads to the same [yarn]: Howell's keys are echoed under Howell's law only."""
+    cfg = load_config(make_case(tmp_path, yarn={"friction": 0.2, **law}))
+    echo = dump_config(cfg)["yarn"]
+    again = load_config(make_case(tmp_path, name="again", yarn={
+        k: (v if v is not None else DROP) for k, v in echo.items()}))
+    assert again.yarn == cfg.yarn
+
+
 def test_friction_law_choice_with_suggestion(tmp_path):
     config_error(tmp_path, '[yarn] friction_law = "howel"', "did you mean 'howell'",
                  '"amontons", "howell"', yarn={"friction_law": "howel"})
