@@ -244,15 +244,21 @@ def _braid_angle_warnings(config, s, distance) -> list[str]:
     ma, y = config.machine, config.yarn
     alpha = np.degrees(analytic.ko_braid_angle(ma.angular_speed, r, v))
     # the yarns narrow to the available width (paper §2.4.2): they jam only where even their
-    # least width does not fit
-    jam = np.degrees(analytic.jamming_angle(ma.carriers, y.least_width, r))
+    # least width does not fit (mixed yarns: the mean least width of a group's carriers, whose
+    # sum is what must fit round the section)
+    least = y.least_width
+    if getattr(config, "is_mixed", False):
+        kinds = config.carrier_types()[: ma.carriers // 2]
+        least = float(np.mean([config.types[t].least_width for t in kinds]))
+    jam = np.degrees(analytic.jamming_angle(ma.carriers, least, r))
     lo, hi = BRAID_ANGLE_RANGE_DEG
     warnings = []
     if np.any(alpha > jam):
         k = int(np.argmax(alpha - jam))
         warnings.append(f"the yarns will likely jam: Ko's braid angle estimate {alpha[k]:.1f} deg exceeds "
                         f"the jamming angle {jam[k]:.1f} deg of yarns narrowed to their least width "
-                        f"({y.least_width:g} m, [yarn] min_width) at {centre[k]:.3g} m from the tip "
+                        f"({least:g} m, {'the mean over the carriers, ' if least != y.least_width else ''}"
+                        f"[yarn] min_width) at {centre[k]:.3g} m from the tip "
                         "(check [machine] angular_speed, [process] take_up_speed, [yarn] width)")
     if alpha.min() < lo or alpha.max() > hi:
         warnings.append(f"Ko's braid angle estimate spans {alpha.min():.1f}-{alpha.max():.1f} deg, outside "

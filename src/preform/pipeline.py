@@ -49,6 +49,7 @@ from .analysis.rtm import missing_material, rtm_fields, stacked_rtm_fields
 from .budget import check_work, estimate_work
 from .checkpoint import CHECKPOINT, LAYER_CHECKPOINT, Checkpoint
 from .checks import preflight
+from .config import mix_lines
 from .errors import PreformError
 from .geometry import centerline_from_points, section_perimeters
 from .geometry.mandrel import mandrel_from_arrays
@@ -116,6 +117,7 @@ def checked_geometry(config, settings=None):
     """
     mandrel, centerline = load_geometry(config)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
+    notes += [f"note: {line}" for line in mix_lines(config)]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
     if config.model.kind == "interaction":

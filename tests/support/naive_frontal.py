@@ -90,9 +90,9 @@ def howell_bound(load, delta, mu, index, n_ref, n_lin):
 def law_arguments(law, st):
     """(mu (m,), index (m,), n_ref, n_lin) of the crossings of ``st`` under a
     ``contact.CrossingFriction`` (its pair tables looked up crossing by crossing where it has
-    them), or under a plain number (Amontons' coefficient)."""
-    if isinstance(law, (int, float)):
-        return np.full(st.m, float(law)), np.ones(st.m), 1.0, 1e-3
+    them), or under Amontons' coefficient (a number, or (m,) one per crossing)."""
+    if isinstance(law, (int, float, np.ndarray)):     # Amontons: one or (m,) coefficients
+        return (np.broadcast_to(np.asarray(law, float), (st.m,)), np.ones(st.m), 1.0, 1e-3)
     mu, index = np.full(st.m, float(law.coefficient)), np.full(st.m, float(law.index))
     if law.yarn_type is not None:
         for c in range(st.m):
@@ -104,9 +104,10 @@ def law_arguments(law, st):
 def bounds(st, fell, top, tension, f_top, h, law):
     """Friction bound per crossing and yarn (m, 2): the largest |f_int - f_ext|, Howell's
     ``F^t`` (:func:`howell_bound`) over cos(delta/2) (Amontons: mu (f_int + f_ext) tan(delta/2)).
-    ``law``: a ``contact.CrossingFriction``, or Amontons' coefficient."""
+    ``law``: a ``contact.CrossingFriction``, or Amontons' coefficient (a number or (m,))."""
     mu, index, n_ref, n_lin = law_arguments(law, st)
     out = np.zeros((st.m, 2))
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), (st.m,))
     for k, (side, chain) in enumerate(chains(st)):
         pts = polyline(st, k, side, chain, fell, top, h)
         ten = [tension[c, side] for c in chain] + [f_top[k]]

@@ -468,6 +468,8 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins(law):
     assert np.allclose(net.tension, ref, rtol=1e-9, atol=1e-9)
     bound = np.empty((st.m, 2))
     psi = np.empty((st.m, 2))
+    # every crossing its own coefficient (mixed yarns), against the twin
+    mu = np.random.default_rng(5).uniform(0.0, 0.6, st.m)
     frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
                                     bc.fell, bc.top, net.tension, f_top, bc.h,
                                     *law.kernel_arguments(st.yarn[: st.m]), bound, psi)

@@ -169,6 +169,12 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
                            *law.kernel_arguments(lat.yarn), gb, psi)
         assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, law),
                            rtol=1e-9, atol=1e-12)
+    # every crossing its own coefficient (mixed yarns), against the twin
+    mu = np.random.default_rng(3).uniform(0.0, 0.5, m)
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top, mu,
+                       np.ones(m), 1.0, 1e-3, gb, psi)
+    assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, mu),
+                       rtol=1e-9, atol=1e-12)
 
 
 # Newton and the relaxation both to 1e-10 of the tensions: both converge there (Newton

@@ -521,12 +521,13 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
     the mandrel side carries the higher tension, f = f_spool exp(mu_r eta)), -1 towards the spool
     (the tensioner takes yarn back: f = f_spool exp(-mu_r eta), eq. 9 as the paper writes it), 0
     stick: the held tension f_hold[k] within that cone. eta is the yarn's deflection at the ring
-    point (``interaction/model.py``)."""
+    point (``interaction/model.py``). f_spool, mu_r (2n,): every yarn's spool tension (N) and
+    yarn-ring friction (its yarn type's)."""
     n = n_yarns // 2
     p = np.empty(3)
     for k in range(n_yarns):
         if not has_ring:
-            f_top[k] = f_spool
+            f_top[k] = f_spool[k]
             continue
         c = highest[k]
         _end_point(pos, normal, over, c, 0 if k < n else 1, k, fell, h, p)
@@ -541,10 +542,10 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
         cb = (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)
         eta = math.pi - math.acos(min(1.0, max(-1.0, cb)))
         if capstan[k] != 0.0:
-            f_top[k] = f_spool * math.exp(capstan[k] * mu_r * eta)
+            f_top[k] = f_spool[k] * math.exp(capstan[k] * mu_r[k] * eta)
         else:
-            f_top[k] = min(max(f_hold[k], f_spool * math.exp(-mu_r * eta)),
-                           f_spool * math.exp(mu_r * eta))
+            f_top[k] = min(max(f_hold[k], f_spool[k] * math.exp(-mu_r[k] * eta)),
+                           f_spool[k] * math.exp(mu_r[k] * eta))
 
 
 @njit(cache=True)

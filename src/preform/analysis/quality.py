@@ -250,7 +250,7 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
                          2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
-def snapshot_checks(snap, law) -> tuple[float, float]:
+def snapshot_checks(snap, mu, kinds=None, law=None) -> tuple[float, float]:
     """(largest imbalance / the snapshot's largest tension, largest Psi / tension) of a
     convergence-zone snapshot, from its own arrays as a reader of ``convergence.pvd`` sees them.
 
@@ -259,10 +259,15 @@ def snapshot_checks(snap, law) -> tuple[float, float]:
     the neighbouring points; the crossing's two points (one per yarn, the same contact id) and
     their ``external_force_N`` must sum to zero. The friction law: with cos(beta) =
     u_lo . u_hi, ``Psi = |f_lo - f_hi| sqrt((1 - cos beta) / 2) - mu (f_lo + f_hi) sqrt((1 + cos
-    beta) / 2) <= 0``, ``mu`` the crossings' law (``law``: an
-    ``interaction.contact.CrossingFriction``, or Amontons' coefficient) at the yarn's normal
-    force ``(f_lo + f_hi) sqrt((1 + cos beta) / 2)``. (0, 0) for a snapshot without crossings
-    (the kinematic zone)."""
+    beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone).
+
+    mu: the yarn-yarn friction, or with ``kinds`` (n_yarns,) every yarn's type, the (nt, nt)
+    table of every pair of types (``Config.pair_friction``): each crossing its pair's; or an
+    ``interaction.contact.CrossingFriction`` (its coefficient, and it is ``law``). law: the
+    crossings' friction law (None: Amontons), whose coefficient at the yarn's normal force
+    ``(f_lo + f_hi) sqrt((1 + cos beta) / 2)`` is ``mu`` times ``(N / N_ref)^(n - 1)``."""
+    if isinstance(mu, CrossingFriction):
+        mu, law = mu.coefficient, mu
     P = np.asarray(snap.points, dtype=float)
     off = np.asarray(snap.offsets, dtype=np.int64)
     cid = np.asarray(snap.contact_id, dtype=np.int64)
@@ -281,40 +286,37 @@ def snapshot_checks(snap, law) -> tuple[float, float]:
     ids, at = np.unique(cid[j], return_inverse=True)
     net = np.zeros((len(ids), 3))
     np.add.at(net, at, force)
+    if kinds is not None:     # a crossing's pair: the types of the two yarns of its contact id
+        kinds = np.asarray(kinds)
+        lo_type = np.full(len(ids), np.iinfo(np.int64).max)
+        hi_type = np.full(len(ids), -1)
+        np.minimum.at(lo_type, at, kinds[k])
+        np.maximum.at(hi_type, at, kinds[k])
+        mu = np.asarray(mu, dtype=float)[lo_type, hi_type][at]
     imbalance = np.linalg.norm(net, axis=1) / float(np.max(ten))
     cb = np.clip(np.einsum("ij,ij->i", u_lo, u_hi), -1.0, 1.0)
     normal = (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)
-    mu = law if isinstance(law, (int, float)) else law.coefficient_at(normal, _contact_pairs(
-        at, k) if law.yarn_type is not None else None)
+    if law is not None and law.index != 1.0:
+        mu = mu * (np.maximum(normal, law.n_lin) / law.reference_force) ** (law.index - 1.0)
     psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0) - mu * normal) / np.maximum(f_lo, f_hi)
     return float(imbalance.max()), float(psi.max())
 
 
-def _contact_pairs(at, yarn) -> np.ndarray:
-    """(k, 2) the two yarns of the contact of each of k crossing points (``at``: its contact's
-    index, ``yarn``: its own yarn), lower yarn first."""
-    lo = np.full(int(at.max()) + 1, np.iinfo(np.int64).max)
-    hi = np.full(int(at.max()) + 1, -1)
-    np.minimum.at(lo, at, yarn)
-    np.maximum.at(hi, at, yarn)
-    return np.stack([lo[at], hi[at]], axis=1)
-
-
-def snapshot_reasons(snapshots, law, settings: QualitySettings = QUALITY,
-                     width: float | None = None) -> list[str]:
+def snapshot_reasons(snapshots, mu, settings: QualitySettings = QUALITY,
+                     width: float | None = None, kinds=None, law=None) -> list[str]:
     """Reasons to doubt the written convergence-zone snapshots, one a kind (the worst snapshot
     and how many): crossings out of balance beyond ``max_snapshot_imbalance``
     (:func:`snapshot_checks`), a slack segment, and, where a re-balance checked the snapshot
     (``Snapshot.rebalanced``): the re-balanced copy outside the friction cone
     (``max_snapshot_psi``), the re-balance failing, or the written crossings further than
     ``max_snapshot_shift_widths`` yarn widths (``width``, m) from the re-balanced ones. A
-    snapshot without a re-balanced copy is checked for the friction cone itself. ``law``: the
-    crossings' friction law (``snapshot_checks``)."""
+    snapshot without a re-balanced copy is checked for the friction cone itself. mu, kinds,
+    law: as :func:`snapshot_checks`."""
     found = {"imbalance": [], "psi": [], "slack": [], "failed": [], "shift": []}
     for snap in snapshots:
-        imbalance, psi = snapshot_checks(snap, law)
+        imbalance, psi = snapshot_checks(snap, mu, kinds, law)
         if snap.rebalanced is not None:
-            psi = snapshot_checks(snap.rebalanced, law)[1]
+            psi = snapshot_checks(snap.rebalanced, mu, kinds, law)[1]
         ten = np.asarray(snap.tension_N, dtype=float)
         shift = float(snap.rebalance_shift_m)
         t = snap.time_s
@@ -384,7 +386,13 @@ def assess(result, settings: QualitySettings = QUALITY, interlacing=False) -> di
     reasons += interlacing_reasons(run_interlacing(result) if interlacing is False else interlacing,
                                    settings)
     if result.snapshots and result.config is not None:
-        reasons += snapshot_reasons(result.snapshots, CrossingFriction.of_yarn(result.config.yarn),
-                                    settings,
-                                    width=float(result.config.yarn.width))
+        cfg = result.config
+        law = CrossingFriction.of_yarn(cfg.yarn)
+        if getattr(cfg, "is_mixed", False):   # every crossing's pair friction
+            reasons += snapshot_reasons(result.snapshots, cfg.pair_friction()[0], settings,
+                                        width=float(cfg.yarn.width), kinds=cfg.carrier_types(),
+                                        law=law)
+        else:
+            reasons += snapshot_reasons(result.snapshots, float(cfg.yarn.friction), settings,
+                                        width=float(cfg.yarn.width), law=law)
     return verdict(reasons)

@@ -114,11 +114,16 @@ class InteractionZone:
         y = config.yarn
         self.h = 0.5 * float(y.thickness)
         self.width = float(y.width)
-        self.friction = CrossingFriction.of_yarn(y)   # the crossings' friction law
+        self.mu = float(y.friction)
+        self.friction_law = CrossingFriction.of_yarn(y)   # the crossings' friction law
         self.mu_r = float(y.ring_friction)
         self.f_spool = float(y.tension)
+        # mixed yarns: every yarn's type, and the friction and tension of the types
+        # (``frontal.Boundary``); None: every yarn is [yarn]
+        self.types = _yarn_types(config) if getattr(config, "is_mixed", False) else {}
         self.state = ZoneState(machine.n_yarns)
-        self.f_top = np.full(machine.n_yarns, self.f_spool)   # N, top tension of every yarn
+        self.f_top = (np.full(machine.n_yarns, self.f_spool) if not self.types else
+                      self.types["type_tension"][self.types["yarn_type"]])   # N, every yarn's top tension
         self.step_index = 0
         self.G_prev = None            # (2n, 3) free-yarn ends of the last step
         self.lowest_uid_prev = None   # (2n,) uid of every yarn's lowest crossing at the last step
@@ -206,9 +211,9 @@ class InteractionZone:
             if m.has_ring and self.ring_capstan is not None else {}
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
                                 top=top, spool=m.spool_points(t),
-                                f_spool=self.f_spool, friction=self.friction,
-                                mu_r=self.mu_r,
-                                has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring)
+                                f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
+                                has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring,
+                                **self.types, law=self.friction_law)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
         t1 = t0 + dt
@@ -424,9 +429,9 @@ class InteractionZone:
         hold = np.ascontiguousarray(self.f_top, dtype=float)
         # sliding along the ring in this step, the yarn has one friction cone along and across
         s_long = np.ascontiguousarray(np.abs(self.ring_s_long), dtype=float)
-        ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
+        ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), bc.spool_tensions(),
                                  self.machine.ring_radius, self.machine.supply_z,
-                                 np.asarray(theta, float), self.mu_r, capstan, hold, s_long,
+                                 np.asarray(theta, float), bc.ring_frictions(), capstan, hold, s_long,
                                  *ring_arguments(self.settings.ring), out, status)
         ok = status == ring_kernels.RING_OK
         return np.where(ok, out[:, ring_kernels.RING_OUT_THETA], theta)
@@ -703,6 +708,17 @@ class InteractionZone:
         return deposits
 
 
+def _yarn_types(config) -> dict:
+    """The mixed yarns' arrays of ``frontal.Boundary``: every yarn's type (``Config.
+    carrier_types``), the friction of every pair of types (``Config.pair_friction``), every
+    type's spool tension and yarn-ring friction."""
+    types = config.types
+    return dict(yarn_type=np.ascontiguousarray(config.carrier_types(), dtype=np.int64),
+                pair_mu=np.ascontiguousarray(config.pair_friction()[0], dtype=float),
+                type_tension=np.array([t.tension for t in types], dtype=float),
+                type_ring_friction=np.array([t.ring_friction for t in types], dtype=float))
+
+
 def _restore(st, posed):
     """Write a step's posed arrays (``InteractionZone.step``: name -> the first m rows) back into
     the zone state ``st``, in place."""
@@ -770,12 +786,13 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
         fx = [np.zeros(3)] + [ext_c[c, side] for c in chain] + [np.zeros(3)]
         if ring:
             pts.append(bc.spool[k])
-            ten.append(bc.f_spool)
+            f_spool = float(bc.spool_tensions()[k])
+            ten.append(f_spool)
             ids.append(-1)
             sl.append(0)
             fx.append(np.zeros(3))
             below, at, above = pts[-3], pts[-2], pts[-1]
-            fx[-2] = -(f_written * _unit(below - at) + bc.f_spool * _unit(above - at))
+            fx[-2] = -(f_written * _unit(below - at) + f_spool * _unit(above - at))
         points.extend(pts)
         tension.extend(ten)
         cid.extend(ids)

@@ -524,8 +524,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     lat = lattice_of(state)
     f_top = np.empty(ny)
     FK.top_tensions(ny, state.highest, state.pos, state.normal, state.over, bc.fell, bc.top,
-                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, *bc.capstan_arguments(),
-                    f_top)
+                    bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                    *bc.capstan_arguments(), f_top)
     d_below = np.empty((m, 2, 3))
     l_below = np.empty((m, 2))
     d_top = np.empty((ny, 3))
@@ -564,7 +564,8 @@ def ring_top_tensions(state, bc):
     def f(pos):
         out = np.empty(ny)
         FK.top_tensions(ny, state.highest, pos, state.normal, state.over, fell, bc.top,
-                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, capstan, f_hold, out)
+                        bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                        capstan, f_hold, out)
         return out
     return f
 

@@ -18,7 +18,7 @@ from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
 from .rtm_files import write_rtm
 from .surface import INPUT_VTU, PICTURES, write_input_mesh_fields, write_surface
 from .tables import write_history, write_summary
-from .vtk_yarns import write_convergence, write_yarns_vtp
+from .vtk_yarns import write_convergence, write_yarns_vtp, yarn_types_of
 
 SUMMARY = "summary.json"
 HISTORY = "history.csv"
@@ -181,11 +181,12 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
             if background:             # the worker's (drawn by its finish() where it cannot fork)
                 rendered = []
         written = [write_history(result, out_dir / HISTORY),
-                   write_yarns_vtp(result.yarns, out_dir / YARNS),
+                   write_yarns_vtp(result.yarns, out_dir / YARNS, yarn_types_of(result.config)),
                    *write_convergence(result.snapshots, out_dir)]
         for k, layer in enumerate(analysed.layer_results, start=2):
             folder = safe_folder(out_dir, f"layer{k}")
-            written += [write_history(layer, folder / HISTORY), write_yarns_vtp(layer.yarns, folder / YARNS)]
+            written += [write_history(layer, folder / HISTORY),
+                        write_yarns_vtp(layer.yarns, folder / YARNS, yarn_types_of(layer.config))]
         if fields is not None:
             written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
             if analysed.input_mesh_fields is not None:
