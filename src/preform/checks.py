@@ -45,25 +45,27 @@ def preflight(config, mandrel, centerline) -> list[str]:
     implausible for the machine (much larger than the machine and not fitting it, or smaller than
     two yarn widths), when the part of the mandrel that passes the machine
     (``s <= initial_position + braid_length``) plus the eccentricity does not fit inside the guide
-    ring and the spool circle, when ``initial_position + braid_length`` exceeds the centerline,
-    or when a kinematic run's mandrel end would pass the machine before braid_length is braided
-    (:func:`mandrel_end_problem`; a warning for the interaction model).
+    ring and the spool circle, when the mandrel's end has passed the machine at the start
+    (:func:`_check_start`), or when a kinematic run's mandrel end would pass the machine before
+    braid_length is braided (:func:`mandrel_end_problem`, the run's own rule and message; a
+    warning for the interaction model).
     """
     vertices = np.asarray(mandrel.vertices, dtype=float)
     if vertices.ndim != 2 or len(vertices) == 0:
         raise MandrelError(f"{config.mandrel.stl}: the mandrel has no vertices")
     s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
     _check_unit(config, float(mandrel.diagonal), float(distance.max()))
-    _check_length(config, float(centerline.length))
+    _check_braid_length(config, float(centerline.length))
     _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
-    reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
+    reach = float(np.max(distance[passing], initial=0.0)) + config.process.largest_eccentricity
     warnings = _check_fit(config, reach)
     warnings += _braid_angle_warnings(config, s[passing], distance[passing])
     _check_time_step(config)
     from .reference import resolve_pose_lead
 
     lead = float(resolve_pose_lead(config, mandrel, centerline).process.pose_lead)
+    _check_start(config, float(centerline.length), lead)
     radius = float(np.median(distance[passing])) if np.any(passing) else 0.0
     warnings += _check_mandrel_end(config, float(centerline.length), radius, lead,
                                    _section_changes(s[passing], distance[passing]))
@@ -125,21 +127,35 @@ def _check_centerline_inside(config, mandrel, centerline) -> None:
             "expected a centerline inside the mandrel, tip first, in the STL's frame and unit")
 
 
-def _check_length(config, length: float) -> None:
-    """The mandrel must reach past the supply plane by initial_position + braid_length; a guide
-    ring offset from the spool plane takes its offset of mandrel too (initial_position counts
-    from the ring)."""
+def _check_braid_length(config, length: float) -> None:
+    """The braided length is centerline arc length from the tip: braid_length cannot exceed the
+    centerline, whatever the convergence zone (how much less the mandrel holds is
+    :func:`mandrel_end_problem`'s)."""
+    p = config.process
+    if p.braid_length > length:
+        raise ConfigError(f"[process] braid_length = {p.braid_length:g}: expected at most the "
+                          f"centerline length {length:.4g} m of the mandrel (less its convergence "
+                          "zone at the end)")
+
+
+def _check_start(config, length: float, lead: float = 0.0) -> None:
+    """The mandrel must still be in the machine at the start: its tip ``initial_position`` past
+    the supply plane (plus a guide ring's offset from the spool plane) within the centerline's
+    length plus the pose lead (:func:`end_passed`, the rule the run stops by). How much braid the
+    mandrel then holds is :func:`mandrel_end_problem`'s: a run started beyond H_inf needs less
+    than ``initial_position + braid_length``, its convergence zone shrinking as it braids."""
     p = config.process
     ring = config.machine.guide_ring
     offset = ring.offset if ring is not None else 0.0
-    need = p.initial_position + p.braid_length + offset
-    if need > length:
-        terms = (f"[process] braid_length = {p.braid_length:g} plus [process] initial_position = "
-                 f"{p.initial_position:g}")
+    if end_passed(p.initial_position + offset, length, lead):
+        terms = f"[process] initial_position = {p.initial_position:g}"
         if offset:
             terms += f" plus [machine] guide_ring offset = {offset:g}"
-        raise ConfigError(f"{terms} is {need:.4g} m: expected at most the centerline length "
-                          f"{length:.4g} m of the mandrel")
+        lead_text = f" plus the pose lead {lead:.3g} m" if lead else ""
+        raise ConfigError(f"{terms} puts the mandrel's tip {p.initial_position + offset:.4g} m past the "
+                          f"spool plane at the start, beyond the {length:.4g} m centerline{lead_text}: "
+                          "its end has passed the machine before braiding begins; expected a smaller "
+                          "initial_position")
 
 
 def mandrel_end_problem(config, length: float, radius: float, lead: float = 0.0,
@@ -242,7 +258,9 @@ def _braid_angle_warnings(config, s, distance) -> list[str]:
     table = np.asarray(config.process.take_up_speed, dtype=float)
     v = np.interp(centre, table[:, 0], table[:, 1])  # braided length ~ arc length from the tip
     ma, y = config.machine, config.yarn
-    alpha = np.degrees(analytic.ko_braid_angle(ma.angular_speed, r, v))
+    speeds = np.asarray(ma.angular_speeds, dtype=float)
+    omega = np.interp(centre, speeds[:, 0], speeds[:, 1])
+    alpha = np.degrees(analytic.ko_braid_angle(omega, r, v))
     # the yarns narrow to the available width (paper §2.4.2): they jam only where even their
     # least width does not fit (mixed yarns: the mean least width of a group's carriers, whose
     # sum is what must fit round the section)
@@ -275,12 +293,13 @@ def _check_time_step(config) -> None:
     if mo.time_step is None:
         return
     between = 2.0 * math.pi / (ma.carriers / 2)
-    turn = ma.angular_speed * mo.time_step
+    fastest = max(speed for _, speed in ma.angular_speeds)
+    turn = fastest * mo.time_step
     if turn > between:
         raise ConfigError(
             f"[model] time_step = {mo.time_step:g} s turns the carriers by {math.degrees(turn):.3g} deg "
             f"a step, more than the {math.degrees(between):.3g} deg between two carriers of a group: "
-            f"expected at most {between / ma.angular_speed:.3g} s (leave time_step out for the "
+            f"expected at most {between / fastest:.3g} s (leave time_step out for the "
             "automatic step control)")
 
 
@@ -295,8 +314,78 @@ def _value_warnings(config) -> list[str]:
         if mu > HIGH_FRICTION:
             warnings.append(f"[yarn] {key} = {mu:g} is unusually high (measured yarn values: 0.15-0.4)")
     if mo.time_step is not None:
-        turn = ma.angular_speed * mo.time_step
+        turn = max(speed for _, speed in ma.angular_speeds) * mo.time_step
         if turn > TIME_STEP_FACTOR * tol.max_carrier_rotation:
             warnings.append(f"[model] time_step = {mo.time_step:g} turns the carriers by "
                             f"{math.degrees(turn):.3g} deg per step: results may be coarse")
     return warnings
+
+
+def _over_run(table, end: float) -> tuple[np.ndarray, np.ndarray]:
+    """(braided lengths, values (n, k)) where a table over the braided length has its extremes
+    on [0, end]: its rows inside, and both ends (linear between rows, constant beyond)."""
+    table = np.asarray(table, dtype=float)
+    L = np.unique(np.concatenate([[0.0, end], table[(table[:, 0] > 0.0) & (table[:, 0] < end), 0]]))
+    if len(table) == 1:
+        return L, np.repeat(table[:, 1:], len(L), axis=0)
+    return L, np.column_stack([np.interp(L, table[:, 0], table[:, j]) for j in range(1, table.shape[1])])
+
+
+def _range_line(name, unit, L, values, scale, digits=3):
+    """One setting's range over the run: constant, or least and most and where."""
+    lo, hi = int(np.argmin(values)), int(np.argmax(values))
+    show = lambda v: f"{v * scale:.{digits}g}"   # noqa: E731
+    if values[hi] == values[lo]:
+        return f"{name} {show(values[lo])} {unit} throughout"
+    return (f"{name} {show(values[lo])}-{show(values[hi])} {unit} over the run: least at "
+            f"{L[lo]:.3g} m braided, most at {L[hi]:.3g} m (where first reached)")
+
+
+def setting_ranges(config) -> list[str]:
+    """What ``preform check`` says of the process settings over the run: per setting (take-up
+    speed, angular speed, eccentricity) its value, or its least and largest over the braided
+    length ``[0, braid_length]`` and where; for a run driven by ``[process] trajectory`` the
+    path's spans instead (time, braided length, speeds, the origin's coordinates, the turn of
+    the orientation), with the rows where the speeds are least and largest."""
+    p, ma = config.process, config.machine
+    if p.trajectory is not None:
+        return _trajectory_ranges(config)
+    end = float(p.braid_length)
+    L, v = _over_run(p.take_up_speed, end)
+    lines = [_range_line("take-up speed", "mm/s", L, v[:, 0], 1e3)]
+    L, w = _over_run(ma.angular_speeds, end)
+    lines.append(_range_line("angular speed", "deg/s", L, w[:, 0], 180.0 / math.pi))
+    L, e = _over_run(p.eccentricities, end)
+    if not p.eccentricity_table:
+        lines.append(f"eccentricity [{p.eccentricity[0]:g}, {p.eccentricity[1]:g}] m throughout")
+    else:
+        lines.append(_range_line("eccentricity |[x, y]|", "mm", L, np.hypot(e[:, 0], e[:, 1]), 1e3))
+    return lines
+
+
+def _trajectory_ranges(config) -> list[str]:
+    from .config import MAX_ANGULAR_SPEED_DEG, MAX_TAKE_UP_SPEED
+    from .trajectory import read_trajectory
+
+    path = read_trajectory(config.process.trajectory, max_take_up_speed=MAX_TAKE_UP_SPEED,
+                           max_angular_speed_deg=MAX_ANGULAR_SPEED_DEG)
+    t = path.time
+
+    def span(name, unit, values, scale):
+        lo, hi = int(np.argmin(values)), int(np.argmax(values))
+        if values[lo] == values[hi]:
+            return f"{name} {values[lo] * scale:.3g} {unit} throughout"
+        return (f"{name} {values[lo] * scale:.3g}-{values[hi] * scale:.3g} {unit} (least at row "
+                f"{lo + 1}, t = {t[lo]:.4g} s; most at row {hi + 1}, t = {t[hi]:.4g} s)")
+
+    q = path.quaternion
+    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)))
+    x = path.position
+    return [f"trajectory {path.path}: {len(t)} rows over {t[-1] - t[0]:.4g} s, braided length "
+            f"{path.braided.min():.3g}-{path.braided.max():.3g} m",
+            span("take-up speed", "mm/s", path.take_up, 1e3),
+            span("angular speed", "deg/s", path.angular, 180.0 / math.pi),
+            "the mandrel frame's origin (machine frame) x from {:.4g} to {:.4g} m, y from {:.4g} "
+            "to {:.4g} m, z from {:.4g} to {:.4g} m; its orientation turns up to {:.3g} deg from "
+            "the first row's".format(x[:, 0].min(), x[:, 0].max(), x[:, 1].min(), x[:, 1].max(),
+                                     x[:, 2].min(), x[:, 2].max(), float(turn.max()))]

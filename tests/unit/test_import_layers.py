@@ -21,10 +21,11 @@ from support.modules import SRC, imports_in, module_names
 #: ``__init__`` alone.
 LAYERS = (
     ("base", ("preform.errors", "preform.plain", "preform.tolerances", "preform.analytic",
-              "preform.result", "preform.zone", "preform._version", "preform.materials")),
+              "preform.result", "preform.zone", "preform._version", "preform.materials",
+              "preform.drawing")),
     ("kernels", ("preform._kernels",)),
     ("geometry", ("preform.geometry",)),
-    ("inputs", ("preform.config", "preform.machine")),
+    ("inputs", ("preform.config", "preform.machine", "preform.trajectory")),
     ("models", ("preform.kinematic", "preform.interaction", "preform.laid", "preform.reference",
                 "preform.recording", "preform.stepping", "preform.checkpoint", "preform.simulation")),
     ("analysis", ("preform.analysis", "preform.checks", "preform.budget", "preform.structural.layup",
