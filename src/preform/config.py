@@ -79,8 +79,17 @@ class YarnConfig:
     width: float                    # m
     thickness: float                # m
     tension: float = 4.7            # N, spool tension
-    friction: float = 0.0           # yarn-yarn mu_y
+    friction: float = 0.0           # yarn-yarn mu_y (Howell: at howell_reference_force)
     ring_friction: float = 0.0      # yarn-ring mu_r
+    #: the yarn-yarn friction law at the crossings (docs/theory.md §4): "amontons" F^t <= mu N,
+    #: or "howell" F^t <= a N^n with a = friction * howell_reference_force^(1 - n)
+    friction_law: str = "amontons"
+    #: Howell's index n (0 < n <= 1; 1 is Amontons); given with friction_law = "howell" only
+    howell_index: float | None = None
+    #: N, the normal force at which ``friction`` is Howell's coefficient: a fixed force, not one
+    #: scaled with the spool tension (that would make the law homogeneous in the forces again,
+    #: and the spool tension's effect vanish); 1 N makes ``friction`` Howell's a in N^(1-n)
+    howell_reference_force: float = 1.0
     #: least width (m) a yarn narrows to where its neighbours leave it less room (paper §2.4.2);
     #: below it the yarns jam. None: half the width, the order a flat tow of spread filaments
     #: narrows to before they bunch into a round bundle
@@ -365,7 +374,8 @@ KEYS = {
     "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
     "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring", "axial_yarns",
                 "carrier_yarns"),
-    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
+    "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "friction_law",
+             "howell_index", "howell_reference_force", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead",
                 "trajectory"),
@@ -399,6 +409,13 @@ SOLVERS = tuple(ZONE_SOLVERS)  # "newton", "relax"
 
 #: coefficients of friction must lie in [0, MAX_FRICTION)
 MAX_FRICTION = 2.0
+#: ``[yarn] friction_law``: the yarn-yarn friction law at the crossings, and its keys (set in
+#: [yarn] only: one law for the run, each pair's coefficient at its reference force)
+FRICTION_LAWS = ("amontons", "howell")
+FRICTION_LAW_KEYS = ("friction_law", "howell_index", "howell_reference_force")
+#: ``[yarn] howell_reference_force`` (N) must lie in this range: crossing normal forces are
+#: fractions of the spool tension, and a value outside is almost surely another unit
+HOWELL_REFERENCE_RANGE = (1e-4, 1e3)
 #: unit plausibility: above these the value was almost surely given in another unit
 MAX_TAKE_UP_SPEED = 1.0         # m/s
 MAX_ANGULAR_SPEED_DEG = 3600.0  # deg/s (10 revolutions per second)
@@ -761,6 +778,7 @@ def _yarn(sec: _Section) -> YarnConfig:
     _implausible(sec, "thickness", thickness, MAX_YARN_THICKNESS, "m", "mm? divide by 1000")
     tension = sec.number("tension", "N", default=YarnConfig.tension, positive=True)
     frictions = {key: _friction(sec, key) for key in ("friction", "ring_friction")}
+    frictions.update(_friction_law(sec))
     min_width = sec.number("min_width", "m", default=None, positive=True)
     if min_width is not None and min_width > width:
         raise sec.error("min_width", min_width, f"expected at most {sec.where('width')} = {_fmt(width)} "
@@ -811,6 +829,12 @@ def _yarn_types(raw, data: dict) -> tuple[YarnTypeConfig, ...]:
                 hint = _suggest(key, YARN_TYPE_KEYS)
                 raise ConfigError(f"{prefix}{key} = {_fmt(table[key])}: unknown key; {hint}"
                                   f"expected name or a [yarn] key ({', '.join(KEYS['yarn'])})")
+        for key in FRICTION_LAW_KEYS:
+            if key in table:
+                raise ConfigError(f"{prefix}{key} = {_fmt(table[key])}: the crossings' friction "
+                                  "law is the run's: set it once in [yarn] (a type's friction, "
+                                  "and [[friction_pair]]'s, are its coefficient at "
+                                  "howell_reference_force)")
         own = {key: v for key, v in table.items() if key != "name"}
         merged = {**data.get("yarn", {}), **own}
         if any(key in own for key in MATERIAL):   # its tow data go together, not with [yarn]'s
@@ -1082,6 +1106,34 @@ def _friction(sec: _Section, key: str, required: bool = False) -> float:
     return mu
 
 
+def _friction_law(sec: _Section) -> dict:
+    """``friction_law``, ``howell_index`` and ``howell_reference_force`` of [yarn]: Howell's keys
+    only with ``friction_law = "howell"``, which needs the index."""
+    law = sec.choice("friction_law", FRICTION_LAWS, default=YarnConfig.friction_law)
+    if law != "howell":
+        for key in ("howell_index", "howell_reference_force"):
+            if key in sec.table:
+                raise sec.error(key, sec.table[key], f'applies to friction_law = "howell" only '
+                                f'(friction_law is "{law}"); set friction_law = "howell" or '
+                                "remove it")
+        return {"friction_law": law}
+    what = "Howell's index n, 0 < n <= 1 (1 is Amontons; fibre tows 0.7-0.95, docs/theory.md)"
+    if "howell_index" not in sec.table:
+        raise sec.error("friction_law", law, f"needs howell_index = n: {what}")
+    n = sec.number("howell_index", what)
+    if not 0.0 < n <= 1.0:
+        raise sec.error("howell_index", sec.table["howell_index"], f"expected {what}")
+    lo, hi = HOWELL_REFERENCE_RANGE
+    ref = sec.number("howell_reference_force", "N, the normal force at which friction is "
+                     "Howell's coefficient", default=YarnConfig.howell_reference_force,
+                     positive=True)
+    if not lo <= ref <= hi:
+        raise sec.error("howell_reference_force", sec.table["howell_reference_force"],
+                        f"expected a normal force between {lo:g} and {hi:g} N (crossing normal "
+                        "forces are fractions of the spool tension)")
+    return {"friction_law": law, "howell_index": n, "howell_reference_force": ref}
+
+
 def _process(sec: _Section) -> ProcessConfig:
     """``[process]`` of a [[layer]] table (no trajectory there)."""
     return _process_and_path(sec, None)[0]
@@ -1281,7 +1333,12 @@ def _dump_sections(config: Config) -> dict:
                     "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset},
                     "axial_yarns": ma.axial_yarns},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
-                 "friction": y.friction, "ring_friction": y.ring_friction, "min_width": y.min_width,
+                 "friction": y.friction, "ring_friction": y.ring_friction,
+                 "friction_law": y.friction_law, "howell_index": y.howell_index,
+                 # Howell's keys only under Howell's law (an echo reads back as a config)
+                 "howell_reference_force": (y.howell_reference_force
+                                            if y.friction_law == "howell" else None),
+                 "min_width": y.min_width,
                  "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
                  "fibre_radius": y.fibre_radius},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,

@@ -54,6 +54,7 @@ from .errors import PreformError
 from .geometry import centerline_from_points, section_perimeters
 from .geometry.mandrel import mandrel_from_arrays
 from .geometry.offset import interpolate, offset_surface, refined_surface, vertex_means, vertex_normals
+from .interaction.contact import CrossingFriction
 from .io.cache import cached_field_mesh, cached_mandrel
 from .io.folder import RunLock, check_results_folder
 from .machine import Machine
@@ -124,6 +125,9 @@ def checked_geometry(config, settings=None):
     notes += [f"note: {line}" for line in mix_lines(config)]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]
     notes += [f"note: {line}" for line in reference_lines(config, mandrel, centerline)]
+    if config.model.kind == "interaction":
+        notes += [f"note: yarn-yarn friction at the crossings: "
+                  f"{CrossingFriction.of_yarn(config.yarn).describe()}"]
     cost = zone_class(config.model.kind).cost_note
     if cost and not config.layers:
         # the model's cost for this run (the work estimate's steps), before it starts; the

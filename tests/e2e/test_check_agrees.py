@@ -177,3 +177,24 @@ def test_the_interaction_step_estimate_takes_its_own_zone(tmp_path):
     # 0.03 m), to the rounding of the counts (one step)
     per_step = k.steps * k.time_step_s / i.time_step_s
     assert i.steps == pytest.approx(per_step * 0.1 / (0.1 + h_end - 0.03), abs=1.0)
+
+
+@pytest.mark.parametrize("law, expect", [
+    ("", "yarn-yarn friction at the crossings: Amontons, F_t <= mu N, mu = 0.2"),
+    ('friction_law = "howell"\nhowell_index = 0.8\nhowell_reference_force = 0.5',
+     # a = 0.2 * 0.5^0.2 = 0.1741; at 0.1 N: 0.2 * (0.1 / 0.5)^-0.2 = 0.276
+     "Howell, F_t <= a N^n, n = 0.8, mu = 0.2 at N_ref = 0.5 N (a = 0.1741 N^0.2"),
+])
+def test_check_prints_the_crossings_friction_law(tmp_path, capsys, law, expect):
+    """The interaction model's check names the friction law at the crossings and its
+    parameters; the kinematic model's, which has no crossings, does not."""
+    path = write_cylinder_case(tmp_path, kind="interaction", snapshots=0, yarn_extra=law)
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr()
+    text = out.out + out.err
+    assert expect in text
+    if law:
+        assert "at 0.1 N 0.276" in text
+    kinematic = write_cylinder_case(tmp_path / "k", snapshots=0, yarn_extra=law)
+    assert main(["check", str(kinematic)]) == 0
+    assert "friction at the crossings" not in capsys.readouterr().out

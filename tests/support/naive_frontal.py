@@ -3,7 +3,8 @@
 Chains are walked yarn by yarn from the fell point to the top point (not over the crossing
 arrays in creation order as the kernels do), segments are vectors, the energy is written term by
 term from the docstring of ``preform/interaction/frontal.py`` and the friction cone from docs/theory.md §4
-§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``). The model's constants are
+§3.3 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, with Howell's law ``F^t <= a N^n`` in
+place of ``mu N`` where the law is given). The model's constants are
 arguments (``preform.interaction.settings``).
 """
 
@@ -76,9 +77,35 @@ def tensions(st, fell, EA, compression, h, eps2):
     return out
 
 
-def bounds(st, fell, top, tension, f_top, h, mu):
-    """Friction bound mu (f_int + f_ext) tan(delta/2) per crossing and yarn (m, 2); mu: one
-    coefficient, or (m,) one per crossing."""
+def howell_bound(load, delta, mu, index, n_ref, n_lin):
+    """The largest friction force ``F^t`` (N) of Howell's law ``F^t <= a N^n``, ``a = mu
+    n_ref^(1 - n)``, at the normal force ``N = load sin(delta/2)`` (``load = f_int + f_ext``),
+    continued below ``n_lin`` by the straight line through 0 and its value there (index 1:
+    Amontons' ``mu N``); vectorised."""
+    N = np.asarray(load, float) * np.sin(0.5 * np.asarray(delta, float))
+    a = mu * n_ref ** (1.0 - index)
+    return np.where(N >= n_lin, a * np.abs(N) ** index, a * n_lin ** index * (N / n_lin))
+
+
+def law_arguments(law, st):
+    """(mu (m,), index (m,), n_ref, n_lin) of the crossings of ``st`` under a
+    ``contact.CrossingFriction`` (its pair tables looked up crossing by crossing where it has
+    them), or under Amontons' coefficient (a number, or (m,) one per crossing)."""
+    if isinstance(law, (int, float, np.ndarray)):     # Amontons: one or (m,) coefficients
+        return (np.broadcast_to(np.asarray(law, float), (st.m,)), np.ones(st.m), 1.0, 1e-3)
+    mu, index = np.full(st.m, float(law.coefficient)), np.full(st.m, float(law.index))
+    if law.yarn_type is not None:
+        for c in range(st.m):
+            a, b = (int(law.yarn_type[st.yarn[c, side]]) for side in range(2))
+            mu[c], index[c] = law.pair_coefficient[a][b], law.pair_index[a][b]
+    return mu, index, law.reference_force, law.linear_below * law.reference_force
+
+
+def bounds(st, fell, top, tension, f_top, h, law):
+    """Friction bound per crossing and yarn (m, 2): the largest |f_int - f_ext|, Howell's
+    ``F^t`` (:func:`howell_bound`) over cos(delta/2) (Amontons: mu (f_int + f_ext) tan(delta/2)).
+    ``law``: a ``contact.CrossingFriction``, or Amontons' coefficient (a number or (m,))."""
+    mu, index, n_ref, n_lin = law_arguments(law, st)
     out = np.zeros((st.m, 2))
     mu = np.broadcast_to(np.asarray(mu, dtype=float), (st.m,))
     for k, (side, chain) in enumerate(chains(st)):
@@ -89,5 +116,7 @@ def bounds(st, fell, top, tension, f_top, h, mu):
             u_int = (lo - p) / np.linalg.norm(lo - p)
             u_ext = (hi - p) / np.linalg.norm(hi - p)
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
-            out[c, side] = mu[c] * (ten[i] + ten[i + 1]) * np.tan(delta / 2)
+            load = ten[i] + ten[i + 1]
+            out[c, side] = howell_bound(load, delta, mu[c], index[c], n_ref, n_lin) / np.cos(
+                delta / 2)
     return out

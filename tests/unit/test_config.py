@@ -279,6 +279,62 @@ def test_friction_too_large(tmp_path, value):
     config_error(tmp_path, f"[yarn] friction = {value!r}", "[0, 2)", yarn={"friction": value})
 
 
+def test_howell_friction_law_is_read_and_echoed(tmp_path):
+    cfg = load_config(make_case(tmp_path, yarn={"friction": 0.2, "friction_law": "howell",
+                                                "howell_index": 0.85,
+                                                "howell_reference_force": 0.5}))
+    y = cfg.yarn
+    assert (y.friction_law, y.howell_index, y.howell_reference_force) == ("howell", 0.85, 0.5)
+    echo = dump_config(cfg)["yarn"]
+    assert (echo["friction_law"], echo["howell_index"], echo["howell_reference_force"]) == (
+        "howell", 0.85, 0.5)
+    # the reference force defaults to 1 N, and Amontons stays the default law
+    assert load_config(make_case(tmp_path, yarn={"friction_law": "howell", "howell_index": 0.9})
+                       ).yarn.howell_reference_force == 1.0
+    assert load_config(make_case(tmp_path)).yarn.friction_law == "amontons"
+
+
+@pytest.mark.parametrize("law", [{}, {"friction_law": "howell", "howell_index": 0.85,
+                                      "howell_reference_force": 0.5}])
+def test_the_friction_law_echo_reads_back_as_the_same_yarn(tmp_path, law):
+    """The echo written as a config (as ``preform design`` writes one, absent values left out)
+    loads to the same [yarn]: Howell's keys are echoed under Howell's law only."""
+    cfg = load_config(make_case(tmp_path, yarn={"friction": 0.2, **law}))
+    echo = dump_config(cfg)["yarn"]
+    again = load_config(make_case(tmp_path, name="again", yarn={
+        k: (v if v is not None else DROP) for k, v in echo.items()}))
+    assert again.yarn == cfg.yarn
+
+
+def test_friction_law_choice_with_suggestion(tmp_path):
+    config_error(tmp_path, '[yarn] friction_law = "howel"', "did you mean 'howell'",
+                 '"amontons", "howell"', yarn={"friction_law": "howel"})
+
+
+def test_howell_needs_its_index(tmp_path):
+    config_error(tmp_path, '[yarn] friction_law = "howell"', "needs howell_index", "0 < n <= 1",
+                 yarn={"friction_law": "howell"})
+
+
+@pytest.mark.parametrize("value", [0, -0.5, 1.2])
+def test_howell_index_outside_zero_to_one(tmp_path, value):
+    config_error(tmp_path, f"[yarn] howell_index = {value!r}", "0 < n <= 1",
+                 yarn={"friction_law": "howell", "howell_index": value})
+
+
+@pytest.mark.parametrize("key, value", [("howell_index", 0.8), ("howell_reference_force", 1.0)])
+def test_howell_keys_need_the_howell_law(tmp_path, key, value):
+    config_error(tmp_path, f"[yarn] {key} = {value!r}", 'applies to friction_law = "howell" only',
+                 '"amontons"', yarn={key: value})
+
+
+@pytest.mark.parametrize("value", [0, -1.0, 5e-5, 2000.0])
+def test_howell_reference_force_out_of_range(tmp_path, value):
+    config_error(tmp_path, f"[yarn] howell_reference_force = {value!r}", "N",
+                 yarn={"friction_law": "howell", "howell_index": 0.8,
+                       "howell_reference_force": value})
+
+
 def test_stl_unit_choice(tmp_path):
     config_error(tmp_path, '[mandrel] stl_unit = "cm"', 'expected one of "m", "mm"',
                  mandrel={"stl_unit": "cm"})

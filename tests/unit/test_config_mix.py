@@ -199,3 +199,18 @@ def test_a_layer_keeps_the_pattern_dividing_its_group(tmp_path):
     with pytest.raises(ConfigError, match=r"\[\[layer\]\] 1 \[machine\] carrier_yarns .* a pattern "
                                           r"of 4 does not divide the 6 carriers"):
         load_config(path)
+
+
+@pytest.mark.parametrize("key, value", [("friction_law", "howell"), ("howell_index", 0.8),
+                                        ("howell_reference_force", 0.5)])
+def test_a_yarn_type_refuses_the_friction_laws_keys(tmp_path, key, value):
+    """The crossings' law is the run's ([yarn]); a type's and a pair's friction are its
+    coefficient at the reference force."""
+    error(tmp_path, f'[[yarn_type]] "polyester" {key}', "set it once in [yarn]",
+          types=({**POLYESTER, key: value},))
+
+
+def test_a_howell_mix_loads_with_the_law_of_yarn(tmp_path):
+    cfg = load_config(case(tmp_path, yarn={"friction_law": "howell", "howell_index": 0.8},
+                           pairs=({"types": ["yarn", "polyester"], "friction": 0.15},)))
+    assert cfg.yarn.friction_law == "howell" and cfg.yarn.howell_index == 0.8

@@ -17,11 +17,11 @@ import scipy.sparse as sp
 
 from support import naive_frontal as naive
 from preform._kernels import frontal as frontal_kernels
-from preform.config import MachineConfig
+from preform.config import MachineConfig, YarnConfig
 from preform.errors import SimulationError
 from preform.geometry import shapes
 from preform.interaction import frontal, linalg
-from preform.interaction.contact import psi as friction_function
+from preform.interaction.contact import CrossingFriction, psi as friction_function
 from preform.geometry.mandrel import mandrel_from_arrays
 from preform.interaction.mandrel_distance import NEAR, MandrelDistance, NearSettings
 from preform.interaction.model import InteractionZone, creation_point
@@ -74,8 +74,8 @@ def run_zone(mu=0.2, tension=4.7, steps=60, carriers=16, settings=None, solve_zo
     distance (no wall)."""
     mc = MachineConfig(carriers=carriers, spool_radius=0.3, angular_speed=0.2309401, pattern="regular")
     machine = Machine.from_config(mc)
-    cfg = NS(yarn=NS(width=4e-3, thickness=2.5e-4, tension=tension, friction=mu, ring_friction=0.0),
-             machine=mc)
+    cfg = NS(yarn=YarnConfig(width=4e-3, thickness=2.5e-4, tension=tension, friction=mu,
+                             ring_friction=0.0), machine=mc)
     distance = MandrelDistance(_Mandrel(), near) if wall else _cylinder_distance
     zone = InteractionZone(cfg, machine, None, distance=distance, settings=settings,
                            solve_zone=solve_zone)
@@ -438,9 +438,27 @@ def test_linear_solver_auto_is_cholmod_when_cvxopt_imports_else_superlu():
             linalg.backend("cholmod")
 
 
-def test_tension_bound_and_psi_kernels_match_numpy_twins():
+#: the friction laws the kernels are checked with: Amontons, Howell at n = 0.8 (N_ref 1 N), and
+#: Howell with its linear part reaching a share of the crossings (N below 0.15 of N_ref = 2 N:
+#: 0.3 N; these crossings press with 0.1-0.9 N)
+LAWS = {"amontons": CrossingFriction(coefficient=0.3),
+        "howell": CrossingFriction(law="howell", coefficient=0.3, index=0.8),
+        "howell linear": CrossingFriction(law="howell", coefficient=0.3, index=0.7,
+                                          reference_force=2.0, linear_below=0.15),
+        # per pair: the warp yarns alternate between two types, each pair its own law
+        "howell pairs": CrossingFriction(
+            law="howell", coefficient=0.3, index=0.8,
+            yarn_type=np.array([k % 2 for k in range(8)] + [0] * 8),
+            pair_coefficient=np.array([[0.6, 0.45], [0.45, 0.8]]),
+            pair_index=np.array([[0.8, 0.9], [0.9, 1.0]]))}
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+def test_tension_bound_and_psi_kernels_match_numpy_twins(law):
     """Segment tensions, friction bounds and Psi / (f_int + f_ext) of the kernels against the
-    NumPy twins (Psi from the vectorised tension form ``interaction.contact.psi``)."""
+    NumPy twins (Amontons' Psi from the vectorised tension form ``interaction.contact.psi``;
+    Howell's bound from ``naive_frontal.howell_bound``, written as a N^n)."""
+    law = LAWS[law]
     zone, bc = _perturbed()
     st = zone.state
     net, f_top = _net(zone, bc)
@@ -453,19 +471,41 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins():
     # every crossing its own coefficient (mixed yarns), against the twin
     mu = np.random.default_rng(5).uniform(0.0, 0.6, st.m)
     frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
-                                    bc.fell, bc.top, net.tension, f_top, bc.h, mu, bound, psi)
-    assert np.allclose(bound, naive.bounds(st, bc.fell, bc.top, net.tension, f_top, bc.h, mu),
+                                    bc.fell, bc.top, net.tension, f_top, bc.h,
+                                    *law.kernel_arguments(st.yarn[: st.m]), bound, psi)
+    # the same law by two codes (half angles from dot products against arccos and tan):
+    # rounding of unit vectors, 1e-15, amplified near straight yarns
+    assert np.allclose(bound, naive.bounds(st, bc.fell, bc.top, net.tension, f_top, bc.h, law),
                        rtol=1e-9)
     psi_ref = np.empty((st.m, 2))
+    normal = np.empty((st.m, 2))
     for k, (side, chain) in enumerate(naive.chains(st)):
         pts = naive.polyline(st, k, side, chain, bc.fell, bc.top, bc.h)
         ten = [net.tension[c, side] for c in chain] + [f_top[k]]
         for i, c in enumerate(chain):
             u_int, u_ext = pts[i] - pts[i + 1], pts[i + 2] - pts[i + 1]
             u_int, u_ext = u_int / np.linalg.norm(u_int), u_ext / np.linalg.norm(u_ext)
-            psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext, mu[c]) / (
-                ten[i] + ten[i + 1])
+            load = ten[i] + ten[i + 1]
+            delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1.0, 1.0))
+            normal[c, side] = load * np.sin(delta / 2)
+            if law.yarn_type is not None:
+                a, b = law.yarn_type[st.yarn[c]]
+                mu, index = law.pair_coefficient[a, b], law.pair_index[a, b]
+            else:
+                mu, index = law.coefficient, law.index
+            if law.law == "amontons":
+                psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext,
+                                                     law.coefficient) / load
+            else:
+                bound = naive.howell_bound(load, delta, mu, index, law.reference_force, law.n_lin)
+                psi_ref[c, side] = (abs(ten[i] - ten[i + 1]) * np.cos(delta / 2) - bound) / load
     assert np.any(psi_ref > 0) and np.any(psi_ref < 0)     # both sides of the cone seen
+    if law.yarn_type is not None:
+        # more than one pair's law among the crossings
+        assert len(np.unique(law.per_crossing(st.yarn[: st.m])[0])) >= 2
+    if law.linear_below > 0.01:
+        # both branches of the law seen
+        assert 0.1 < np.mean(normal < law.n_lin) < 0.9
     # the same formula evaluated by two codes: double rounding of unit vectors (1e-15)
     assert np.allclose(psi, psi_ref, rtol=0, atol=1e-12)
 

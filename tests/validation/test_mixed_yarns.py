@@ -203,6 +203,17 @@ def test_every_yarn_pulls_at_its_types_tension_and_slides_at_its_pairs_friction(
     np.testing.assert_array_equal(bc.ring_frictions(), np.where(kinds == 1, 0.3, 0.0))
     yarn = np.array([[0, n // 2], [1, n // 2 + 1], [0, n // 2 + 1], [3, n // 2 + 2]])
     np.testing.assert_array_equal(bc.crossing_mu(yarn), [0.2, 0.5, 0.35, 0.35])
+    # the law the bounds' kernels take: the same coefficients, Amontons' index for every pair
+    mu, index = bc.friction.per_crossing(yarn)
+    np.testing.assert_array_equal(mu, [0.2, 0.5, 0.35, 0.35])
+    np.testing.assert_array_equal(index, [1.0] * 4)
+    # under Howell's law the pairs keep their coefficients, at [yarn]'s index
+    howell = dataclasses.replace(cfg, yarn=dataclasses.replace(
+        cfg.yarn, friction_law="howell", howell_index=0.8))
+    hb = InteractionZone(howell, machine).boundary(0.0, np.zeros((n, 3)))
+    mu, index = hb.friction.per_crossing(yarn)
+    np.testing.assert_array_equal(mu, [0.2, 0.5, 0.35, 0.35])
+    np.testing.assert_array_equal(index, [0.8] * 4)
     snap = KinematicZone(cfg, machine).snapshot(0.0, np.zeros((n, 3)))
     np.testing.assert_array_equal(snap.tension_N, np.where(kinds == 1, 3.0, 4.7))
 

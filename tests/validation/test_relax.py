@@ -27,6 +27,7 @@ from preform._kernels import stiffness as SK
 from preform._kernels import zone as KZ
 from preform.interaction import frontal, relax as R
 from preform.interaction import preconditioners as PC
+from preform.interaction.contact import CrossingFriction
 from preform.interaction.settings import DEFAULT
 
 E = DEFAULT.energy
@@ -64,7 +65,7 @@ def _relax(st, bc, s_old, settings, plane="bc", pos=None, bounds=None, tol=None)
     return R.relax(R.lattice_of(st), st.pos[:m] if pos is None else pos, st.material[:m],
                    st.material_fell,
                    s_old[:m], bc.fell, bc.top, f0, b0 if bounds is None else bounds,
-                   f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width,
+                   f_spool=bc.f_spool, friction=bc.friction, h=bc.h, width=bc.width,
                    plane=bc.plane if plane == "bc" else plane, settings=settings, tol=tol)
 
 
@@ -161,9 +162,17 @@ def test_kernels_match_numpy_twins_and_the_newton_gradient(captured):
     assert np.allclose(W, diag, rtol=1e-13)   # the stiffness the wall residual uses
     # friction bounds against the Newton reference's twin
     gb, psi = np.empty((m, 2)), np.empty((m, 2))
+    howell = CrossingFriction(law="howell", coefficient=bc.friction.coefficient, index=0.75,
+                              reference_force=0.5)
+    for law in (bc.friction, howell):
+        RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top,
+                           *law.kernel_arguments(lat.yarn), gb, psi)
+        assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, law),
+                           rtol=1e-9, atol=1e-12)
     # every crossing its own coefficient (mixed yarns), against the twin
     mu = np.random.default_rng(3).uniform(0.0, 0.5, m)
-    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top, mu, gb, psi)
+    RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top, ten, f_top, mu,
+                       np.ones(m), 1.0, 1e-3, gb, psi)
     assert np.allclose(gb, naive_frontal.bounds(st, fell, top, ten, f_top, bc.h, mu),
                        rtol=1e-9, atol=1e-12)
 

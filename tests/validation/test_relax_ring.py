@@ -269,7 +269,7 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
     b0, f0 = R.start_bounds(st, bc)
     rs = R.RelaxSettings(max_iter=300, ring_stall=60)
     res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old[:m],
-                  bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
+                  bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
                   width=bc.width, plane=bc.plane,
                   settings=dataclasses.replace(rs, preconditioner=rs.ring_preconditioner),
                   model=model, top_tensions=R.ring_top_tensions(st, bc),

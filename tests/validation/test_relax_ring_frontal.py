@@ -102,7 +102,7 @@ def test_structure_is_shared_only_by_the_same_lattice(ring_step):
     b0, f0 = R.start_bounds(st, bc)
     full = R.RelaxSettings(preconditioner="full")
     args = (lat, st.pos[:m], st.material[:m], st.material_fell, s_old, bc.fell, bc.top, f0, b0)
-    kw = dict(f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width, plane=bc.plane)
+    kw = dict(f_spool=bc.f_spool, friction=bc.friction, h=bc.h, width=bc.width, plane=bc.plane)
     PC.BlockStiffness._last = None
     first = R.relax(*args, settings=full, **kw)
     assert PC.BlockStiffness._last is not None

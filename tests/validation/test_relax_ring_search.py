@@ -223,7 +223,7 @@ def test_steps_the_plain_iteration_stalls_on_land_on_newton(mu, steps, carriers,
     b0, f0 = R.start_bounds(st, bc)
     args = (R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old, bc.fell,
             bc.top, f0, b0)
-    kw = dict(f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width, plane=bc.plane)
+    kw = dict(f_spool=bc.f_spool, friction=bc.friction, h=bc.h, width=bc.width, plane=bc.plane)
     base = R.RelaxSettings()
     full = dataclasses.replace(base, preconditioner=base.ring_preconditioner)
     plain = R.relax(*args, settings=dataclasses.replace(full, **PLAIN), **kw)

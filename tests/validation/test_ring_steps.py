@@ -140,7 +140,8 @@ def test_every_crossing_meets_its_converged_friction_bounds(mu, runs):
     for rep, st, bc, fresh, _ in runs(mu):
         if not st.m:
             continue
-        g = naive_frontal.bounds(st, bc.fell, bc.top, st.tension[: st.m], rep.f_top, bc.h, bc.mu)
+        g = naive_frontal.bounds(st, bc.fell, bc.top, st.tension[: st.m], rep.f_top, bc.h,
+                                 bc.friction)
         step_worst = -np.inf
         for c in range(st.m):
             seen += 1

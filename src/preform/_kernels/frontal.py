@@ -50,6 +50,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .friction import crossing_coefficient
+
 
 @njit(cache=True)
 def yarn_point(pos, normal, over, c, side, h, out):
@@ -442,12 +444,13 @@ def tensions(m, yarn, pos, normal, over, low, fell, material, material_fell, EA,
 
 
 @njit(cache=True)
-def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, bound,
-                    psi):
-    """Per crossing and yarn the friction bound mu (f_int + f_ext) tan(delta/2) (N) of the
+def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_top, h, mu, index,
+                    n_ref, n_lin, bound, psi):
+    """Per crossing and yarn the friction bound mu_c (f_int + f_ext) tan(delta/2) (N) of the
     current geometry and tensions into bound (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
-    Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2); mu (m,): each crossing's coefficient
-    (``interaction.contact.crossing_friction``)."""
+    Psi = |F^t| - mu_c |F^n| (paper §2.2), into psi (m, 2). mu_c is the crossing's law at the
+    yarn's normal force |F^n| = (f_int + f_ext) sin(delta/2) (``friction.crossing_coefficient``):
+    mu (m,) its coefficient at n_ref (N), index (m,) Howell's index (1: Amontons), n_lin (N)."""
     p = np.empty(3)
     a = np.empty(3)
     b = np.empty(3)
@@ -462,8 +465,9 @@ def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_t
             _end_point(pos, normal, over, u, side, k, top, h, b)
             ch, sh = half_angles(deflection_dot(p, a, b))
             tot = max(fi + fe, 1e-300)
-            bound[c, side] = mu[c] * (fi + fe) * sh / max(ch, 1e-300)
-            psi[c, side] = (abs(fi - fe) * ch - mu[c] * (fi + fe) * sh) / tot
+            mu_c = crossing_coefficient((fi + fe) * sh, mu[c], index[c], n_ref, n_lin)
+            bound[c, side] = mu_c * (fi + fe) * sh / max(ch, 1e-300)
+            psi[c, side] = (abs(fi - fe) * ch - mu_c * (fi + fe) * sh) / tot
 
 
 @njit(cache=True)

@@ -29,6 +29,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .friction import crossing_coefficient
+
 
 
 @njit(cache=True)
@@ -382,11 +384,13 @@ def wall_distance(m, pos, plane, out):
 
 
 @njit(cache=True)
-def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_top, mu, g, psi):
-    """Friction bound g = mu (f_int + f_ext) tan(delta/2) (N) of every crossing and yarn for the
+def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_top, mu, index,
+                    n_ref, n_lin, g, psi):
+    """Friction bound g = mu_c (f_int + f_ext) tan(delta/2) (N) of every crossing and yarn for the
     current geometry and tensions into g (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
-    Psi = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2), into psi (m, 2); mu
-    (m,): each crossing's coefficient (``interaction.contact.crossing_friction``).
+    Psi = |f_int - f_ext| cos(delta/2) - mu_c (f_int + f_ext) sin(delta/2), into psi (m, 2).
+    mu_c is the crossing's law at the yarn's normal force (f_int + f_ext) sin(delta/2)
+    (``friction.crossing_coefficient``: mu (m,) at n_ref N, index (m,), n_lin N).
     ``delta`` from the yarn points (the top segment to the unsmoothed top point); a segment
     without length counts as straight."""
     for c in range(m):
@@ -409,8 +413,9 @@ def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_to
                 d = min(1.0, max(-1.0, (ax * bx + ay * by + az * bz) / (la * lb)))
             ch = math.sqrt(max(0.5 * (1.0 - d), 0.0))
             sh = math.sqrt(max(0.5 * (1.0 + d), 0.0))
-            g[c, side] = mu[c] * (fi + fe) * sh / max(ch, 1e-300)
-            psi[c, side] = (abs(fi - fe) * ch - mu[c] * (fi + fe) * sh) / max(fi + fe, 1e-300)
+            mu_c = crossing_coefficient((fi + fe) * sh, mu[c], index[c], n_ref, n_lin)
+            g[c, side] = mu_c * (fi + fe) * sh / max(ch, 1e-300)
+            psi[c, side] = (abs(fi - fe) * ch - mu_c * (fi + fe) * sh) / max(fi + fe, 1e-300)
 
 
 # -- the block preconditioner: each crossing's 3 x 3 stiffness, coupled along the lattice -------

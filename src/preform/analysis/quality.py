@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..interaction.contact import CrossingFriction
 from ..result import FLAG_BRIDGE, FLAG_CATCH, FLAG_SLIP
 from .interlacing import INTERLACING, InterlacingSettings
 
@@ -250,7 +251,7 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
                          2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
-def snapshot_checks(snap, mu, kinds=None) -> tuple[float, float]:
+def snapshot_checks(snap, mu, kinds=None, law=None) -> tuple[float, float]:
     """(largest imbalance / the snapshot's largest tension, largest Psi / tension) of a
     convergence-zone snapshot, from its own arrays as a reader of ``convergence.pvd`` sees them.
 
@@ -262,7 +263,12 @@ def snapshot_checks(snap, mu, kinds=None) -> tuple[float, float]:
     beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone).
 
     mu: the yarn-yarn friction, or with ``kinds`` (n_yarns,) every yarn's type, the (nt, nt)
-    table of every pair of types (``Config.pair_friction``): each crossing its pair's."""
+    table of every pair of types (``Config.pair_friction``): each crossing its pair's; or an
+    ``interaction.contact.CrossingFriction`` (its coefficient, and it is ``law``). law: the
+    crossings' friction law (None: Amontons), whose coefficient at the yarn's normal force
+    ``(f_lo + f_hi) sqrt((1 + cos beta) / 2)`` is ``mu`` times ``(N / N_ref)^(n - 1)``."""
+    if isinstance(mu, CrossingFriction):
+        mu, law = mu.coefficient, mu
     P = np.asarray(snap.points, dtype=float)
     off = np.asarray(snap.offsets, dtype=np.int64)
     cid = np.asarray(snap.contact_id, dtype=np.int64)
@@ -290,26 +296,28 @@ def snapshot_checks(snap, mu, kinds=None) -> tuple[float, float]:
         mu = np.asarray(mu, dtype=float)[lo_type, hi_type][at]
     imbalance = np.linalg.norm(net, axis=1) / float(np.max(ten))
     cb = np.clip(np.einsum("ij,ij->i", u_lo, u_hi), -1.0, 1.0)
-    psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0)
-           - mu * (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)) / np.maximum(f_lo, f_hi)
+    normal = (f_lo + f_hi) * np.sqrt((1.0 + cb) / 2.0)
+    if law is not None and law.index != 1.0:
+        mu = mu * (np.maximum(normal, law.n_lin) / law.reference_force) ** (law.index - 1.0)
+    psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0) - mu * normal) / np.maximum(f_lo, f_hi)
     return float(imbalance.max()), float(psi.max())
 
 
 def snapshot_reasons(snapshots, mu, settings: QualitySettings = QUALITY,
-                     width: float | None = None, kinds=None) -> list[str]:
+                     width: float | None = None, kinds=None, law=None) -> list[str]:
     """Reasons to doubt the written convergence-zone snapshots, one a kind (the worst snapshot
     and how many): crossings out of balance beyond ``max_snapshot_imbalance``
     (:func:`snapshot_checks`), a slack segment, and, where a re-balance checked the snapshot
     (``Snapshot.rebalanced``): the re-balanced copy outside the friction cone
     (``max_snapshot_psi``), the re-balance failing, or the written crossings further than
     ``max_snapshot_shift_widths`` yarn widths (``width``, m) from the re-balanced ones. A
-    snapshot without a re-balanced copy is checked for the friction cone itself. mu, kinds: as
-    :func:`snapshot_checks`."""
+    snapshot without a re-balanced copy is checked for the friction cone itself. mu, kinds,
+    law: as :func:`snapshot_checks`."""
     found = {"imbalance": [], "psi": [], "slack": [], "failed": [], "shift": []}
     for snap in snapshots:
-        imbalance, psi = snapshot_checks(snap, mu, kinds)
+        imbalance, psi = snapshot_checks(snap, mu, kinds, law)
         if snap.rebalanced is not None:
-            psi = snapshot_checks(snap.rebalanced, mu, kinds)[1]
+            psi = snapshot_checks(snap.rebalanced, mu, kinds, law)[1]
         ten = np.asarray(snap.tension_N, dtype=float)
         shift = float(snap.rebalance_shift_m)
         t = snap.time_s
@@ -381,10 +389,12 @@ def assess(result, settings: QualitySettings = QUALITY, interlacing=False) -> di
                                    settings)
     if result.snapshots and result.config is not None:
         cfg = result.config
+        law = CrossingFriction.of_yarn(cfg.yarn)
         if getattr(cfg, "is_mixed", False):   # every crossing's pair friction
             reasons += snapshot_reasons(result.snapshots, cfg.pair_friction()[0], settings,
-                                        width=float(cfg.yarn.width), kinds=cfg.carrier_types())
+                                        width=float(cfg.yarn.width), kinds=cfg.carrier_types(),
+                                        law=law)
         else:
             reasons += snapshot_reasons(result.snapshots, float(cfg.yarn.friction), settings,
-                                        width=float(cfg.yarn.width))
+                                        width=float(cfg.yarn.width), law=law)
     return verdict(reasons)

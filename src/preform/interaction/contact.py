@@ -10,9 +10,15 @@ form :func:`psi_frame`): a yarn sticks while ``Psi <= 0`` and slips on ``Psi = 0
 discrete Capstan law ``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)`` (:func:`cone_ratio`).
 The frontal solver (``interaction/frontal.py``) imposes it at every crossing through the friction
 bounds of ``_kernels.frontal.friction_bounds``; these vectorised forms are its reference.
+
+The coefficient ``mu`` is the crossing's friction law at its normal force ``|F^n| = (f_int +
+f_ext) sin(delta/2)`` (:class:`CrossingFriction`, ``_kernels.friction``): ``[yarn] friction``
+for Amontons, ``friction (|F^n| / N_ref)^(n - 1)`` for Howell's ``F^t <= a N^n``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -114,3 +120,88 @@ def bound_change(up, yarn, tension, f_top, new, old, floor) -> float:
     crossing's scale (:func:`bound_scale`: ``f_int + f_ext``, the scale of the friction law, at
     least ``floor`` times the yarn's top tension)."""
     return float(np.max(np.abs(new - old) / bound_scale(up, yarn, tension, f_top, floor)))
+
+
+@dataclass(frozen=True, eq=False)
+class CrossingFriction:
+    """The friction law at the yarn-yarn crossings, as the friction bounds' kernels take it
+    (``_kernels.friction.crossing_coefficient``, docs/theory.md §4): a yarn pressed with the
+    normal force ``N`` carries a friction force up to ``mu N`` (Amontons) or ``a N^n`` (Howell),
+    ``a = mu N_ref^(1 - n)``. The coefficient and the index are per crossing at the kernels
+    (:meth:`per_crossing`): from the tables over the two yarns' types where ``yarn_type`` is
+    given, else the run's one ``coefficient`` and ``index``."""
+
+    #: "amontons" or "howell" (``config.FRICTION_LAWS``)
+    law: str = "amontons"
+    #: the friction coefficient at ``reference_force`` (Amontons: at every force)
+    coefficient: float = 0.0
+    #: Howell's index n, 0 < n <= 1 (1: Amontons, whatever ``reference_force``)
+    index: float = 1.0
+    #: N, the normal force at which ``coefficient`` is the law's
+    reference_force: float = 1.0
+    #: fraction of ``reference_force`` below which the coefficient is held at its value there
+    #: (the bound linear in N with a finite slope at N = 0, where N^n has an infinite one): at
+    #: n = 0.8 it caps the coefficient at 4x ``coefficient``; the crossings of a 16-carrier
+    #: cylinder at 1-8 N spool tension press with 4 mN to 0.12 N, so only nearly straight
+    #: yarns reach it at the default 1 N reference
+    linear_below: float = 1e-3
+    #: (2n,) int, every yarn's type (an index into the tables), or None: one coefficient
+    yarn_type: np.ndarray | None = None
+    #: (k, k) coefficients and indices of each pair of types (symmetric), with ``yarn_type``
+    pair_coefficient: np.ndarray | None = None
+    pair_index: np.ndarray | None = None
+
+    @classmethod
+    def of_yarn(cls, yarn) -> "CrossingFriction":
+        """The law of a ``config.YarnConfig``'s ``friction``, ``friction_law``, ``howell_index``
+        and ``howell_reference_force``."""
+        howell = yarn.friction_law == "howell"
+        return cls(law=yarn.friction_law, coefficient=float(yarn.friction),
+                   index=float(yarn.howell_index) if howell else 1.0,
+                   reference_force=float(yarn.howell_reference_force) if howell else 1.0)
+
+    @property
+    def n_lin(self) -> float:
+        """N, the normal force below which the bound is linear (``linear_below`` of the
+        reference force)."""
+        return self.linear_below * self.reference_force
+
+    def per_crossing(self, yarn) -> tuple[np.ndarray, np.ndarray]:
+        """(coefficient (m,), index (m,)) float64 of the crossings of ``yarn`` (m, 2), the
+        warp and weft yarn of each crossing, for the kernels."""
+        yarn = np.asarray(yarn)
+        m = len(yarn)
+        if self.yarn_type is None:
+            return np.full(m, float(self.coefficient)), np.full(m, float(self.index))
+        a, b = self.yarn_type[yarn[:, 0]], self.yarn_type[yarn[:, 1]]
+        return (np.ascontiguousarray(self.pair_coefficient[a, b], dtype=float),
+                np.ascontiguousarray(self.pair_index[a, b], dtype=float))
+
+    def coefficient_at(self, normal, yarn=None) -> np.ndarray:
+        """The coefficient (...) at the normal forces ``normal`` (..., N) of the crossings of
+        ``yarn`` (..., 2) (needed where ``yarn_type`` is given); the NumPy form of
+        ``_kernels.friction.crossing_coefficient``."""
+        if self.yarn_type is None:
+            mu, index = float(self.coefficient), float(self.index)
+        else:
+            mu, index = self.per_crossing(np.asarray(yarn).reshape(-1, 2))
+            mu, index = mu.reshape(np.shape(normal)), index.reshape(np.shape(normal))
+        N = np.maximum(np.asarray(normal, dtype=float), self.n_lin)
+        return mu * (N / float(self.reference_force)) ** (index - 1.0)
+
+    def kernel_arguments(self, yarn) -> tuple:
+        """(mu (m,), index (m,), n_ref, n_lin): the law's arguments of the friction bounds'
+        kernels for the crossings of ``yarn`` (m, 2)."""
+        mu, index = self.per_crossing(yarn)
+        return mu, index, float(self.reference_force), float(self.n_lin)
+
+    def describe(self) -> str:
+        """The law and its parameters in one line, for ``preform check``."""
+        if self.law != "howell":
+            return f"Amontons, F_t <= mu N, mu = {self.coefficient:g}"
+        a = self.coefficient * self.reference_force ** (1.0 - self.index)
+        return (f"Howell, F_t <= a N^n, n = {self.index:g}, mu = {self.coefficient:g} at N_ref = "
+                f"{self.reference_force:g} N (a = {a:.4g} N^{1.0 - self.index:.3g}; "
+                f"mu at 0.01 N {float(self.coefficient_at(0.01)):.3g}, at 0.1 N "
+                f"{float(self.coefficient_at(0.1)):.3g}; crossings press with a few mN to 0.1 N, "
+                "docs/theory.md §4)")

@@ -7,8 +7,8 @@ Every yarn carries a material coordinate (m of yarn from a point of its deposite
 that material does not move through it during the step (``material = centre``, its friction
 centre): for inextensible yarns with fixed neighbours this is the paper's "Eulerian angles fixed
 while sticking", and it holds the crossing where it was on its yarns. A yarn *slips* when material
-passes; the friction force then is on the Amontons bound, opposing the sliding. The paper's
-force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
+passes; the friction force then is on the bound of its friction law, opposing the sliding. The
+paper's force/position sweeps (its Fig. 10) are replaced by this formulation because, as a map, that
 iteration diverges on realistic machines (``docs/decisions.md``).
 
 One time step is the minimum of an energy over the crossing positions ``C`` and the material
@@ -25,7 +25,9 @@ of slack segments, see there). The constants below are fields of
 * the spool pays yarn out at the top tension ``f_top`` (the spool tension, or Capstan ``exp(-mu_r
   eta)`` times it behind the guide ring, paper eq. 9);
 * friction at every crossing and yarn is ``bound |u - centre|``, the work of the friction force
-  against the sliding, with the bound ``mu (f_int + f_ext) tan(delta/2)`` held fixed: its
+  against the sliding, with the bound ``mu (f_int + f_ext) tan(delta/2)`` held fixed (``mu`` the
+  crossing's law at its normal force, ``Boundary.friction``: Amontons' constant or Howell's
+  ``friction (N / N_ref)^(n - 1)``): its
   stationarity ``f_int - f_ext in bound d|u - centre|`` *is* the discrete Capstan law of
   docs/theory.md §4 (``|f_int - f_ext| <= mu (f_int + f_ext) tan(delta/2)``, equality while slipping, on the
   side that opposes the sliding). ``|x|`` is smoothed to ``sqrt(x^2 + eps^2) - eps`` (``eps =
@@ -82,6 +84,7 @@ to the next: that history is what makes the model differ from a frictionless one
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import math
@@ -93,7 +96,7 @@ import scipy.sparse as sp
 from .._kernels import frontal as frontal_kernels
 from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
-from .contact import bound_change, bound_scale, crossing_friction
+from .contact import CrossingFriction, bound_change, bound_scale, crossing_friction
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
 
@@ -113,7 +116,9 @@ class Boundary:
     (``_kernels.frontal.top_tensions``). Mixed yarns (``[[yarn_type]]``): yarn_type (2n,) int64,
     every yarn's type; pair_mu (nt, nt), the yarn-yarn friction of every pair of types;
     type_tension, type_ring_friction (nt,), every type's spool tension (N) and yarn-ring friction;
-    None: every yarn is [yarn], with f_spool, mu and mu_r.
+    None: every yarn is [yarn], with f_spool, mu and mu_r. law: the crossings' friction law
+    (``contact.CrossingFriction``: Howell's index and reference force; None: Amontons), whose
+    coefficients are mu or pair_mu (:attr:`friction`).
     """
 
     fell: np.ndarray
@@ -132,6 +137,20 @@ class Boundary:
     pair_mu: np.ndarray | None = None
     type_tension: np.ndarray | None = None
     type_ring_friction: np.ndarray | None = None
+    law: CrossingFriction | None = None
+
+    @property
+    def friction(self) -> CrossingFriction:
+        """The crossings' friction law with this boundary's coefficients (``mu``, or ``pair_mu``
+        over the yarns' types, each pair at the law's one index), as the bounds' kernels take it
+        (``CrossingFriction.kernel_arguments``)."""
+        law = CrossingFriction() if self.law is None else self.law
+        law = dataclasses.replace(law, coefficient=float(self.mu))
+        if self.pair_mu is None:
+            return law
+        pair = np.asarray(self.pair_mu, dtype=float)
+        return dataclasses.replace(law, yarn_type=np.asarray(self.yarn_type), pair_coefficient=pair,
+                                   pair_index=np.full_like(pair, law.index))
 
     def crossing_mu(self, yarn) -> np.ndarray:
         """(m,) float64: the yarn-yarn friction of every crossing of the two yarns ``yarn`` (m, 2)
@@ -313,7 +332,7 @@ class _Network:
                                      f_top)
         frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
                                         bc.fell, bc.top, self.tension, f_top, bc.h,
-                                        bc.crossing_mu(st.yarn[:st.m]), bound, psi)
+                                        *bc.friction.kernel_arguments(st.yarn[:st.m]), bound, psi)
         return bound, psi, f_top
 
     def balance(self, tol, max_steps):

@@ -78,6 +78,7 @@ from ..kinematic import KinematicZone
 from ..result import Snapshot
 from ..zone import ZoneStep, solver_of
 from . import frontal, step_check
+from .contact import CrossingFriction
 from .ring import ring_arguments, ring_point
 from .mandrel_distance import MandrelDistance
 from .settings import DEFAULT, InteractionSettings
@@ -121,6 +122,7 @@ class InteractionZone:
         self.h = 0.5 * float(y.thickness)
         self.width = float(y.width)
         self.mu = float(y.friction)
+        self.friction_law = CrossingFriction.of_yarn(y)   # the crossings' friction law
         self.mu_r = float(y.ring_friction)
         self.f_spool = float(y.tension)
         # mixed yarns: every yarn's type, and the friction and tension of the types
@@ -219,7 +221,7 @@ class InteractionZone:
                                 top=top, spool=m.spool_points(t),
                                 f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
                                 has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring,
-                                **self.types)
+                                **self.types, law=self.friction_law)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
         t1 = t0 + dt

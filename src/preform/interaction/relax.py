@@ -168,15 +168,15 @@ class RelaxResult:
     posed: object = None
 
 
-def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
+def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, friction, h,
           width, plane=None, settings: RelaxSettings = DEFAULT.relax,
           model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False,
           tol=None, bound_iterations=None, friction_tol=None):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
-    (held unless ``consistent``), f_spool N, mu (m,) every crossing's yarn-yarn friction (a
-    number: the same at every crossing), h m half the yarn thickness,
+    (held unless ``consistent``), f_spool N, friction the crossings' law
+    (``contact.CrossingFriction``), h m half the yarn thickness,
     width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
@@ -199,8 +199,8 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     tol = model.newton.balance_tolerance if tol is None else float(tol)
     bound_iterations = fr.max_iterations - 1 if bound_iterations is None else int(bound_iterations)
     friction_tol = fr.friction_tolerance if friction_tol is None else float(friction_tol)
-    kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
-              model=model, tol=tol)
+    kw = dict(f_spool=f_spool, friction=friction, h=h, width=width, plane=plane,
+              settings=settings, model=model, tol=tol)
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
     if fresh is not None and not consistent and res.converged and m:
@@ -322,8 +322,8 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
     return bound_change(lat.up, lat.yarn, tension, f_top, new, old, floor)
 
 
-def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
-                h, width, plane, settings, model, tol):
+def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool,
+                friction, h, width, plane, settings, model, tol):
     """The iteration with the bounds and top tensions held (``relax``), to the relative
     residual ``tol``: sweep, forces and residual, then the preconditioner's update, wall step
     and mixing (``preconditioners``)."""
@@ -445,7 +445,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     g_new = np.empty((m, 2))
     psi = np.zeros((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, seg.d_below, seg.l_below, seg.d_top, tension,
-                       x.prob.f_top, _per_crossing(mu, m), g_new, psi)
+                       x.prob.f_top, *friction.kernel_arguments(lat.yarn), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
@@ -500,7 +500,7 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
-                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
+                friction=bc.friction, h=bc.h, width=bc.width, plane=bc.plane,
                 settings=rsc, model=settings,
                 top_tensions=ring_top_tensions(state, bc), consistent=True, tol=balance,
                 bound_iterations=max_iter - 1, friction_tol=friction_tol)
@@ -516,11 +516,6 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
 
 
 # -- adapter from the zone's state ------------------------------------------------------------
-
-def _per_crossing(mu, m) -> np.ndarray:
-    """(m,) float64 of a per-crossing friction array or one coefficient for every crossing."""
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (m,)))
-
 
 def lattice_of(state) -> Lattice:
     """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
@@ -555,7 +550,7 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     psi = np.empty((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top,
                        np.ascontiguousarray(state.tension[:m]), f_top,
-                       bc.crossing_mu(lat.yarn), g0, psi)
+                       *bc.friction.kernel_arguments(lat.yarn), g0, psi)
     old = state.bound[:m]
     return np.where(np.isfinite(old), old, g0), f_top
 
@@ -652,9 +647,8 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
-                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
-                settings=rs, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, friction=bc.friction,
+                h=bc.h, width=bc.width, plane=bc.plane, settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
                 fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes,
                 tol=balance)
