@@ -400,6 +400,18 @@ class RelaxSettings:
     #: slowly (a 48-carrier case-B-like step: 55 iterations, stalled at ring_stall; with 3, 18
     #: iterations and 2 factorisations; neutral on the bent tube's steps)
     ring_refactor_stall: int = 3
+    #: behind a guide ring the posed iteration's solves of a time step (``relax``'s
+    #: ``fresh``) start from the factorisation of K the last one left, where it was made for
+    #: the same wall active set: each re-solve starts where the last converged, with bounds a
+    #: few per cent or less apart, so that K is as good as a fresh one (the iteration
+    #: refreshes a stale K by ``ring_refactor_stall``); the factorisation is 61 % of the
+    #: solves' time on the bent tube's steps (docs/decisions.md, "Speed behind the ring")
+    reuse_factor: bool = True
+    #: the posed iteration's re-solves stop at this share of the change of the bounds and top
+    #: tensions that posed them (not below ``tol``), and the one it stops at is finished to
+    #: ``tol``: a bound the next solve replaces needs no geometry balanced beyond its own
+    #: change (an inexact fixed-point iteration); 0: every re-solve to ``tol``
+    posed_inexact: float = 0.1
     #: the full preconditioner's elimination order: "metis" (METIS's nested dissection of the
     #: lattice, pymetis, ~3 ms at 1230 crossings: 27 % less fill than "band" and half its
     #: factorisation work; bent tube 0.6 m end to end: 31 s of CPU against 40 s) or "band"
