@@ -261,7 +261,8 @@ def run_mode(args):
             print(f"{toml} run {i}: {wall:.1f} s ({cpu:.1f} s CPU, the process and its "
                   f"workers); " + ", ".join(
                 f"{k} {v:.1f}" for k, v in stages[-1].items()) + f"; status "
-                f"{summary.get('status')}, quality {quality.get('verdict', quality)}", flush=True)
+                f"{summary.get('status')}, quality {quality.get('verdict', quality)}"
+                + "".join(f"\n  reason: {r}" for r in quality.get("reasons", ())), flush=True)
         if walls:
             keys = stages[0].keys()
             print(f"{toml} median: {statistics.median(walls):.1f} s "
