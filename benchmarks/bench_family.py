@@ -3,8 +3,8 @@
 ``python benchmarks/bench_family.py [--quick] [--carriers 24] [--length 0.1] [--friction 0 0.25]
 [--parts bend30 s_tube ...] [--repeat 3]``
 
-Every part of the family (single bends of 30, 60 and 90 deg, S-bends from 0.15 m and from 30 mm
-of the tip, rectangle-to-circle and
+Every part of the family (single bends of 30, 60 and 90 deg, one of 35 deg and 0.45 m from 30 mm
+of the tip, S-bends from 0.15 m and from 30 mm of the tip, rectangle-to-circle and
 circle-to-rectangle transitions, a taper, the 744 mm S-bent tube of a user's part) on a
 case-B-like machine (ring 0.17 m, spool 0.85 m, 18 deg/s, 26.3 mm/s, tip 0.2 m beyond the
 ring), well-shaped in metres and with CAD slivers in millimetres, with the guide ring and

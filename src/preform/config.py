@@ -53,6 +53,9 @@ class MachineConfig:
     pattern: str = "regular"        # "diamond" | "regular" | "hercules"
     guide_ring: GuideRingConfig | None = None
     axial_yarns: int = 0            # triaxial braiding: yarns laid along the mandrel ([axial_yarn])
+    #: the yarn type of every carrier of a group: a pattern of type names repeated round each
+    #: group from its first carrier (warp and weft alike); ("yarn",): [yarn] on every carrier
+    carrier_yarns: tuple[str, ...] = ("yarn",)
 
     @property
     def pattern_m(self) -> int:
@@ -200,6 +203,31 @@ class LayerConfig:
         return {name: value for sec, name, value in self.overrides if sec == section}
 
 
+#: the name of the type ``[yarn]`` describes (the default of every carrier)
+BASE_TYPE = "yarn"
+
+
+@dataclass(frozen=True)
+class YarnTypeConfig:
+    """One ``[[yarn_type]]``: a named yarn whose keys are ``[yarn]``'s, each given one laid over
+    ``[yarn]`` (:meth:`Config.yarn_type`), so a change of ``[yarn]`` (a sweep, a layer) reaches
+    every key the type does not set itself."""
+
+    name: str
+    #: (field, value) of every [yarn] key the type sets, as YarnConfig holds them
+    own: tuple[tuple[str, object], ...] = ()
+
+
+@dataclass(frozen=True)
+class FrictionPair:
+    """One ``[[friction_pair]]``: the yarn-yarn friction where a yarn of type ``a`` crosses one
+    of type ``b`` (a != b; a type with itself is that type's own ``friction``)."""
+
+    a: str
+    b: str
+    friction: float
+
+
 @dataclass(frozen=True)
 class Config:
     mandrel: MandrelConfig
@@ -215,6 +243,10 @@ class Config:
     layers: tuple[LayerConfig, ...] = ()
     #: ``[material]``, or None: no structural hand-off
     material: MaterialConfig | None = None
+    #: ``[[yarn_type]]`` tables: named yarns besides ``[yarn]`` (the type named "yarn")
+    yarn_types: tuple[YarnTypeConfig, ...] = ()
+    #: ``[[friction_pair]]`` tables: the friction of crossings of two different types
+    friction_pairs: tuple[FrictionPair, ...] = ()
 
     def layer_config(self, k: int) -> "Config":
         """The config that braids layer ``k`` (0-based): the top-level sections with the layer's
@@ -224,6 +256,69 @@ class Config:
         sections = {sec: dataclasses.replace(getattr(self, sec), **layer.fields(sec))
                     for sec in LAYER_SECTIONS}
         return dataclasses.replace(self, **sections, layers=self.layers[:k + 1])
+
+    # -- yarn types (docs/guide/configuration.md, "Mixed yarns") ---------------------------------
+    @property
+    def type_names(self) -> tuple[str, ...]:
+        """The yarn types, "yarn" ([yarn]) first, then the [[yarn_type]] tables in file order."""
+        return (BASE_TYPE, *(t.name for t in self.yarn_types))
+
+    def yarn_type(self, name: str) -> YarnConfig:
+        """The yarn of type ``name``: [yarn] with the type's own keys laid over it."""
+        if name == BASE_TYPE:
+            return self.yarn
+        for t in self.yarn_types:
+            if t.name == name:
+                return dataclasses.replace(self.yarn, **dict(t.own))
+        raise KeyError(name)
+
+    @property
+    def types(self) -> tuple[YarnConfig, ...]:
+        """Every type's yarn, in the order of :attr:`type_names`."""
+        return tuple(self.yarn_type(name) for name in self.type_names)
+
+    def carrier_types(self):
+        """(2n,) int64: the type (index into :attr:`type_names`) of every yarn, warp 0 .. n-1
+        then weft n .. 2n-1 (docs/architecture.md §2), the ``carrier_yarns`` pattern repeated
+        round each group from its first carrier."""
+        import numpy as np
+
+        n = self.machine.carriers // 2
+        index = {name: i for i, name in enumerate(self.type_names)}
+        pattern = np.array([index[name] for name in self.machine.carrier_yarns], dtype=np.int64)
+        per_group = pattern[np.arange(n) % len(pattern)]
+        return np.concatenate([per_group, per_group])
+
+    @property
+    def is_mixed(self) -> bool:
+        """True when some carrier carries a type other than [yarn]: the per-type models and
+        fields are used; else the run is the uniform one, to the bit."""
+        return any(name != BASE_TYPE for name in self.machine.carrier_yarns)
+
+    def used_types(self) -> tuple[int, ...]:
+        """The types (indices into :attr:`type_names`) some carrier carries, in type order."""
+        names = set(self.machine.carrier_yarns)
+        return tuple(i for i, name in enumerate(self.type_names) if name in names)
+
+    def pair_friction(self):
+        """((nt, nt) float64, (nt, nt) str): the yarn-yarn friction of every pair of types and
+        where it comes from: "own" (a type with itself: its ``friction``), "pair" (a
+        [[friction_pair]]), or "mean" (a pair not listed: the mean of the two types' own
+        ``friction``, which lies between the two uniform braids; docs/decisions.md, "Mixed
+        yarns")."""
+        import numpy as np
+
+        names = self.type_names
+        own = np.array([t.friction for t in self.types], dtype=float)
+        mu = 0.5 * (own[:, None] + own[None, :])
+        source = np.full(mu.shape, "mean", dtype=object)
+        np.fill_diagonal(mu, own)
+        np.fill_diagonal(source, "own")
+        for pair in self.friction_pairs:
+            i, j = names.index(pair.a), names.index(pair.b)
+            mu[i, j] = mu[j, i] = pair.friction
+            source[i, j] = source[j, i] = "pair"
+        return mu, source
 
     def axial(self) -> tuple[int, float, float, float | None]:
         """(count, width m, thickness m, tex or None) of the axial yarns."""
@@ -239,7 +334,8 @@ class Config:
 #: known keys per section, in the order of docs/guide/configuration.md
 KEYS = {
     "mandrel": ("stl", "stl_unit", "centerline", "roll_reference", "body"),
-    "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring", "axial_yarns"),
+    "machine": ("carriers", "spool_radius", "angular_speed", "pattern", "guide_ring", "axial_yarns",
+                "carrier_yarns"),
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
     "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
@@ -250,6 +346,10 @@ KEYS = {
     "material": ("preset", *MATERIAL_CONSTANTS),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
+#: the arrays of tables besides [[layer]], and their keys
+YARN_TYPE_KEYS = ("name", *KEYS["yarn"])
+FRICTION_PAIR_KEYS = ("types", "friction")
+ARRAYS_OF_TABLES = ("layer", "yarn_type", "friction_pair")
 #: the sections a ``[[layer]]`` table may override, and its own keys
 LAYER_SECTIONS = ("machine", "yarn", "process", "model", "axial_yarn")
 LAYER_KEYS = ("direction",)
@@ -308,7 +408,8 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
     """
     base_dir = Path(base_dir).expanduser().resolve()
     layers_raw = data.get("layer", None)
-    data = {k: v for k, v in data.items() if k != "layer"}
+    types_raw, pairs_raw = data.get("yarn_type", None), data.get("friction_pair", None)
+    data = {k: v for k, v in data.items() if k not in ARRAYS_OF_TABLES}
     _check_layout(data)
     machine = _machine(_Section("machine", data))
     config = Config(
@@ -323,6 +424,12 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
         axial_yarn=_axial_yarn(_Section("axial_yarn", data)),
         material=_structural_material(_Section("material", data)) if "material" in data else None,
     )
+    if types_raw is not None or pairs_raw is not None or machine.carrier_yarns != ("yarn",):
+        types = _yarn_types(types_raw, data)
+        names = (BASE_TYPE, *(t.name for t in types))
+        config = dataclasses.replace(config, yarn_types=types,
+                                     friction_pairs=_friction_pairs(pairs_raw, names))
+        _check_mix(config, "")
     if layers_raw is None:
         return config
     return dataclasses.replace(config, layers=_layers(layers_raw, data, config))
@@ -372,9 +479,11 @@ def _check_layout(data: dict) -> None:
 def _unknown_top_level(name, value) -> None:
     sections = ", ".join(f"[{s}]" for s in KEYS)
     if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-        hint = "did you mean [[layer]]? " if _suggest(name, ["layer"]) else ""
-        raise ConfigError(f"unknown array of tables [[{name}]]: {hint}[[layer]] is the only one "
-                          "(one table per braided layer)")
+        close = difflib.get_close_matches(name, ARRAYS_OF_TABLES, n=1, cutoff=0.6)
+        hint = f"did you mean [[{close[0]}]]? " if close else ""
+        raise ConfigError(f"unknown array of tables [[{name}]]: {hint}expected [[layer]] (one "
+                          "table per braided layer), [[yarn_type]] (a named yarn) or "
+                          "[[friction_pair]] (the friction of two yarn types)")
     if not isinstance(value, dict):
         home = _home_of(name)
         where = f"it belongs in [{home}]" if home else f"expected the sections {sections}"
@@ -540,7 +649,20 @@ def _machine(sec: _Section) -> MachineConfig:
     ring = _guide_ring(sec, spool)
     axial = sec.integer("axial_yarns", "a non-negative integer number of axial yarns", default=0, minimum=0)
     return MachineConfig(carriers=carriers, spool_radius=spool, angular_speed=math.radians(speed_deg),
-                         pattern=pattern, guide_ring=ring, axial_yarns=axial)
+                         pattern=pattern, guide_ring=ring, axial_yarns=axial,
+                         carrier_yarns=_carrier_yarns(sec))
+
+
+def _carrier_yarns(sec: _Section) -> tuple[str, ...]:
+    """``carrier_yarns``: one type name (every carrier) or a non-empty list of names (a pattern
+    round each group); the names are checked against the types in :func:`_check_mix`."""
+    what = ('a yarn type name ("yarn" or a [[yarn_type]] name) or a list of them, repeated '
+            "round each group from its first carrier")
+    value = sec.raw("carrier_yarns", BASE_TYPE, what)
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not names or not all(isinstance(v, str) for v in names):
+        raise sec.error("carrier_yarns", value, f"expected {what}")
+    return tuple(names)
 
 
 def _guide_ring(machine: _Section, spool_radius: float) -> GuideRingConfig | None:
@@ -574,11 +696,160 @@ def _yarn(sec: _Section) -> YarnConfig:
     frictions = {key: _friction(sec, key) for key in ("friction", "ring_friction")}
     min_width = sec.number("min_width", "m", default=None, positive=True)
     if min_width is not None and min_width > width:
-        raise sec.error("min_width", min_width, f"expected at most [yarn] width = {_fmt(width)} (m): "
-                        "the least width a yarn narrows to")
+        raise sec.error("min_width", min_width, f"expected at most {sec.where('width')} = {_fmt(width)} "
+                        "(m): the least width a yarn narrows to")
     material = _material(sec)
     return YarnConfig(width=width, thickness=thickness, tension=tension, min_width=min_width,
                       **frictions, **material)
+
+
+#: a yarn type's name: a letter, then letters, digits and "_" (it names fields, coverage_<type>)
+RESERVED_TYPE_NAMES = ("warp", "weft", "axial")
+TYPE_NAME_CHARS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_"
+
+
+def _yarn_types(raw, data: dict) -> tuple[YarnTypeConfig, ...]:
+    """``[[yarn_type]]`` tables -> YarnTypeConfigs: each is [yarn] with its keys laid over it,
+    read by the [yarn] reader, so a bad value names its type (``[[yarn_type]] "polyester"
+    width = ...``)."""
+    if raw is None:
+        return ()
+    if isinstance(raw, dict):
+        raise ConfigError("[yarn_type] must be an array of tables: write [[yarn_type]] (two "
+                          "brackets) once per named yarn")
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        raise ConfigError(f"yarn_type = {_fmt(raw)}: expected [[yarn_type]] tables, one per named yarn")
+    types, seen = [], {BASE_TYPE: "[yarn]"}
+    for k, table in enumerate(raw, start=1):
+        prefix = f"[[yarn_type]] {k} "
+        name = table.get("name", None)
+        if name is None:
+            raise ConfigError(f'{prefix}has no name: give name = "..." (the name carrier_yarns '
+                              "and [[friction_pair]] use)")
+        if (not isinstance(name, str) or not name or not name[0].isalpha()
+                or any(ch not in TYPE_NAME_CHARS for ch in name)):
+            raise ConfigError(f"{prefix}name = {_fmt(name)}: expected a name of letters, digits "
+                              'and "_", starting with a letter (it names fields: coverage_<name>)')
+        if name in RESERVED_TYPE_NAMES:
+            raise ConfigError(f'{prefix}name = "{name}": reserved (the fields of the groups and the '
+                              f"axial yarns are named {', '.join(RESERVED_TYPE_NAMES)}); choose another")
+        if name in seen:
+            again = ("the type [yarn] describes; give its keys in [yarn]" if name == BASE_TYPE
+                     else f"a type named twice (also {seen[name]})")
+            raise ConfigError(f'{prefix}name = "{name}": {again}')
+        seen[name] = f"[[yarn_type]] {k}"
+        prefix = f'[[yarn_type]] "{name}" '
+        for key in table:
+            if key not in YARN_TYPE_KEYS:
+                hint = _suggest(key, YARN_TYPE_KEYS)
+                raise ConfigError(f"{prefix}{key} = {_fmt(table[key])}: unknown key; {hint}"
+                                  f"expected name or a [yarn] key ({', '.join(KEYS['yarn'])})")
+        own = {key: v for key, v in table.items() if key != "name"}
+        merged = {**data.get("yarn", {}), **own}
+        if any(key in own for key in MATERIAL):   # its tow data go together, not with [yarn]'s
+            merged = {**{k: v for k, v in merged.items() if k not in MATERIAL},
+                      **{k: v for k, v in own.items() if k in MATERIAL}}
+        yarn = _yarn(_Section("", {}, table=merged, prefix=prefix))
+        types.append(YarnTypeConfig(name=name, own=tuple((key, getattr(yarn, key)) for key in own)))
+    return tuple(types)
+
+
+def _friction_pairs(raw, names) -> tuple[FrictionPair, ...]:
+    """``[[friction_pair]]`` tables: ``types = [a, b]`` of two different known types and their
+    ``friction``; a pair listed twice (in either order) is an error."""
+    if raw is None:
+        return ()
+    if isinstance(raw, dict):
+        raise ConfigError("[friction_pair] must be an array of tables: write [[friction_pair]] "
+                          "(two brackets) once per pair of yarn types")
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        raise ConfigError(f"friction_pair = {_fmt(raw)}: expected [[friction_pair]] tables")
+    known = ", ".join(f'"{n}"' for n in names)
+    pairs, seen = [], {}
+    for k, table in enumerate(raw, start=1):
+        sec = _Section("", {}, table=table, prefix=f"[[friction_pair]] {k} ")
+        for key in table:
+            if key not in FRICTION_PAIR_KEYS:
+                hint = _suggest(key, FRICTION_PAIR_KEYS)
+                raise sec.error(key, table[key], f"unknown key; {hint}expected types, friction")
+        what = f'two yarn type names, e.g. ["yarn", "polyester"] (the types: {known})'
+        types = sec.raw("types", expected=what)
+        if (not isinstance(types, list) or len(types) != 2
+                or not all(isinstance(t, str) for t in types)):
+            raise sec.error("types", types, f"expected {what}")
+        for t in types:
+            if t not in names:
+                raise sec.error("types", types, f'unknown yarn type "{t}": {_suggest(t, names)}'
+                                f"expected one of {known}")
+        a, b = types
+        if a == b:
+            raise sec.error("types", types, f'a type with itself: its friction is the type\'s own '
+                            f'friction ({"[yarn]" if a == BASE_TYPE else f"[[yarn_type]] {_fmt(a)}"}'
+                            " friction); expected two different types")
+        key = frozenset(types)
+        if key in seen:
+            raise sec.error("types", types, f"the pair is listed twice (also [[friction_pair]] "
+                            f"{seen[key]}); give each pair of types once")
+        seen[key] = k
+        pairs.append(FrictionPair(a=a, b=b, friction=_friction(sec, "friction", required=True)))
+    return tuple(pairs)
+
+
+def _check_mix(config: Config, prefix: str) -> None:
+    """The carriers' types against the types, the pattern against the group, the tow data of
+    the types on the carriers against each other (prefix: "[[layer]] k " for a layer)."""
+    ma = config.machine
+    names = config.type_names
+    value = list(ma.carrier_yarns) if len(ma.carrier_yarns) > 1 else ma.carrier_yarns[0]
+    where = f"{prefix}[machine] carrier_yarns = {_fmt(value)}"
+    for name in ma.carrier_yarns:
+        if name not in names:
+            known = ", ".join(f'"{n}"' for n in names)
+            raise ConfigError(f'{where}: unknown yarn type "{name}": {_suggest(name, names)}'
+                              f"expected one of {known} ([yarn], or a [[yarn_type]] name)")
+    n = ma.carriers // 2
+    if n % len(ma.carrier_yarns):
+        raise ConfigError(f"{where}: a pattern of {len(ma.carrier_yarns)} does not divide the "
+                          f"{n} carriers of a group ([machine] carriers = {ma.carriers}): expected a "
+                          "pattern whose length divides carriers / 2, repeated round each group")
+    used = [config.types[i] for i in config.used_types()]
+    with_tow = [t.has_material for t in used]
+    if any(with_tow) and not all(with_tow):
+        lacking = [config.type_names[i] for i in config.used_types()
+                   if not config.yarn_type(config.type_names[i]).has_material]
+        raise ConfigError(f"{where}: the yarn type {_fmt(lacking[0])} has no tow material data "
+                          "(linear_density_tex, fibre_density, fibre_radius) while other types on "
+                          "the carriers have: give them for every type on the carriers")
+
+
+def mix_lines(config: Config) -> list[str]:
+    """What ``preform check`` says of a mix: the carriers of every type per group and the
+    friction of every pair of the types on the carriers, with where it comes from; [] for a
+    uniform config without yarn types."""
+    if not config.is_mixed and not config.yarn_types and not config.friction_pairs:
+        return []
+    names = config.type_names
+    kinds = config.carrier_types()
+    n = config.machine.carriers // 2
+    used = config.used_types()
+    per = ", ".join(f"{names[i]} {int((kinds[:n] == i).sum())}" for i in used)
+    lines = [f"yarns: {per} carriers per group (warp and weft alike; carrier_yarns "
+             f"{_fmt(list(config.machine.carrier_yarns))} from each group's first carrier)"]
+    mu, source = config.pair_friction()
+    words = {"own": "the type's own friction", "pair": "[[friction_pair]]",
+             "mean": "not listed: the mean of the two types' own friction"}
+    for a in used:
+        for b in used:
+            if b >= a:
+                lines.append(f"friction {names[a]}-{names[b]}: {mu[a, b]:g} ({words[source[a, b]]})")
+    unused = [n_ for i, n_ in enumerate(names) if i not in used]
+    if unused:
+        lines.append(f"yarn types on no carrier: {', '.join(unused)}")
+    shapes = {(config.types[i].width, config.types[i].thickness) for i in used}
+    if config.model.kind == "interaction" and len(shapes) > 1:
+        lines.append("the interaction model's crossings take [yarn]'s width and thickness for "
+                     "every type (each type's own in the fields and the kinematic deposition)")
+    return lines
 
 
 #: material keys of [yarn] (given together) and their plausible ranges with a unit hint
@@ -663,6 +934,10 @@ def _layers(raw, data: dict, config: Config) -> tuple[LayerConfig, ...]:
         raise ConfigError(f"layer = {_fmt(raw)}: expected [[layer]] tables, one per braided layer")
     layers = [_layer(k, table, data) for k, table in enumerate(raw, start=1)]
     whole = dataclasses.replace(config, layers=tuple(layers))
+    if config.yarn_types or config.friction_pairs or any(
+            whole.layer_config(k).is_mixed for k in range(len(layers))):
+        for k in range(len(layers)):
+            _check_mix(whole.layer_config(k), f"[[layer]] {k + 1} ")
     with_tow = [whole.layer_config(k).yarn.has_material for k in range(len(layers))]
     if any(with_tow) and not all(with_tow):
         k = with_tow.index(False) + 1
@@ -726,9 +1001,12 @@ def _rtm(sec: _Section, base_dir: Path) -> RtmConfig:
                      k_ref=k_ref, vf_ref=vf_ref, table=table)
 
 
-def _friction(sec: _Section, key: str) -> float:
+def _friction(sec: _Section, key: str, required: bool = False) -> float:
+    """A coefficient of friction in [0, MAX_FRICTION); absent: YarnConfig's default, or an error
+    where ``required``."""
     expected = f"expected a coefficient of friction in [0, {MAX_FRICTION:g})"
-    mu = sec.number(key, "coefficient of friction", default=getattr(YarnConfig, key))
+    default = _MISSING if required else getattr(YarnConfig, key)
+    mu = sec.number(key, "coefficient of friction", default=default)
     if mu < 0:
         raise sec.error(key, sec.table[key], f"must not be negative; {expected}")
     if mu >= MAX_FRICTION:
@@ -895,6 +1173,13 @@ def _dump_sections(config: Config) -> dict:
                 "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
                 "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
+    if ma.carrier_yarns != MachineConfig.carrier_yarns:   # echoed when given, as below
+        echo["machine"]["carrier_yarns"] = list(ma.carrier_yarns)
+    if config.yarn_types:
+        echo["yarn_types"] = {t.name: dict(t.own) for t in config.yarn_types}
+    if config.friction_pairs:   # numbered from "1" as the file lists them, like "layers"
+        echo["friction_pairs"] = {str(k): {"types": [p_.a, p_.b], "friction": p_.friction}
+                                  for k, p_ in enumerate(config.friction_pairs, start=1)}
     if config.material is not None:   # echoed when given (a run without it hashes as before)
         echo["material"] = {"preset": config.material.preset,
                             **{name: getattr(config.material.constituents, name) for name in MATERIAL_CONSTANTS}}

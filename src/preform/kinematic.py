@@ -77,14 +77,18 @@ def _smooth_normals_into(s, faces, points, out):
 
 
 class Depositor:
-    """Advances the fell points of all yarns by one time step on one mandrel."""
+    """Advances the fell points of all yarns by one time step on one mandrel.
 
-    def __init__(self, mandrel, clearance: float, h_max: float, bridge_depth: float = 0.0):
+    clearance (m): how far above the surface a fell point's free yarn starts for the catch test;
+    bridge_depth (m): a span over a dip shallower than this lies on the surface; each one number
+    or (ny,), per yarn (mixed yarns: its type's thickness); h_max (m): the walk's piece."""
+
+    def __init__(self, mandrel, clearance, h_max: float, bridge_depth=0.0):
         self.mandrel = mandrel
         self.surface = SurfaceArrays.from_mandrel(mandrel)
-        self.clearance = float(clearance)
+        self.clearance = np.asarray(clearance, dtype=float)
         self.h_max = float(h_max)
-        self.bridge_depth = float(bridge_depth)
+        self.bridge_depth = np.asarray(bridge_depth, dtype=float)
 
     def span_depth(self, a, b) -> np.ndarray:
         """How far (m) the straight spans from ``a`` to ``b`` ((k, 3) each, points on the
@@ -112,7 +116,9 @@ class Depositor:
         extra: dict[int, list] = {}
         # the free yarns of every yarn first: most steps nothing is hit and the step is done
         starts = np.empty_like(F_out)
-        K.lifted_points(s.V, s.T, s.CN, face_out, F_out, self.clearance, starts)
+        clearance = np.ascontiguousarray(np.broadcast_to(self.clearance, (ny,)))
+        bridge_depth = np.broadcast_to(self.bridge_depth, (ny,))
+        K.lifted_points(s.V, s.T, s.CN, face_out, F_out, clearance, starts)
         first = self.mandrel.intersect_segments(starts, G_end)
         if not np.any(first[0]):
             return StepLaid(F_out, face_out, moved, end_flag, extra)
@@ -128,17 +134,17 @@ class Depositor:
                 first = None
             else:
                 starts = np.empty((len(idx), 3))
-                K.lifted_points(s.V, s.T, s.CN, face_out[idx], F_out[idx], self.clearance, starts)
+                K.lifted_points(s.V, s.T, s.CN, face_out[idx], F_out[idx], clearance[idx], starts)
                 hit, point, hit_face, _dist = self.mandrel.intersect_segments(starts, G_end[idx])
             if not np.any(hit):
                 break
             jumpers = idx[hit]
             flags = np.where(status[jumpers] == K.WALK_CONCAVE, FLAG_BRIDGE, FLAG_CATCH).astype(np.uint8)
             bridged = flags == FLAG_BRIDGE
-            if self.bridge_depth > 0.0 and bridged.any():
+            if np.any(bridge_depth > 0.0) and bridged.any():
                 # a span over a dip shallower than bridge_depth lies on the surface: not a bridge
                 kb = jumpers[bridged]
-                shallow = self.span_depth(F_out[kb], point[hit][bridged]) <= self.bridge_depth
+                shallow = self.span_depth(F_out[kb], point[hit][bridged]) <= bridge_depth[kb]
                 flags[np.nonzero(bridged)[0][shallow]] = 0
             for k, fl in zip(jumpers, flags):
                 # the point reached so far is laid; the jump to the hit point is a straight span
@@ -176,6 +182,11 @@ class Depositor:
 class KinematicZone:
     """The kinematic model's zone (``preform.zone.Zone``): free yarns straight from fell point to
     supply point (spool, or guide-ring point), docs/theory.md §3. It has no state of its own."""
+
+    #: seconds a run: nothing to say before it starts (``Zone.cost_note``)
+    cost_note = ""
+    #: the first-run worker's jobs are this model's kernels (``Zone.first_run_worker``)
+    first_run_worker = True
 
     def __init__(self, config, machine, mandrel=None):
         self.config = config
@@ -221,8 +232,13 @@ class KinematicZone:
         ny = len(F_machine)
         per = len(ends)
         points = np.stack(ends, axis=1).reshape(-1, 3)
+        if getattr(self.config, "is_mixed", False):   # every yarn at its type's spool tension
+            types = np.array([y.tension for y in self.config.types], dtype=float)
+            tension = np.repeat(types[self.config.carrier_types()], per - 1)
+        else:
+            tension = np.full(ny * (per - 1), float(self.config.yarn.tension))
         return Snapshot(time_s=t, points=points, offsets=np.arange(ny + 1, dtype=np.int64) * per,
-                        tension_N=np.full(ny * (per - 1), float(self.config.yarn.tension)),
+                        tension_N=tension,
                         contact_id=np.full(len(points), -1, dtype=np.int64),
                         slip=np.zeros(len(points), dtype=np.int8), group=self.machine.group.copy())
 

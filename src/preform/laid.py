@@ -38,9 +38,12 @@ class CenterlineProjector:
         return out
 
 
-def mandrel_friction(config) -> float:
+def mandrel_friction(config):
     """Yarn-mandrel friction coefficient for the slip tendency: the config has no coefficient of
-    its own for yarn on the mandrel, so it is the yarn-yarn one, ``[yarn] friction``."""
+    its own for yarn on the mandrel, so it is the yarn-yarn one, ``[yarn] friction``; mixed
+    yarns: (n_yarns,), every yarn's type's own ``friction``."""
+    if getattr(config, "is_mixed", False):
+        return np.array([t.friction for t in config.types])[config.carrier_types()]
     return config.yarn.friction
 
 
@@ -76,7 +79,8 @@ def laid_braid_angles(surface, project, centerline, points, face, offsets, mu,
 
     surface : kinematic.SurfaceArrays of the mandrel; project : CenterlineProjector
     points (m, 3) float64, m, mandrel frame; face (m,) int64; offsets (n_yarns + 1,) int64: yarn
-    ``k`` is ``points[offsets[k]:offsets[k + 1]]``; mu : yarn-mandrel friction coefficient;
+    ``k`` is ``points[offsets[k]:offsets[k + 1]]``; mu : yarn-mandrel friction coefficient, one
+    or (n_yarns,) one per yarn;
     s : the points' arc lengths when already known (else ``project(points)``).
 
     The laid direction at a point is the chord between its neighbours along the yarn (one-sided at
@@ -96,7 +100,9 @@ def laid_braid_angles(surface, project, centerline, points, face, offsets, mu,
     next_i[ends] = ends
     s = project(points) if s is None else s
     c = np.empty(m)
+    per_point = (np.full(m, float(mu)) if np.ndim(mu) == 0 else
+                 np.repeat(np.asarray(mu, dtype=float), np.diff(offsets)))
     K.laid_yarn_angles(surface.V, surface.T, surface.CN, _c(centerline.s), _c(centerline.tangents),
-                       _c(points), _c(face, np.int64), _c(s), prev_i, next_i, float(mu),
+                       _c(points), _c(face, np.int64), _c(s), prev_i, next_i, per_point,
                        float(curvature_tol), c, slip)
     return np.degrees(np.arccos(np.clip(c, 0.0, 1.0))), slip

@@ -60,8 +60,20 @@ def default_time_step(config, machine, mandrel, centerline, tolerances: Toleranc
     omega = machine.omega
     v_max = max(v for _, v in config.process.take_up_speed)
     r_max = float(np.max(centerline.project(mandrel.vertices)[1]))
-    per_width = config.yarn.width / (omega * r_max + v_max)   # s for the fell points to advance a width
+    # s for the fell points to advance a width (mixed yarns: the narrowest type's)
+    per_width = float(yarn_dimensions(config)[1].min()) / (omega * r_max + v_max)
     return zone_class(config.model.kind).default_time_step(machine, per_width, tolerances)
+
+
+def yarn_dimensions(config) -> tuple[np.ndarray, np.ndarray]:
+    """(thickness (ny,), width (ny,)), m: every yarn's, its type's (``Config.carrier_types``);
+    [yarn]'s on every carrier of a uniform config."""
+    ny = config.machine.carriers
+    if not getattr(config, "is_mixed", False):
+        return np.full(ny, float(config.yarn.thickness)), np.full(ny, float(config.yarn.width))
+    kinds = config.carrier_types()
+    types = config.types
+    return (np.array([t.thickness for t in types])[kinds], np.array([t.width for t in types])[kinds])
 
 
 def tie_points(config, machine, mandrel, centerline, pose, rng, tolerances: Tolerances = tol):
@@ -132,11 +144,13 @@ class Stepper:
         self.tolerances = tolerances
         self.project = CenterlineProjector(centerline, spacing=s.projector_spacing)
         self.dt = config.model.time_step or default_time_step(config, machine, mandrel, centerline, s)
-        clearance = max(s.catch_clearance_thickness * config.yarn.thickness,
-                        s.catch_clearance_diagonal * mandrel.diagonal)
+        # every yarn's own thickness (mixed yarns: its type's); the walk's piece of the narrowest
+        thickness, width = yarn_dimensions(config)
+        clearance = np.maximum(s.catch_clearance_thickness * thickness,
+                               s.catch_clearance_diagonal * mandrel.diagonal)
         self.depositor = Depositor(mandrel, clearance=clearance,
-                                   h_max=s.walk_piece_widths * config.yarn.width,
-                                   bridge_depth=s.bridge_depth_thickness * config.yarn.thickness)
+                                   h_max=s.walk_piece_widths * float(width.min()),
+                                   bridge_depth=s.bridge_depth_thickness * thickness)
         self.ecc = np.asarray(config.process.eccentricity, dtype=float)
         self.lead = config.process.pose_lead
         # travel counts from the spool plane; initial_position from the supply plane (the guide

@@ -77,8 +77,10 @@ def tensions(st, fell, EA, compression, h, eps2):
 
 
 def bounds(st, fell, top, tension, f_top, h, mu):
-    """Friction bound mu (f_int + f_ext) tan(delta/2) per crossing and yarn (m, 2)."""
+    """Friction bound mu (f_int + f_ext) tan(delta/2) per crossing and yarn (m, 2); mu: one
+    coefficient, or (m,) one per crossing."""
     out = np.zeros((st.m, 2))
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), (st.m,))
     for k, (side, chain) in enumerate(chains(st)):
         pts = polyline(st, k, side, chain, fell, top, h)
         ten = [tension[c, side] for c in chain] + [f_top[k]]
@@ -87,5 +89,5 @@ def bounds(st, fell, top, tension, f_top, h, mu):
             u_int = (lo - p) / np.linalg.norm(lo - p)
             u_ext = (hi - p) / np.linalg.norm(hi - p)
             delta = np.pi - np.arccos(np.clip(u_int @ u_ext, -1, 1))
-            out[c, side] = mu * (ten[i] + ten[i + 1]) * np.tan(delta / 2)
+            out[c, side] = mu[c] * (ten[i] + ten[i + 1]) * np.tan(delta / 2)
     return out

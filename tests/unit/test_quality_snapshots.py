@@ -55,6 +55,23 @@ def test_a_tension_jump_the_friction_cannot_hold_is_reported():
     assert snapshot_reasons([snap], 5.0) == []     # a friction that holds the jump
 
 
+def test_mixed_yarns_check_each_crossing_at_its_pairs_friction():
+    """With every yarn's type (``kinds``) and the table of pairs, a crossing is checked at its
+    pair's coefficient: the jump above breaks 0.25 (pair 0-1) and holds at 5.0."""
+    f_lo, f_hi, bend = 1.0, 1.2, 0.3
+    u = np.array([[-1.0, -bend, -1.0], [1.0, -bend, 1.0]])
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    ext = -(f_lo * u[0] + f_hi * u[1]) + _pull(1.0, bend)
+    snap = _crossing(f_a=(f_lo, f_hi), ext_a=tuple(ext), bend=bend)
+    kinds = np.array([0, 1])                        # yarn a of type 0, yarn b of type 1
+    weak = np.array([[5.0, 0.25], [0.25, 5.0]])      # the types hold it alone, not together
+    assert snapshot_checks(snap, weak, kinds) == snapshot_checks(snap, 0.25)
+    strong = np.array([[0.0, 5.0], [5.0, 0.0]])
+    assert snapshot_checks(snap, strong, kinds) == snapshot_checks(snap, 5.0)
+    assert snapshot_reasons([snap], strong, kinds=kinds) == []
+    assert len(snapshot_reasons([snap], weak, kinds=kinds)) == 1
+
+
 def test_a_crossing_out_of_balance_is_reported():
     snap = _crossing(ext_a=(0.0, 0.0, 0.01))       # 1 % of the largest tension, not balanced
     imbalance, _ = snapshot_checks(snap, 0.25)

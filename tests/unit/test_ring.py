@@ -175,7 +175,8 @@ def test_batch_kernel_matches_wrapper():
     A, B = np.array([p[0] for p in ps]), np.array([p[1] for p in ps])
     f, th = np.array([p[2] for p in ps]), np.array([p[3] for p in ps])
     out, status = ring_kernels.empty_out(len(ps)), np.zeros(len(ps), np.int64)
-    ring_kernels.solve_rings(A, B, f, R_RING, Z_RING, th, 0.2, np.full(len(ps), -1.0), f,
+    ring_kernels.solve_rings(A, B, f, R_RING, Z_RING, th, np.full(len(ps), 0.2),
+                             np.full(len(ps), -1.0), f,
                              np.zeros(len(ps)), *ring_arguments(RingSettings()), out, status)
     for i, p in enumerate(ps):
         s = solve_ring(p[0], p[1], p[2], R_RING, Z_RING, p[3], 0.2)

@@ -7,8 +7,11 @@ models must give the same braid angle and convergence length (to the crossings' 
 non-axisymmetric zone forces on interlaced yarns, ``docs/decisions.md``). The part is the
 family's S-bend (two 35 deg bends of 300 mm, a 50 mm circle), eccentric by 10 mm, on a well-shaped
 triangulation in metres and on a CAD-sliver one in millimetres: the two meshes are one surface, so
-the interaction runs on them must agree too. With friction the braid must stay interlaced: its
-warp-weft crossings per unit area (``preform.analysis.interlacing``) those of the pattern.
+the interaction runs on them must agree too. Braiding onto a bend from near the tip, the models
+agree where the kinematic yarns follow the bend's inner side (``bend_tip``, 0.45 m); on the
+S-bend's 0.3 m bend both models' inner-side fell points stall, each its own way (a strict xfail).
+With friction the braid must stay interlaced: its warp-weft crossings per unit area
+(``preform.analysis.interlacing``) those of the pattern.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ from support.simcase import make_config, write_stl
 MACHINE = dict(carriers=24, spool_radius=0.85, guide_ring=(0.17, 0.0), initial_position=0.2,
                angular_speed=np.radians(18.0), take_up_speed=0.0263, braid_length=0.06,
                eccentricity=(0.01, 0.0), pose_lead=None, snapshots=0)
+#: m, the yarn width of ``make_config``'s default yarn
+YARN_WIDTH = 4e-3
 #: braided lengths (m) at which the models are compared: past the first row's deposit
 AT = (0.02, 0.03, 0.04, 0.05, 0.06)
 
@@ -155,29 +160,67 @@ def test_mandrel_distance_is_the_closest_points_on_a_sliver_mesh(tri):
         assert centroid.max() > 1e-3
 
 
-@pytest.mark.xfail(strict=True, reason="on the inner side of a bend the interaction model's "
-                   "crossings bridge the axially concave surface 0.5-3 mm up and are not "
-                   "deposited (docs/decisions.md): the fell points there stop")
-def test_frictionless_models_agree_braiding_on_a_bend(tmp_path):
-    """Braiding onto the bend itself (the S-bend from 30 mm of the tip, its own centerline):
-    frictionless, the interaction model must give the kinematic model's braid angle and H
-    (measured at 0.06-0.12 m: 0.6-3.9 deg below, H 2-5 % longer)."""
-    from preform.result import FLAG_BRIDGE, FLAG_CATCH
+def _bend_tip_runs(tmp_path, name, length):
+    """{kind: Result} of both models, frictionless, braiding 0.03 m onward onto the bend of the
+    family's part ``name`` (sliver mesh in millimetres, its own centerline: the automatic one
+    finds fewer than two sections on a part that bends this near its tip)."""
     from support.simcase import write_centerline
 
-    V, F, path = shapes.family_part("s_bend_tip", triangulation="sliver", scale=1000.0)
-    stl = write_stl(tmp_path / "t.stl", V, F)
-    csv = write_centerline(tmp_path / "t.csv", path)
+    V, F, path = shapes.family_part(name, triangulation="sliver", scale=1000.0)
+    stl = write_stl(tmp_path / f"{name}.stl", V, F)
+    csv = write_centerline(tmp_path / f"{name}.csv", path)
     out = {}
     for kind in ("kinematic", "interaction"):
         cfg = _config(stl, "mm", kind, 0.0, 0.0)
         cfg = dataclasses.replace(cfg, mandrel=dataclasses.replace(cfg.mandrel, centerline=csv),
-                                  process=dataclasses.replace(cfg.process, braid_length=0.12))
+                                  process=dataclasses.replace(cfg.process, braid_length=length))
         out[kind] = simulate(cfg, progress=False)
-    # the kinematic run lays no yarn caught or bridged: a reference
-    assert np.mean((out["kinematic"].yarns.flags & (FLAG_BRIDGE | FLAG_CATCH)) > 0) < 0.01
-    for L in (0.06, 0.08, 0.1, 0.12):
-        a_k, h_k = _at(out["kinematic"], L)
-        a_i, h_i = _at(out["interaction"], L)
+    return out
+
+
+def _longest_laid_step(result):
+    """m: the longest straight piece between consecutive laid points of any yarn."""
+    pts, off = np.asarray(result.yarns.points), np.asarray(result.yarns.offsets)
+    return max(float(np.linalg.norm(np.diff(pts[a:b], axis=0), axis=1).max())
+               for a, b in zip(off[:-1], off[1:]) if b - a > 1)
+
+
+def test_frictionless_models_agree_braiding_on_a_bend(tmp_path):
+    """Braiding onto the bend itself (``bend_tip``: 35 deg of 0.45 m radius from 30 mm of the
+    tip, under a 0.32-0.39 m zone): frictionless, the interaction model gives the kinematic
+    model's braid angle and H (measured at 0.04-0.1 m: 0.26-0.58 deg below, H 0.8-1.7 % longer;
+    on 0.6 m: 0.31-0.39 deg, 0.1-1.0 %)."""
+    out = _bend_tip_runs(tmp_path, "bend_tip", 0.1)
+    kin, inter = out["kinematic"], out["interaction"]
+    assert inter.status == "done", inter.message
+    # the reference: the kinematic yarns follow the bend's inner side, no laid piece longer
+    # than 2.5 yarn widths (measured 1.4 mm; on the 0.3 m bend they lift off there and catch
+    # 47-90 mm ahead from 0.092 m braided, where the kinematic run is no reference)
+    assert _longest_laid_step(kin) < 2.5 * YARN_WIDTH
+    for L in (0.04, 0.06, 0.08, 0.1):
+        a_k, h_k = _at(kin, L)
+        a_i, h_i = _at(inter, L)
+        # the agreement asked of the two models: 1 deg and 3 %
+        assert a_i == pytest.approx(a_k, abs=1.0), L
+        assert h_i == pytest.approx(h_k, rel=0.03), L
+
+
+@pytest.mark.xfail(strict=True, reason="on the inner side of a 0.3 m bend two first-row "
+                   "crossings hover 0.3-1 mm up between fell points whose free yarns lift off, "
+                   "so neither the walk nor the deposit moves four yarns' fell points from "
+                   "the arc's start (docs/decisions.md)")
+def test_frictionless_models_agree_braiding_on_a_tight_bend(tmp_path):
+    """Braiding onto the S-bend's first bend (0.3 m radius, from 30 mm of the tip): up to
+    0.08 m braided the kinematic reference still follows the surface (its inner-side yarns
+    lift off from about 0.08 m and catch 47-90 mm ahead from 0.092 m on); the interaction
+    model's H is 3.8 % longer at 0.08 m (angle 0.58 / 0.76 deg below at 0.06 / 0.08 m)."""
+    out = _bend_tip_runs(tmp_path, "s_bend_tip", 0.08)
+    kin, inter = out["kinematic"], out["interaction"]
+    assert inter.status == "done", inter.message
+    # no catch yet (the longest piece 9 mm, a fast walk along the inner side at 0.075 m)
+    assert _longest_laid_step(kin) < 2.5 * YARN_WIDTH
+    for L in (0.06, 0.08):
+        a_k, h_k = _at(kin, L)
+        a_i, h_i = _at(inter, L)
         assert a_i == pytest.approx(a_k, abs=1.0), L
         assert h_i == pytest.approx(h_k, rel=0.03), L

@@ -450,9 +450,11 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins():
     assert np.allclose(net.tension, ref, rtol=1e-9, atol=1e-9)
     bound = np.empty((st.m, 2))
     psi = np.empty((st.m, 2))
+    # every crossing its own coefficient (mixed yarns), against the twin
+    mu = np.random.default_rng(5).uniform(0.0, 0.6, st.m)
     frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
-                                    bc.fell, bc.top, net.tension, f_top, bc.h, 0.3, bound, psi)
-    assert np.allclose(bound, naive.bounds(st, bc.fell, bc.top, net.tension, f_top, bc.h, 0.3),
+                                    bc.fell, bc.top, net.tension, f_top, bc.h, mu, bound, psi)
+    assert np.allclose(bound, naive.bounds(st, bc.fell, bc.top, net.tension, f_top, bc.h, mu),
                        rtol=1e-9)
     psi_ref = np.empty((st.m, 2))
     for k, (side, chain) in enumerate(naive.chains(st)):
@@ -461,7 +463,7 @@ def test_tension_bound_and_psi_kernels_match_numpy_twins():
         for i, c in enumerate(chain):
             u_int, u_ext = pts[i] - pts[i + 1], pts[i + 2] - pts[i + 1]
             u_int, u_ext = u_int / np.linalg.norm(u_int), u_ext / np.linalg.norm(u_ext)
-            psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext, 0.3) / (
+            psi_ref[c, side] = friction_function(ten[i], ten[i + 1], u_int, u_ext, mu[c]) / (
                 ten[i] + ten[i + 1])
     assert np.any(psi_ref > 0) and np.any(psi_ref < 0)     # both sides of the cone seen
     # the same formula evaluated by two codes: double rounding of unit vectors (1e-15)

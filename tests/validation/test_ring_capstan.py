@@ -100,8 +100,8 @@ def test_top_tensions_kernel():
     hold = np.array([4.7, 4.7, 4.7, 4.7, 4.0, 9.0, 1.0, 4.7])
     out = np.empty(n)
     empty = np.zeros((0, 3))
-    FK.top_tensions(n, np.full(n, -1), empty, empty, np.zeros(0), fell, top, spool, 1e-4, 4.7,
-                    0.4, True, capstan, hold, out)
+    FK.top_tensions(n, np.full(n, -1), empty, empty, np.zeros(0), fell, top, spool, 1e-4,
+                    np.full(n, 4.7), np.full(n, 0.4), True, capstan, hold, out)
     for k in range(n):
         a, b = fell[k] - top[k], top[k] - spool[k]
         eta = np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b))

@@ -173,7 +173,7 @@ def _bounds_of(x, bc, f_top):
     m = x.m
     bound, psi = np.empty((m, 2)), np.empty((m, 2))
     FK.friction_bounds(m, x.yarn, x.pos, x.normal, x.over, x.low, x.up, bc.fell, bc.top,
-                       x.tension[:m], f_top, bc.h, bc.mu, bound, psi)
+                       x.tension[:m], f_top, bc.h, bc.crossing_mu(x.yarn[:m]), bound, psi)
     return bound, psi
 
 

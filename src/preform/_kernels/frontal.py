@@ -446,7 +446,8 @@ def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_t
                     psi):
     """Per crossing and yarn the friction bound mu (f_int + f_ext) tan(delta/2) (N) of the
     current geometry and tensions into bound (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
-    Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2)."""
+    Psi = |F^t| - mu |F^n| (paper §2.2), into psi (m, 2); mu (m,): each crossing's coefficient
+    (``interaction.contact.crossing_friction``)."""
     p = np.empty(3)
     a = np.empty(3)
     b = np.empty(3)
@@ -461,8 +462,8 @@ def friction_bounds(m, yarn, pos, normal, over, low, up, fell, top, tension, f_t
             _end_point(pos, normal, over, u, side, k, top, h, b)
             ch, sh = half_angles(deflection_dot(p, a, b))
             tot = max(fi + fe, 1e-300)
-            bound[c, side] = mu * (fi + fe) * sh / max(ch, 1e-300)
-            psi[c, side] = (abs(fi - fe) * ch - mu * (fi + fe) * sh) / tot
+            bound[c, side] = mu[c] * (fi + fe) * sh / max(ch, 1e-300)
+            psi[c, side] = (abs(fi - fe) * ch - mu[c] * (fi + fe) * sh) / tot
 
 
 @njit(cache=True)
@@ -516,12 +517,13 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
     the mandrel side carries the higher tension, f = f_spool exp(mu_r eta)), -1 towards the spool
     (the tensioner takes yarn back: f = f_spool exp(-mu_r eta), eq. 9 as the paper writes it), 0
     stick: the held tension f_hold[k] within that cone. eta is the yarn's deflection at the ring
-    point (``interaction/model.py``)."""
+    point (``interaction/model.py``). f_spool, mu_r (2n,): every yarn's spool tension (N) and
+    yarn-ring friction (its yarn type's)."""
     n = n_yarns // 2
     p = np.empty(3)
     for k in range(n_yarns):
         if not has_ring:
-            f_top[k] = f_spool
+            f_top[k] = f_spool[k]
             continue
         c = highest[k]
         _end_point(pos, normal, over, c, 0 if k < n else 1, k, fell, h, p)
@@ -536,10 +538,10 @@ def top_tensions(n_yarns, highest, pos, normal, over, fell, top, spool, h, f_spo
         cb = (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)
         eta = math.pi - math.acos(min(1.0, max(-1.0, cb)))
         if capstan[k] != 0.0:
-            f_top[k] = f_spool * math.exp(capstan[k] * mu_r * eta)
+            f_top[k] = f_spool[k] * math.exp(capstan[k] * mu_r[k] * eta)
         else:
-            f_top[k] = min(max(f_hold[k], f_spool * math.exp(-mu_r * eta)),
-                           f_spool * math.exp(mu_r * eta))
+            f_top[k] = min(max(f_hold[k], f_spool[k] * math.exp(-mu_r[k] * eta)),
+                           f_spool[k] * math.exp(mu_r[k] * eta))
 
 
 @njit(cache=True)

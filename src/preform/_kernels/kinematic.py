@@ -336,13 +336,13 @@ def smooth_normals_batch(V, T, CN, faces, points, out):
 
 @njit(cache=True)
 def lifted_points(V, T, CN, faces, points, clearance, out):
-    """points (m, 3) on faces (m,) lifted along their smooth normal: ``p + clearance n(p)``,
-    into out (m, 3) (where the catch test's free yarn starts)."""
+    """points (m, 3) on faces (m,) lifted along their smooth normal: ``p + clearance[i] n(p)``
+    (clearance (m,), m: each yarn's), into out (m, 3) (where the catch test's free yarn starts)."""
     for i in range(points.shape[0]):
         nx, ny, nz = smooth_normal(V, T, CN, faces[i], points[i, 0], points[i, 1], points[i, 2])
-        out[i, 0] = points[i, 0] + clearance * nx
-        out[i, 1] = points[i, 1] + clearance * ny
-        out[i, 2] = points[i, 2] + clearance * nz
+        out[i, 0] = points[i, 0] + clearance[i] * nx
+        out[i, 1] = points[i, 1] + clearance[i] * ny
+        out[i, 2] = points[i, 2] + clearance[i] * nz
 
 
 # ---------------------------------------------------------------- braid angles of laid yarn
@@ -479,4 +479,4 @@ def laid_yarn_angles(V, T, CN, S, CT, points, faces, s, prev_i, next_i, mu, curv
         kappa_g = kx * cx + ky * cy + kz * cz
         kappa_n = ((normals[b, 0] - normals[a, 0]) * mx + (normals[b, 1] - normals[a, 1]) * my
                    + (normals[b, 2] - normals[a, 2]) * mz) / (l1 + l2)
-        slip[i] = abs(kappa_g) > mu * abs(kappa_n) + curvature_tol
+        slip[i] = abs(kappa_g) > mu[i] * abs(kappa_n) + curvature_tol

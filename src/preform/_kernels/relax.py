@@ -385,7 +385,8 @@ def wall_distance(m, pos, plane, out):
 def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_top, mu, g, psi):
     """Friction bound g = mu (f_int + f_ext) tan(delta/2) (N) of every crossing and yarn for the
     current geometry and tensions into g (m, 2) (docs/theory.md §4), and Psi / (f_int + f_ext),
-    Psi = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2), into psi (m, 2).
+    Psi = |f_int - f_ext| cos(delta/2) - mu (f_int + f_ext) sin(delta/2), into psi (m, 2); mu
+    (m,): each crossing's coefficient (``interaction.contact.crossing_friction``).
     ``delta`` from the yarn points (the top segment to the unsmoothed top point); a segment
     without length counts as straight."""
     for c in range(m):
@@ -408,8 +409,8 @@ def friction_bounds(m, n_yarns, yarn, up, d_below, l_below, d_top, tension, f_to
                 d = min(1.0, max(-1.0, (ax * bx + ay * by + az * bz) / (la * lb)))
             ch = math.sqrt(max(0.5 * (1.0 - d), 0.0))
             sh = math.sqrt(max(0.5 * (1.0 + d), 0.0))
-            g[c, side] = mu * (fi + fe) * sh / max(ch, 1e-300)
-            psi[c, side] = (abs(fi - fe) * ch - mu * (fi + fe) * sh) / max(fi + fe, 1e-300)
+            g[c, side] = mu[c] * (fi + fe) * sh / max(ch, 1e-300)
+            psi[c, side] = (abs(fi - fe) * ch - mu[c] * (fi + fe) * sh) / max(fi + fe, 1e-300)
 
 
 # -- the block preconditioner: each crossing's 3 x 3 stiffness, coupled along the lattice -------

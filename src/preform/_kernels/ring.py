@@ -258,11 +258,11 @@ def solve_ring(ax, ay, az, bx, by, bz, f_ext, r, z_ring, theta_prev, mu, capstan
 @njit(cache=True)
 def solve_rings(A, B, f_ext, r, z_ring, theta_prev, mu, capstan_sign, f_hold, s_long,
                 psi_rel_tol, march_step, march_max, root_max_iter, root_rel_tol, out, status):
-    """Batch driver over rows of A, B (n, 3) and f_ext, theta_prev, capstan_sign, f_hold, s_long
-    (n,); out (n, RING_OUT_SIZE)."""
+    """Batch driver over rows of A, B (n, 3) and f_ext, theta_prev, mu (each yarn's yarn-ring
+    friction), capstan_sign, f_hold, s_long (n,); out (n, RING_OUT_SIZE)."""
     for i in range(A.shape[0]):
         status[i] = solve_ring(A[i, 0], A[i, 1], A[i, 2], B[i, 0], B[i, 1], B[i, 2], f_ext[i], r,
-                               z_ring, theta_prev[i], mu, capstan_sign[i], f_hold[i], s_long[i],
+                               z_ring, theta_prev[i], mu[i], capstan_sign[i], f_hold[i], s_long[i],
                                psi_rel_tol, march_step, march_max, root_max_iter, root_rel_tol,
                                out[i])
 

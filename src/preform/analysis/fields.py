@@ -378,6 +378,8 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     """
     V, F, source, h = field_mesh(result, edge_length, remesh) if mesh is None else mesh
     normals, areas, centroids = face_geometry(V, F)
+    if getattr(result.config, "is_mixed", False):
+        return _map_mixed(result, V, F, source, h, normals, areas, centroids, pool_radius_m)
     length, moment, first, unmapped = clip_yarns(result.yarns, V, F, normals, centroids, with_first=True)
     width = float(result.config.yarn.width)
     thickness = float(result.config.yarn.thickness)
@@ -421,6 +423,129 @@ def map_to_surface(result, edge_length=None, pool_radius_m=None,
     data["jammed"] = jammed.astype(np.uint8)
     for g, name in enumerate(GROUPS):
         data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(len(F)), where=A > 0)
+    data["source_face"] = source.copy()
+    for name, values in data.items():
+        if not np.all(np.isfinite(values)):  # a bug, not a user error
+            raise AssertionError(f"non-finite values in surface field {name}")
+    return SurfaceFields(vertices=V, faces=F, source_faces=source, cell_data=data, jammed=jammed,
+                         unmapped_length_m=unmapped, edge_length_m=h, pool_radius_m=rho)
+
+
+# ------------------------------------------------------------------------------- mixed yarns
+
+@dataclass(frozen=True)
+class _Subset:
+    """The polylines of some yarns of a YarnPaths (points, offsets, group), for clip_yarns."""
+
+    points: np.ndarray
+    offsets: np.ndarray
+    group: np.ndarray
+
+
+def yarns_of_type(yarns, kinds, t) -> _Subset:
+    """The deposited yarns whose type ``kinds[k]`` is ``t``: yarns (YarnPaths), kinds (ny,) int."""
+    offsets = np.asarray(yarns.offsets, dtype=np.int64)
+    keep = np.nonzero(np.asarray(kinds) == t)[0]
+    counts = offsets[keep + 1] - offsets[keep]
+    index = np.concatenate([np.arange(offsets[k], offsets[k + 1]) for k in keep]) if len(keep) \
+        else np.zeros(0, dtype=np.int64)
+    return _Subset(points=np.asarray(yarns.points)[index],
+                   offsets=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+                   group=np.asarray(yarns.group)[keep])
+
+
+def _map_mixed(result, V, F, source, h, normals, areas, centroids, pool_radius_m):
+    """:func:`map_to_surface` for mixed yarns (``[[yarn_type]]``, docs/theory.md §5, "Mixed
+    yarns"): the yarns of every type are clipped and pooled apart, and per face and group
+
+    - the yarns narrow together, each to its share of the available width: with the demand
+      ``D = sum_t L_t w_t / A`` (the coverage the yarns would have at their own widths), each
+      type's width is ``w_eff,t = max(w_t min(1, 1 / D), w_min,t)`` (one type: ``max(min(w, A / L),
+      w_min)``, the uniform rule); jammed where some type would narrow below its least width;
+    - ``coverage_{group}`` = min(1, sum_t L_t w_eff,t / A), ``yarn_width_{group}_m`` the
+      length-weighted mean of ``w_eff,t``; ``thickness_m`` = sum_t t_t w_t (L_t,warp + L_t,weft) / A;
+    - per type ``coverage_<type>`` = 1 - (1 - k_t,warp)(1 - k_t,weft) (k_t,g = min(1, L_t,g
+      w_eff,t / A)) and ``yarn_length_<type>_m_per_m2`` = (L_t,warp + L_t,weft) / A, which the RTM
+      fields weigh with each type's tow data.
+
+    Directions and braid angles are of all the yarns of a group, as for one type."""
+    config = result.config
+    kinds = config.carrier_types()
+    used = config.used_types()
+    yarns = [config.types[t] for t in used]
+    names = [config.type_names[t] for t in used]
+    parts = [clip_yarns(yarns_of_type(result.yarns, kinds, t), V, F, normals, centroids,
+                        with_first=True) for t in used]
+    moment = np.sum([p[1] for p in parts], axis=0)
+    unmapped = float(sum(p[3] for p in parts))
+    smooth = centroid_normals(V, F, normals)
+    tangent = surface_tangent(result, centroids, smooth)
+    e1, e2 = local_frames(smooth, tangent)
+    width = float(config.yarn.width)
+    rho = default_pool_radius(h, width) if pool_radius_m is None else float(pool_radius_m)
+    planar = planar_moments(moment, e1, e2)
+    nf, nt = len(F), len(used)
+    Lt = np.empty((nt, nf, 2))           # pooled length of every type and group
+    if rho > 0:
+        A = pool(centroids, normals, rho, areas[:, None])[:, 0]
+        M = np.empty((nf, 2, 3))
+        length = np.sum([p[0] for p in parts], axis=0)
+        first = np.sum([p[2] for p in parts], axis=0)
+        for g in range(2):
+            at = np.where(length[:, g, None] > 0, first[:, g]
+                          / np.where(length[:, g, None] > 0, length[:, g, None], 1.0), centroids)
+            # every type's sums sit where the group's do, so that the types' pooled lengths add
+            # up to the group's (the pooling is linear in the values at fixed places)
+            s = pool(centroids, normals, rho,
+                     np.column_stack([*(p[0][:, g] for p in parts), planar[:, g]]), at)
+            Lt[:, :, g], M[:, g] = s[:, :nt].T, s[:, nt:]
+    else:
+        A, M = areas, planar
+        for i, p in enumerate(parts):
+            Lt[i] = p[0]
+    L = Lt.sum(axis=0)
+    w = np.array([y.width for y in yarns])
+    w_min = np.array([y.least_width for y in yarns])
+    data = _group_fields(A, L, M, e1, e2, np.linalg.norm(tangent, axis=1) > 0, width,
+                         float(config.yarn.least_width))
+    k_type = np.zeros((nt, nf, 2))
+    for g, name in enumerate(GROUPS):
+        hit = L[:, g] > 0
+        demand = np.divide(np.einsum("t,tf->f", w, Lt[:, :, g]), A, out=np.zeros(nf), where=A > 0)
+        share = np.minimum(1.0, np.divide(1.0, demand, out=np.ones(nf), where=demand > 0))
+        w_eff = np.maximum(w[:, None] * share[None, :], w_min[:, None])       # (nt, nf)
+        covered = np.einsum("tf,tf->f", w_eff, Lt[:, :, g])
+        data[f"coverage_{name}"] = np.minimum(1.0, np.divide(covered, A, out=np.zeros(nf), where=A > 0))
+        data[f"yarn_width_{name}_m"] = np.divide(covered, L[:, g], out=np.zeros(nf), where=hit)
+        data[f"_jammed_{name}"] = hit & np.any((Lt[:, :, g] > 0) & (
+            w_min[:, None] > w[:, None] * share[None, :] * (1.0 + JAM_RTOL)), axis=0)
+        k_type[:, :, g] = np.minimum(1.0, np.divide(w_eff * Lt[:, :, g], A, out=np.zeros((nt, nf)),
+                                                    where=A > 0))
+    for name in GROUPS:
+        d = data[f"{name}_direction"]
+        d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
+        norm = np.linalg.norm(d, axis=1)
+        data[f"{name}_direction"] = np.divide(d, norm[:, None], out=np.zeros_like(d),
+                                              where=norm[:, None] > 0)
+    jammed = (data.pop("_jammed_warp") | data.pop("_jammed_weft")).astype(bool)
+    k_warp, k_weft = data["coverage_warp"], data["coverage_weft"]
+    hit_warp, hit_weft = data["reached_warp"] > 0, data["reached_weft"] > 0
+    n_present = hit_warp.astype(float) + hit_weft
+    data["braid_angle_deg"] = np.divide(
+        data["braid_angle_warp_deg"] * hit_warp + data["braid_angle_weft_deg"] * hit_weft,
+        n_present, out=np.zeros(nf), where=n_present > 0)
+    section = np.array([y.thickness * y.width for y in yarns])   # every type's cross-section
+    data["thickness_m"] = np.divide(np.einsum("t,tf->f", section, Lt.sum(axis=2)), A,
+                                    out=np.zeros(nf), where=A > 0)
+    k_axial = _add_axial_yarns(data, result, V[F], centroids, areas, normals, tangent, hit_warp | hit_weft, h)
+    data["cover_factor"] = 1.0 - (1.0 - k_warp) * (1.0 - k_weft) * (1.0 - k_axial)
+    data["jammed"] = jammed.astype(np.uint8)
+    for g, name in enumerate(GROUPS):
+        data[f"yarn_length_{name}_m_per_m2"] = np.divide(L[:, g], A, out=np.zeros(nf), where=A > 0)
+    for i, name in enumerate(names):
+        data[f"coverage_{name}"] = 1.0 - (1.0 - k_type[i, :, 0]) * (1.0 - k_type[i, :, 1])
+        data[f"yarn_length_{name}_m_per_m2"] = np.divide(Lt[i].sum(axis=1), A, out=np.zeros(nf),
+                                                         where=A > 0)
     data["source_face"] = source.copy()
     for name, values in data.items():
         if not np.all(np.isfinite(values)):  # a bug, not a user error

@@ -71,8 +71,9 @@ class QualitySettings:
     #: would stay
     max_slip_share: float = 0.1
     #: m, a snapshot's crossing further than this many yarn widths from where the re-balance
-    #: that checks it puts it: the written state is far from a converged one (measured: case A
-    #: 16 carriers, friction 0.25: up to 1.5 mm at 8 of 9 snapshots, 15 mm at one)
+    #: of its step's own problem puts it: the written state is far from a converged one
+    #: (measured: behind a ring, converged, at most 1.2 mm; not converged, up to 28 mm; case A
+    #: 16 carriers, friction 0.25, 0.3 m: up to 1 mm at 8 of 11 snapshots, 14 and 35 mm at two)
     max_snapshot_shift_widths: float = 5.0
 
 
@@ -249,7 +250,7 @@ def surface_reasons(result, fields, settings: QualitySettings = QUALITY) -> list
                          2.0 * float(fields.pool_radius_m), settings, front_start=float(fell[-1].min()))
 
 
-def snapshot_checks(snap, mu: float) -> tuple[float, float]:
+def snapshot_checks(snap, mu, kinds=None) -> tuple[float, float]:
     """(largest imbalance / the snapshot's largest tension, largest Psi / tension) of a
     convergence-zone snapshot, from its own arrays as a reader of ``convergence.pvd`` sees them.
 
@@ -258,7 +259,10 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     the neighbouring points; the crossing's two points (one per yarn, the same contact id) and
     their ``external_force_N`` must sum to zero. The friction law: with cos(beta) =
     u_lo . u_hi, ``Psi = |f_lo - f_hi| sqrt((1 - cos beta) / 2) - mu (f_lo + f_hi) sqrt((1 + cos
-    beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone)."""
+    beta) / 2) <= 0``. (0, 0) for a snapshot without crossings (the kinematic zone).
+
+    mu: the yarn-yarn friction, or with ``kinds`` (n_yarns,) every yarn's type, the (nt, nt)
+    table of every pair of types (``Config.pair_friction``): each crossing its pair's."""
     P = np.asarray(snap.points, dtype=float)
     off = np.asarray(snap.offsets, dtype=np.int64)
     cid = np.asarray(snap.contact_id, dtype=np.int64)
@@ -277,6 +281,13 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     ids, at = np.unique(cid[j], return_inverse=True)
     net = np.zeros((len(ids), 3))
     np.add.at(net, at, force)
+    if kinds is not None:     # a crossing's pair: the types of the two yarns of its contact id
+        kinds = np.asarray(kinds)
+        lo_type = np.full(len(ids), np.iinfo(np.int64).max)
+        hi_type = np.full(len(ids), -1)
+        np.minimum.at(lo_type, at, kinds[k])
+        np.maximum.at(hi_type, at, kinds[k])
+        mu = np.asarray(mu, dtype=float)[lo_type, hi_type][at]
     imbalance = np.linalg.norm(net, axis=1) / float(np.max(ten))
     cb = np.clip(np.einsum("ij,ij->i", u_lo, u_hi), -1.0, 1.0)
     psi = (np.abs(f_lo - f_hi) * np.sqrt((1.0 - cb) / 2.0)
@@ -284,20 +295,21 @@ def snapshot_checks(snap, mu: float) -> tuple[float, float]:
     return float(imbalance.max()), float(psi.max())
 
 
-def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
-                     width: float | None = None) -> list[str]:
+def snapshot_reasons(snapshots, mu, settings: QualitySettings = QUALITY,
+                     width: float | None = None, kinds=None) -> list[str]:
     """Reasons to doubt the written convergence-zone snapshots, one a kind (the worst snapshot
     and how many): crossings out of balance beyond ``max_snapshot_imbalance``
     (:func:`snapshot_checks`), a slack segment, and, where a re-balance checked the snapshot
     (``Snapshot.rebalanced``): the re-balanced copy outside the friction cone
     (``max_snapshot_psi``), the re-balance failing, or the written crossings further than
     ``max_snapshot_shift_widths`` yarn widths (``width``, m) from the re-balanced ones. A
-    snapshot without a re-balanced copy is checked for the friction cone itself."""
+    snapshot without a re-balanced copy is checked for the friction cone itself. mu, kinds: as
+    :func:`snapshot_checks`."""
     found = {"imbalance": [], "psi": [], "slack": [], "failed": [], "shift": []}
     for snap in snapshots:
-        imbalance, psi = snapshot_checks(snap, mu)
+        imbalance, psi = snapshot_checks(snap, mu, kinds)
         if snap.rebalanced is not None:
-            psi = snapshot_checks(snap.rebalanced, mu)[1]
+            psi = snapshot_checks(snap.rebalanced, mu, kinds)[1]
         ten = np.asarray(snap.tension_N, dtype=float)
         shift = float(snap.rebalance_shift_m)
         t = snap.time_s
@@ -342,9 +354,10 @@ def snapshot_reasons(snapshots, mu: float, settings: QualitySettings = QUALITY,
         k, (v, t) = worst("shift")
         reasons.append(f"{k} of {n} convergence-zone snapshots (the run's own states) have "
                        f"crossings more than {settings.max_snapshot_shift_widths:g} yarn widths "
-                       f"from where the re-balance that checks them puts them, up to "
-                       f"{v * 1e3:.3g} mm at t = {t:.4g} s: the steps were far from balance with "
-                       f"their converged friction bounds")
+                       f"from where their step's own problem puts them balanced (its fell and "
+                       f"ring points held, its friction bounds converged), up to "
+                       f"{v * 1e3:.3g} mm at t = {t:.4g} s: those steps had not converged "
+                       f"(history.csv's residual)")
     return reasons
 
 
@@ -367,6 +380,11 @@ def assess(result, settings: QualitySettings = QUALITY, interlacing=False) -> di
     reasons += interlacing_reasons(run_interlacing(result) if interlacing is False else interlacing,
                                    settings)
     if result.snapshots and result.config is not None:
-        reasons += snapshot_reasons(result.snapshots, float(result.config.yarn.friction), settings,
-                                    width=float(result.config.yarn.width))
+        cfg = result.config
+        if getattr(cfg, "is_mixed", False):   # every crossing's pair friction
+            reasons += snapshot_reasons(result.snapshots, cfg.pair_friction()[0], settings,
+                                        width=float(cfg.yarn.width), kinds=cfg.carrier_types())
+        else:
+            reasons += snapshot_reasons(result.snapshots, float(cfg.yarn.friction), settings,
+                                        width=float(cfg.yarn.width))
     return verdict(reasons)

@@ -59,7 +59,8 @@ def gebart(vf, fibre_radius, packing="hexagonal"):
     K_perp is 0 at and above the packing's V_f max (the channels between fibres close)."""
     c, c1, vf_max = GEBART[packing]
     vf = np.asarray(vf, dtype=float)
-    r2 = float(fibre_radius) ** 2
+    # one radius, or per face (mixed yarns: the types' surface-equivalent mean, ``_type_tow``)
+    r2 = float(fibre_radius) ** 2 if np.ndim(fibre_radius) == 0 else np.asarray(fibre_radius, float) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         k_par = np.where(vf > 0, 8.0 * r2 * (1.0 - vf) ** 3 / (c * vf * vf), np.inf)
         gap = np.sqrt(np.divide(vf_max, vf, out=np.full_like(vf, np.inf), where=vf > 0)) - 1.0
@@ -361,21 +362,51 @@ RTM_ARRAYS = ("areal_weight_kg_m2", "fibre_volume_fraction", "porosity", "permea
 
 def missing_material(config) -> str:
     """Why the RTM fields cannot be made for ``config`` ("" if they can)."""
+    if getattr(config, "is_mixed", False):
+        lacking = [config.type_names[t] for t in config.used_types()
+                   if not config.types[t].has_material]
+        if lacking:
+            return (f"no tow material data for the yarn type {lacking[0]}: give linear_density_tex, "
+                    "fibre_density and fibre_radius of every type on the carriers for fibre "
+                    "volume fraction and permeability")
+        return ""
     if not config.yarn.has_material:
         return ("no tow material data: give [yarn] linear_density_tex, fibre_density and fibre_radius "
                 "for fibre volume fraction and permeability")
     return ""
 
 
-def _principal_values(config, vf, angle_deg):
-    """(K_par, K_perp) of the fibres, or (K1, K2) of the braid for a table model."""
+def _principal_values(config, vf, angle_deg, fibre_radius=None):
+    """(K_par, K_perp) of the fibres, or (K1, K2) of the braid for a table model; fibre_radius
+    (m, one or per face): None, ``[yarn] fibre_radius``."""
     model = config.rtm
     if model.permeability == "gebart":
-        return gebart(vf, config.yarn.fibre_radius, model.packing)
+        r = config.yarn.fibre_radius if fibre_radius is None else fibre_radius
+        return gebart(vf, r, model.packing)
     if model.permeability == "kozeny_carman":
         return kozeny_carman(vf, model.k_ref, model.vf_ref)
     table = read_permeability_table(model.table)
     return table(angle_deg, vf)
+
+
+def _type_tow(cd, config):
+    """Mixed yarns: (areal weight kg/m^2, fibre volume per area m, fibre radius m) per face from
+    every type's yarn length per area (``yarn_length_<type>_m_per_m2``) and tow data:
+    ``A_w = sum_t A_w,t``, ``v = sum_t A_w,t / rho_t``, and the radius of equal specific surface
+    ``r = v / sum_t (v_t / r_t)`` (the volume-weighted harmonic mean: the fibres' wetted surface
+    per volume, ``2 / r``, which Gebart's and Kozeny's laws scale with, is the mix's), [yarn]'s
+    where no yarn lies."""
+    nf = len(cd["thickness_m"])
+    aw, solid, surface = np.zeros(nf), np.zeros(nf), np.zeros(nf)
+    for t in config.used_types():
+        name, y = config.type_names[t], config.types[t]
+        own = areal_weight(cd[f"yarn_length_{name}_m_per_m2"], y.linear_density_tex)
+        aw += own
+        solid += own / y.fibre_density
+        surface += own / y.fibre_density / y.fibre_radius
+    radius = np.divide(solid, surface, out=np.full(nf, float(config.yarn.fibre_radius)),
+                       where=surface > 0)
+    return aw, solid, radius
 
 
 def read_permeability_table(path) -> PermeabilityTable:
@@ -409,18 +440,29 @@ def rtm_fields(fields, config, tangents, thickness=None) -> dict:
     cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     normals = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
     per_area = np.column_stack([cd["yarn_length_warp_m_per_m2"], cd["yarn_length_weft_m_per_m2"]])
-    aw = areal_weight(per_area.sum(axis=1), config.yarn.linear_density_tex)
+    mixed = _type_tow(cd, config) if getattr(config, "is_mixed", False) else None
+    if mixed is None:
+        aw = areal_weight(per_area.sum(axis=1), config.yarn.linear_density_tex)
+    else:
+        aw, solid, radius = mixed
     families = ["warp_direction", "weft_direction"]
     if "yarn_length_axial_m_per_m2" in cd:   # triaxial: the axial yarns are a third family
         axial = cd["yarn_length_axial_m_per_m2"]
-        aw = aw + areal_weight(axial, config.axial()[3] or config.yarn.linear_density_tex)
+        axial_aw = areal_weight(axial, config.axial()[3] or config.yarn.linear_density_tex)
+        aw = aw + axial_aw
+        if mixed is not None:   # the axial yarns are [yarn]'s fibre
+            solid = solid + axial_aw / config.yarn.fibre_density
         per_area = np.column_stack([per_area, axial])
         families.append("axial_direction")
     total = per_area.sum(axis=1)
     if thickness is None:
         thickness = cd["thickness_m"] if config.rtm.cavity_thickness is None else \
             np.full(len(F), config.rtm.cavity_thickness)
-    vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
+    if mixed is None:
+        vf = fibre_volume_fraction(aw, config.yarn.fibre_density, thickness)
+    else:
+        t = np.broadcast_to(np.asarray(thickness, dtype=float), aw.shape)
+        vf = np.divide(solid, t, out=np.zeros_like(aw), where=t > 0)
     valid = (total > 0) & (vf >= MIN_VF) & (vf < 1)
     angle = cd["braid_angle_deg"]
     k1 = np.zeros(len(F))
@@ -431,7 +473,8 @@ def rtm_fields(fields, config, tangents, thickness=None) -> dict:
     if np.any(valid):
         shares = per_area[valid] / total[valid, None]
         d = np.stack([cd[name][valid] for name in families], axis=1)
-        a, b = _principal_values(config, vf[valid], angle[valid])
+        a, b = _principal_values(config, vf[valid], angle[valid],
+                                 None if mixed is None else radius[valid])
         if config.rtm.permeability == "table":
             # the braid's own principal values: K1 along the axis below 45 deg, around it above
             n = normals[valid]
@@ -496,7 +539,10 @@ def stacked_rtm_fields(layer_fields, layer_configs, tangents, cavity_thickness=N
     for k, (fields, config) in enumerate(zip(layer_fields, layer_configs), start=1):
         own = rtm_fields(fields, config, tangents, thickness=t_layers[k - 1] * squeeze)
         aw += own["areal_weight_kg_m2"]
-        solid += own["areal_weight_kg_m2"] / config.yarn.fibre_density
+        if getattr(config, "is_mixed", False):   # the types' fibre volume, at the layer's fill
+            solid += own["fibre_volume_fraction"] * t_layers[k - 1] * squeeze
+        else:
+            solid += own["areal_weight_kg_m2"] / config.yarn.fibre_density
         ok = own["rtm_valid"] > 0
         w = np.where(ok, t_layers[k - 1], 0.0)
         Kk = own["permeability_m2"].reshape(-1, 3, 3)

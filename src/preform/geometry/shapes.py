@@ -375,6 +375,10 @@ def _family():
         # the S-bend from near the tip: a short braid lies on its first bend
         "s_bend_tip": PartSpec("s_bend_tip", (("line", 0.03), ("arc", S, 35.0), ("line", 0.05),
                                               ("arc", S, -35.0), ("line", 0.4)), 0.025),
+        # a single bend from near the tip, gentle enough for the kinematic model's straight
+        # yarns to follow its inner side (at 0.3 m they lift off there and catch ahead)
+        "bend_tip": PartSpec("bend_tip", (("line", 0.03), ("arc", 0.45, 35.0), ("line", 0.5)),
+                             0.025),
         "rect_to_circle": PartSpec("rect_to_circle", (("line", 0.9),), 0.025,
                                    rectangle=(0.06, 0.04, 0.01), change=(0.25, 0.45)),
         "circle_to_rect": PartSpec("circle_to_rect", (("line", 0.9),), 0.025,

@@ -31,6 +31,17 @@ def as_vector(name: str, value) -> np.ndarray:
     return v
 
 
+def crossing_friction(type_a, type_b, pairs) -> np.ndarray:
+    """(m,) float64: the yarn-yarn coefficient of friction of every crossing, from the types
+    ``type_a``, ``type_b`` (m,) int of its two yarns and the (nt, nt) table ``pairs`` of every
+    pair of types (``Config.pair_friction``: symmetric, a type with itself on the diagonal).
+    The one place a crossing's coefficient is formed; the friction bounds of both solvers
+    (``_kernels.frontal.friction_bounds``, ``_kernels.relax.friction_bounds``) take it per
+    crossing."""
+    pairs = np.asarray(pairs, dtype=np.float64)
+    return np.ascontiguousarray(pairs[np.asarray(type_a, np.int64), np.asarray(type_b, np.int64)])
+
+
 def as_friction(name: str, value) -> float:
     """``value`` as a finite float >= 0, or ContactInputError naming ``name``."""
     mu = float(value)

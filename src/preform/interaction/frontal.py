@@ -93,7 +93,7 @@ import scipy.sparse as sp
 from .._kernels import frontal as frontal_kernels
 from .._kernels import zone as zone_kernels
 from ..errors import SimulationError
-from .contact import bound_change, bound_scale
+from .contact import bound_change, bound_scale, crossing_friction
 from .linalg import LowerFactoriser
 from .settings import DEFAULT, InteractionSettings
 
@@ -110,7 +110,10 @@ class Boundary:
     (2n,) or None, per yarn the direction its material slides over the guide ring (+1 towards
     the mandrel, -1 towards the spool, 0 stick; None: -1, the paper's eq. 9 as written) and
     f_hold : (2n,) N, the tension a sticking yarn holds below the ring
-    (``_kernels.frontal.top_tensions``).
+    (``_kernels.frontal.top_tensions``). Mixed yarns (``[[yarn_type]]``): yarn_type (2n,) int64,
+    every yarn's type; pair_mu (nt, nt), the yarn-yarn friction of every pair of types;
+    type_tension, type_ring_friction (nt,), every type's spool tension (N) and yarn-ring friction;
+    None: every yarn is [yarn], with f_spool, mu and mu_r.
     """
 
     fell: np.ndarray
@@ -125,13 +128,37 @@ class Boundary:
     width: float = 0.0
     capstan: np.ndarray | None = None
     f_hold: np.ndarray | None = None
+    yarn_type: np.ndarray | None = None
+    pair_mu: np.ndarray | None = None
+    type_tension: np.ndarray | None = None
+    type_ring_friction: np.ndarray | None = None
+
+    def crossing_mu(self, yarn) -> np.ndarray:
+        """(m,) float64: the yarn-yarn friction of every crossing of the two yarns ``yarn`` (m, 2)
+        (``contact.crossing_friction``): ``mu`` everywhere without yarn types."""
+        yarn = np.asarray(yarn)
+        if self.pair_mu is None:
+            return np.full(len(yarn), float(self.mu))
+        t = self.yarn_type
+        return crossing_friction(t[yarn[:, 0]], t[yarn[:, 1]], self.pair_mu)
+
+    def spool_tensions(self) -> np.ndarray:
+        """(2n,) float64, N: every yarn's spool tension (its type's)."""
+        if self.type_tension is None:
+            return np.full(len(self.fell), float(self.f_spool))
+        return np.ascontiguousarray(self.type_tension[self.yarn_type], dtype=float)
+
+    def ring_frictions(self) -> np.ndarray:
+        """(2n,) float64: every yarn's yarn-ring friction (its type's)."""
+        if self.type_ring_friction is None:
+            return np.full(len(self.fell), float(self.mu_r))
+        return np.ascontiguousarray(self.type_ring_friction[self.yarn_type], dtype=float)
 
     def capstan_arguments(self) -> tuple[np.ndarray, np.ndarray]:
         """(capstan, f_hold) as (2n,) float64 arrays for the kernels (defaults filled in)."""
         n = len(self.fell)
         c = np.full(n, -1.0) if self.capstan is None else np.asarray(self.capstan, dtype=float)
-        f = np.full(n, float(self.f_spool)) if self.f_hold is None else np.asarray(
-            self.f_hold, dtype=float)
+        f = self.spool_tensions() if self.f_hold is None else np.asarray(self.f_hold, dtype=float)
         return np.ascontiguousarray(c), np.ascontiguousarray(f)
 
 
@@ -213,7 +240,7 @@ class _Network:
             self.plane = np.ascontiguousarray(bc.plane[:m])
         self.centre = state.material[:m].copy()
         self.EA = axial_stiffness(bc.f_spool, settings)
-        self.f_top = np.full(state.n_yarns, float(bc.f_spool))
+        self.f_top = bc.spool_tensions()
         self.bound = np.zeros((m, 2))
         self.grad = np.zeros((m, 5))
         self.tension = np.zeros((m, 2))
@@ -285,11 +312,12 @@ class _Network:
         psi = np.empty((st.m, 2))
         f_top = np.empty(st.n_yarns)
         frontal_kernels.top_tensions(st.n_yarns, st.highest, st.pos, st.normal, st.over, bc.fell,
-                                     bc.top, bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring,
-                                     *bc.capstan_arguments(), f_top)
+                                     bc.top, bc.spool, bc.h, bc.spool_tensions(),
+                                     bc.ring_frictions(), bc.has_ring, *bc.capstan_arguments(),
+                                     f_top)
         frontal_kernels.friction_bounds(st.m, st.yarn, st.pos, st.normal, st.over, st.low, st.up,
-                                        bc.fell, bc.top, self.tension, f_top, bc.h, bc.mu, bound,
-                                        psi)
+                                        bc.fell, bc.top, self.tension, f_top, bc.h,
+                                        bc.crossing_mu(st.yarn[:st.m]), bound, psi)
         return bound, psi, f_top
 
     def balance(self, tol, max_steps):

@@ -100,6 +100,13 @@ class InteractionZone:
     (failure-injection tests).
     """
 
+    #: said before a run starts (``Zone.cost_note``)
+    cost_note = ('[model] kind = "interaction": about {steps:,} time steps, each a solve of every '
+                 "crossing of the convergence zone; a step that does not converge stops the run, "
+                 "which keeps the results up to it")
+    #: the first-run worker's jobs are the kinematic run's kernels (``Zone.first_run_worker``)
+    first_run_worker = False
+
     def __init__(self, config, machine, mandrel=None, *, distance=None,
                  settings: InteractionSettings | None = None, solve_zone=None):
         self.config = config
@@ -116,8 +123,12 @@ class InteractionZone:
         self.mu = float(y.friction)
         self.mu_r = float(y.ring_friction)
         self.f_spool = float(y.tension)
+        # mixed yarns: every yarn's type, and the friction and tension of the types
+        # (``frontal.Boundary``); None: every yarn is [yarn]
+        self.types = _yarn_types(config) if getattr(config, "is_mixed", False) else {}
         self.state = ZoneState(machine.n_yarns)
-        self.f_top = np.full(machine.n_yarns, self.f_spool)   # N, top tension of every yarn
+        self.f_top = (np.full(machine.n_yarns, self.f_spool) if not self.types else
+                      self.types["type_tension"][self.types["yarn_type"]])   # N, every yarn's top tension
         self.step_index = 0
         self.G_prev = None            # (2n, 3) free-yarn ends of the last step
         self.lowest_uid_prev = None   # (2n,) uid of every yarn's lowest crossing at the last step
@@ -131,6 +142,7 @@ class InteractionZone:
         self.stage = ""               # the part of the step under way (a fault's message names it)
         self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
         self._own = None              # the Snapshot of the last such step's solved state
+        self._own_problem = None      # (state, boundary) that step solved
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
@@ -206,7 +218,8 @@ class InteractionZone:
         return frontal.Boundary(fell=np.ascontiguousarray(F_machine, dtype=float),
                                 top=top, spool=m.spool_points(t),
                                 f_spool=self.f_spool, mu=self.mu, mu_r=self.mu_r,
-                                has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring)
+                                has_ring=bool(m.has_ring), h=self.h, width=self.width, **ring,
+                                **self.types)
 
     def step(self, t0, dt, F_machine, pose_end) -> ZoneStep:
         t1 = t0 + dt
@@ -274,9 +287,11 @@ class InteractionZone:
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
             self._ring_flow()
         if self.snapshot_due:
-            # the state the step solved, before its deposit: what its snapshot writes
+            # the state the step solved, before its deposit: what its snapshot writes, and its
+            # boundary, which its check holds
             self._own = _snapshot(st, bc, self.last_report.f_top, t1, self.machine,
                                   self.settings, wall="reaction")
+            self._own_problem = (st.copy(), bc)
         self.stage = "the deposit of crossings on the mandrel"
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
@@ -349,16 +364,37 @@ class InteractionZone:
         points at the crossings are from the re-balanced ones (``rebalance_error`` where the
         re-balance failed)."""
         snap, self._own = self._own, None
+        problem, self._own_problem = self._own_problem, None
         if snap is None or snap.time_s != float(t):
             bc = self._with_wall(self.boundary(t, F_machine))
             snap = _snapshot(self.state, bc, self.f_top, t, self.machine, self.settings,
                              wall="reaction")
+            problem = None
         try:
-            checked = self._rebalanced(t, F_machine)
+            checked = (self._rebalanced(t, F_machine) if problem is None else
+                       self._rebalanced_own(t, *problem))
         except SimulationError as err:
             return dataclasses.replace(snap, rebalance_error=str(err))
         return dataclasses.replace(snap, rebalance_shift_m=crossing_shift(snap, checked),
                                    rebalanced=checked)
+
+    def _rebalanced_own(self, t, state, bc) -> Snapshot:
+        """The state a step solved, re-balanced on a copy with its boundary held (the fell points
+        and ring points it was solved with), each yarn's friction centre at each crossing where
+        the step left it, and the friction bounds iterated to those of the geometry
+        (``FrontalSettings.snapshot_tolerance``): a converged state is its own fixed point, a
+        state out of balance or outside its friction cone moves. The ring points' slide and
+        the fell points' walk after the step belong to the next step, not to this one's
+        balance (sliding the ring points to their fixed point moved the crossings of converged
+        runs behind a ring by up to 112 mm), and friction centres from before the step would
+        let the re-balance slide crossings along the zone's neutral directions."""
+        st = state.copy()
+        fr = self.settings.frontal
+        report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
+                                 where=f"in the snapshot at t = {t:.6g} s",
+                                 centre=frontal.friction_centres(st),
+                                 friction_tol=fr.snapshot_tolerance, mode="final")
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def _rebalanced(self, t, F_machine) -> Snapshot:
         """The zone re-balanced on a copy with the fell points given: the ring points and the
@@ -422,9 +458,9 @@ class InteractionZone:
         hold = np.ascontiguousarray(self.f_top, dtype=float)
         # sliding along the ring in this step, the yarn has one friction cone along and across
         s_long = np.ascontiguousarray(np.abs(self.ring_s_long), dtype=float)
-        ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), np.full(n, self.f_spool),
+        ring_kernels.solve_rings(A, np.ascontiguousarray(bc.spool), bc.spool_tensions(),
                                  self.machine.ring_radius, self.machine.supply_z,
-                                 np.asarray(theta, float), self.mu_r, capstan, hold, s_long,
+                                 np.asarray(theta, float), bc.ring_frictions(), capstan, hold, s_long,
                                  *ring_arguments(self.settings.ring), out, status)
         ok = status == ring_kernels.RING_OK
         return np.where(ok, out[:, ring_kernels.RING_OUT_THETA], theta)
@@ -701,6 +737,17 @@ class InteractionZone:
         return deposits
 
 
+def _yarn_types(config) -> dict:
+    """The mixed yarns' arrays of ``frontal.Boundary``: every yarn's type (``Config.
+    carrier_types``), the friction of every pair of types (``Config.pair_friction``), every
+    type's spool tension and yarn-ring friction."""
+    types = config.types
+    return dict(yarn_type=np.ascontiguousarray(config.carrier_types(), dtype=np.int64),
+                pair_mu=np.ascontiguousarray(config.pair_friction()[0], dtype=float),
+                type_tension=np.array([t.tension for t in types], dtype=float),
+                type_ring_friction=np.array([t.ring_friction for t in types], dtype=float))
+
+
 def _restore(st, posed):
     """Write a step's posed arrays (``InteractionZone.step``: name -> the first m rows) back into
     the zone state ``st``, in place."""
@@ -768,12 +815,13 @@ def _snapshot(st, bc, f_top, t, machine, settings: InteractionSettings = DEFAULT
         fx = [np.zeros(3)] + [ext_c[c, side] for c in chain] + [np.zeros(3)]
         if ring:
             pts.append(bc.spool[k])
-            ten.append(bc.f_spool)
+            f_spool = float(bc.spool_tensions()[k])
+            ten.append(f_spool)
             ids.append(-1)
             sl.append(0)
             fx.append(np.zeros(3))
             below, at, above = pts[-3], pts[-2], pts[-1]
-            fx[-2] = -(f_written * _unit(below - at) + bc.f_spool * _unit(above - at))
+            fx[-2] = -(f_written * _unit(below - at) + f_spool * _unit(above - at))
         points.extend(pts)
         tension.extend(ten)
         cid.extend(ids)

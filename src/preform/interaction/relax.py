@@ -170,27 +170,37 @@ class RelaxResult:
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
           width, plane=None, settings: RelaxSettings = DEFAULT.relax,
-          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False):
+          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False,
+          tol=None, bound_iterations=None, friction_tol=None):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
-    (held unless ``consistent``), f_spool N, mu, h m half the yarn thickness,
+    (held unless ``consistent``), f_spool N, mu (m,) every crossing's yarn-yarn friction (a
+    number: the same at every crossing), h m half the yarn thickness,
     width m (jamming; 0 none), plane (m, 6) or None: per crossing a point and the outward unit
     normal of the mandrel's tangent plane. model: the model's constants (the Newton reference's
     ``InteractionSettings``). top_tensions: with consistent bounds, a function of
     the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
     held. fresh: (m, 2) bool, the bounds a step behind a guide ring takes of its converged
     geometry (``_posed_bounds``); given, a step with held bounds is solved again with them and
-    the top tensions taken of its converged geometry (``_posed_fixed_point``). Returns a
+    the top tensions taken of its converged geometry (``_posed_fixed_point``). tol: the balance
+    tolerance (relative residual; None: the Newton reference's
+    ``NewtonSettings.balance_tolerance``, so that both solve to the same). Returns a
     :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
 
     Consistent bounds (``consistent``; else the bounds are held): an outer fixed point, as
     Newton's frontal loop (``frontal.solve_zone``): the step is solved with the bounds held, the
     bounds (and ring top tensions) are taken anew from its converged geometry and tensions, and
-    the step is solved again from there until they change by less than ``friction_tol``
-    relative to the tensions."""
+    the step is solved again from there, at most ``bound_iterations`` times (None: a step's
+    frontal iterations after the first, ``FrontalSettings.max_iterations - 1``), until they
+    change by less than ``friction_tol`` relative to the tensions (None:
+    ``FrontalSettings.friction_tolerance``)."""
+    fr = model.frontal
+    tol = model.newton.balance_tolerance if tol is None else float(tol)
+    bound_iterations = fr.max_iterations - 1 if bound_iterations is None else int(bound_iterations)
+    friction_tol = fr.friction_tolerance if friction_tol is None else float(friction_tol)
     kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
-              model=model)
+              model=model, tol=tol)
     posed_loop = fresh is not None and not consistent
     # the posed iteration's solves start from K as the last one left it
     carry = PC.FactorCarry() if posed_loop else None
@@ -211,15 +221,14 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     iterations, history, times = res.iterations, [res.history], dict(res.times)
     factorisations = res.factorisations
     change = np.inf
-    for _ in range(settings.bound_iterations):
+    for _ in range(bound_iterations):
         change, f_top = (_lag_change(lat, res, bounds, top_tensions, f_top,
                                      model.frontal.change_scale_floor) if m else (0.0, f_top))
-        if change < settings.friction_tol:
+        if change < friction_tol:
             break
         bounds = res.bounds
         res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
-                                  f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                                  settings=settings, model=model)
+                                  **kw)
         iterations += res.iterations
         factorisations += res.factorisations
         history.append(res.history)
@@ -230,7 +239,7 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     res.iterations, res.history, res.times = iterations, np.concatenate(history), times
     res.factorisations = factorisations
     res.bound_change = change
-    res.converged = res.converged and change < settings.friction_tol
+    res.converged = res.converged and change < friction_tol
     return res
 
 
@@ -254,9 +263,9 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
     held_top = res.f_top
     pi = PosedIteration(fr, fresh, bound_scale(lat.up, lat.yarn, res.tension, res.f_top,
                                                fr.change_scale_floor), res.f_top)
-    rs = kw["settings"]
+    rs, tol = kw["settings"], kw["tol"]
     loose = rs.posed_inexact > 0.0      # re-solves to a share of the change, then finished
-    solved_to = rs.tol
+    solved_to = tol
     while True:
         bound1 = np.where(fresh, res.bounds, bounds)
         change = _bound_change(lat, bound1, bounds, res.tension, res.f_top,
@@ -266,7 +275,7 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
             f_top1 = np.asarray(top_tensions(res.pos), dtype=float)
             change = max(change, float(np.max(np.abs(f_top1 - res.f_top) / f_top1)))
         x = pi.step(bounds, held_top, bound1, f_top1, change)
-        if x is None and solved_to > rs.tol:
+        if x is None and solved_to > tol:
             # the iteration stops at a solve short of the balance tolerance: that solve is
             # finished (the same held bounds, from its result) and its change measured again,
             # which the iteration then judges in place of the loose one
@@ -274,10 +283,9 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
             x, loose = (bounds, held_top), False
         elif x is None:
             break
-        solved_to = max(rs.tol, rs.posed_inexact * change) if loose else rs.tol
+        solved_to = max(tol, rs.posed_inexact * change) if loose else tol
         nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, x[1], x[0],
-                                  carry=carry, **dict(kw, settings=dataclasses.replace(
-                                      rs, tol=solved_to)))
+                                  carry=carry, **dict(kw, tol=solved_to))
         iterations += nxt.iterations
         factorisations += nxt.factorisations
         history.append(nxt.history)
@@ -337,11 +345,12 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
-                h, width, plane, settings, model, carry=None):
-    """The iteration with the bounds and top tensions held (``relax``): sweep, forces and
-    residual, then the preconditioner's update, wall step and mixing (``preconditioners``).
-    ``carry``: a ``preconditioners.FactorCarry``; the solve starts from its factorisation where
-    it is valid (``RelaxSettings.reuse_factor``) and leaves its own last one in it."""
+                h, width, plane, settings, model, tol, carry=None):
+    """The iteration with the bounds and top tensions held (``relax``), to the relative
+    residual ``tol``: sweep, forces and residual, then the preconditioner's update, wall step
+    and mixing (``preconditioners``). ``carry``: a ``preconditioners.FactorCarry``; the solve
+    starts from its factorisation where it is valid (``RelaxSettings.reuse_factor``) and
+    leaves its own last one in it."""
     st = settings
     e = model.energy
     m, ny = lat.m, lat.n_yarns
@@ -365,7 +374,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         has_wall = True
     x = PC.Iterate(
         lat=lat, law=KZ.law(EA, e.compression, model.frontal.friction_creep, e.kappa0, h,
-                            e.length_smoothing, e.top_smoothing2, l_jam, k_jam, st.floor),
+                            e.length_smoothing, e.top_smoothing2, l_jam, k_jam,
+                            e.geometric_floor),
         prob=KZ.problem(fell, top, s_fell, s_old, g, f_top), settings=st, pos=pos, s=s,
         tension=np.empty((m, 2)), seg=KZ.segments(m, ny), fo=KZ.forces(m, ny), plane=plane,
         active=np.zeros(m, dtype=np.bool_), has_wall=has_wall,
@@ -412,7 +422,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
         times["forces"] += t2 - t1
-        if residual < st.tol:
+        if residual < tol:
             converged = True
             break
         # safeguard: the block-Jacobi corrections can undo the force-density move where the
@@ -468,7 +478,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     g_new = np.empty((m, 2))
     psi = np.zeros((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, seg.d_below, seg.l_below, seg.d_top, tension,
-                       x.prob.f_top, float(mu), g_new, psi)
+                       x.prob.f_top, _per_crossing(mu, m), g_new, psi)
     # the wall's push at the converged state: the normal pull of the yarns at resting crossings
     fn = -np.einsum("ij,ij->i", force, plane[:, 3:]) if m else np.zeros(0)
     wall_force = np.where(active, np.maximum(fn, 0.0), 0.0)
@@ -518,15 +528,16 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     bounds, ft = start_bounds(state, bc, settings)
     if m == 0:
         return None
-    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner,
-                              bound_iterations=max_iter - 1, friction_tol=friction_tol,
-                              **({} if tol is None else dict(tol=float(tol))))
+    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
+    balance = settings.newton.balance_tolerance if tol is None else float(tol)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rsc, model=settings,
-                top_tensions=ring_top_tensions(state, bc), consistent=True)
-    if not res.residual < rsc.tol:
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
+                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
+                settings=rsc, model=settings,
+                top_tensions=ring_top_tensions(state, bc), consistent=True, tol=balance,
+                bound_iterations=max_iter - 1, friction_tol=friction_tol)
+    if not res.residual < balance:
         return None
     _accept(state, res, centres, fr)
     if finish:
@@ -538,6 +549,11 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
 
 
 # -- adapter from the zone's state ------------------------------------------------------------
+
+def _per_crossing(mu, m) -> np.ndarray:
+    """(m,) float64 of a per-crossing friction array or one coefficient for every crossing."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (m,)))
+
 
 def lattice_of(state) -> Lattice:
     """The :class:`Lattice` of a ``ZoneState`` (views of its first m rows)."""
@@ -557,8 +573,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     lat = lattice_of(state)
     f_top = np.empty(ny)
     FK.top_tensions(ny, state.highest, state.pos, state.normal, state.over, bc.fell, bc.top,
-                    bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, *bc.capstan_arguments(),
-                    f_top)
+                    bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                    *bc.capstan_arguments(), f_top)
     d_below = np.empty((m, 2, 3))
     l_below = np.empty((m, 2))
     d_top = np.empty((ny, 3))
@@ -571,7 +587,8 @@ def start_bounds(state, bc, model: InteractionSettings = DEFAULT):
     g0 = np.empty((m, 2))
     psi = np.empty((m, 2))
     RK.friction_bounds(m, ny, lat.yarn, lat.up, d_below, l_below, d_top,
-                       np.ascontiguousarray(state.tension[:m]), f_top, bc.mu, g0, psi)
+                       np.ascontiguousarray(state.tension[:m]), f_top,
+                       bc.crossing_mu(lat.yarn), g0, psi)
     old = state.bound[:m]
     return np.where(np.isfinite(old), old, g0), f_top
 
@@ -596,7 +613,8 @@ def ring_top_tensions(state, bc):
     def f(pos):
         out = np.empty(ny)
         FK.top_tensions(ny, state.highest, pos, state.normal, state.over, fell, bc.top,
-                        bc.spool, bc.h, bc.f_spool, bc.mu_r, bc.has_ring, capstan, f_hold, out)
+                        bc.spool, bc.h, bc.spool_tensions(), bc.ring_frictions(), bc.has_ring,
+                        capstan, f_hold, out)
         return out
     return f
 
@@ -629,7 +647,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     ``relax_iterations``: the relaxation's iterations of a time step, converged or not.
     Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
-    ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
+    ``NewtonSettings.balance_tolerance``, as Newton's). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
     ``(pos (m, 3), material (m, 2))`` is only the initial iterate (default: the posed one), as in
     ``frontal.solve_zone_inplace``.
@@ -651,8 +669,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
                                           where=where, centre=centre, start=start, mode=mode)
-    if tol is not None:
-        rs = dataclasses.replace(rs, tol=float(tol))
+    balance = settings.newton.balance_tolerance if tol is None else float(tol)
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
         rs = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
     fr = settings.frontal
@@ -660,9 +677,6 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     # last one's converged state (its bounds and top tensions), until they change by less than
     # ``friction_tolerance``; not reaching it is the lag, not a failure
     passes = fr.max_iterations > 1
-    if passes:
-        rs = dataclasses.replace(rs, bound_iterations=fr.max_iterations - 1,
-                                 friction_tol=fr.friction_tolerance)
     m = state.m
     centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
                        dtype=float)
@@ -671,11 +685,13 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.SolveReport(0, 0.0, np.zeros(0), ft)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
-                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
-                width=bc.width, plane=bc.plane, settings=rs, model=settings,
+                centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
+                mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
+                settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
-                fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
-    if not (res.residual < rs.tol if passes else res.converged):
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes,
+                tol=balance)
+    if not (res.residual < balance if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
@@ -687,7 +703,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         raise SimulationError(
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
-            f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
+            f"iterations (tolerance {balance:.3g}, {m} crossings)")
     _accept(state, res, centres, fr)
     posed = {} if res.posed is None else dict(posed_solves=res.posed.solves,
                                               posed_converged=res.posed.converged)

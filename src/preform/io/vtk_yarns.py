@@ -109,9 +109,13 @@ def write_vtp(poly: PolyLines, path) -> Path:
     return atomic_write_bytes(path, vtp_bytes(poly), sync=False)
 
 
-def yarns_polydata(yarns) -> PolyLines:
+def yarns_polydata(yarns, types=None) -> PolyLines:
     """One polyline cell per yarn that has points; point data ``braid_angle_deg``, ``time_s``,
-    ``flags``; cell data ``yarn_id``, ``group`` (0 warp, 1 weft). Mandrel frame, m."""
+    ``flags``; cell data ``yarn_id``, ``group`` (0 warp, 1 weft). Mandrel frame, m.
+
+    types : mixed yarns, (kinds (n_yarns,) int, names): cell data ``yarn_type`` (the index of
+    each yarn's type) and, per type, field data ``yarn_type_<name>`` holding its index, so that a
+    threshold on ``yarn_type`` in ParaView can be read off the names; None: neither."""
     points = np.asarray(yarns.points, dtype=np.float64).reshape(-1, 3)
     m = len(points)
     offsets = np.asarray(yarns.offsets, dtype=np.int64)
@@ -128,12 +132,26 @@ def yarns_polydata(yarns) -> PolyLines:
     if len(ids):
         poly.cell_data = {"yarn_id": ids.astype(np.int64),
                           "group": np.asarray(yarns.group, dtype=np.int8)[ids]}
+    if types is not None:
+        kinds, names = types
+        _check_length("yarn types", kinds, len(offsets) - 1)
+        if len(ids):
+            poly.cell_data["yarn_type"] = np.asarray(kinds, dtype=np.int8)[ids]
+        poly.field_data = {f"yarn_type_{name}": np.array([i], dtype=np.int8)
+                           for i, name in enumerate(names)}
     return poly
 
 
-def write_yarns_vtp(yarns, path) -> Path:
-    """Write ``yarns.vtp`` (binary XML PolyData) atomically."""
-    return write_vtp(yarns_polydata(yarns), path)
+def yarn_types_of(config):
+    """(kinds, names) of a mixed config's yarns for :func:`yarns_polydata`; None if uniform."""
+    if not getattr(config, "is_mixed", False):
+        return None
+    return config.carrier_types(), config.type_names
+
+
+def write_yarns_vtp(yarns, path, types=None) -> Path:
+    """Write ``yarns.vtp`` (binary XML PolyData) atomically; types: see :func:`yarns_polydata`."""
+    return write_vtp(yarns_polydata(yarns, types), path)
 
 
 def snapshot_polydata(snapshot) -> PolyLines:

@@ -105,7 +105,8 @@ def face_plies(fields, configs, tangent) -> Plies:
     for k, (prefix, config) in enumerate(zip(prefixes, configs), start=1):
         valid = cd[f"{prefix}rtm_valid"][keep] > 0
         vf = np.where(valid, cd[f"{prefix}fibre_volume_fraction"][keep], 0.0)
-        tex = {"warp": config.yarn.linear_density_tex, "weft": config.yarn.linear_density_tex,
+        braid = _braid_tex(config)
+        tex = {"warp": braid, "weft": braid,
                "axial": config.axial()[3] or config.yarn.linear_density_tex}
         present = [f for f in FAMILIES if f"{prefix}yarn_length_{f}_m_per_m2" in cd]
         volume = np.column_stack([cd[f"{prefix}yarn_length_{f}_m_per_m2"][keep] * tex[f] for f in present])
@@ -122,6 +123,15 @@ def face_plies(fields, configs, tangent) -> Plies:
             vfs.append(np.where(ply_t > 0, vf, 0.0))
     return Plies(faces=keep.astype(np.int64), names=tuple(names), angle_deg=np.column_stack(angles),
                  thickness_m=np.column_stack(thick), vf=np.column_stack(vfs), axis=e1, normal=n)
+
+
+def _braid_tex(config) -> float:
+    """The linear density (tex) of a group's mean yarn: [yarn]'s, or with mixed yarns the mean
+    over a group's carriers (warp and weft alike carry the ``carrier_yarns`` pattern)."""
+    if not getattr(config, "is_mixed", False):
+        return config.yarn.linear_density_tex
+    kinds = config.carrier_types()[: config.machine.carriers // 2]
+    return float(np.mean([config.types[t].linear_density_tex for t in kinds]))
 
 
 def _layer_thicknesses(cd, prefixes, configs) -> list[np.ndarray]:
