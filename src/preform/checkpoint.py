@@ -53,7 +53,7 @@ LAYER_CHECKPOINT = "checkpoint_layer{k}.npz"
 
 FORMAT = "preform-checkpoint"
 #: version of the arrays' layout and meaning; bump it when either changes
-FORMAT_VERSION = 2   # 2: snapshots carry external_force_N (snapshot_external_force)
+FORMAT_VERSION = 3   # 3: the stepper's carriers' clock and process rows; 2: snapshots' external_force_N
 #: the archive member holding the JSON header
 HEADER = "header"
 #: dtype kinds a checkpoint may hold: bool, signed and unsigned integers, floats

@@ -58,7 +58,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
     _check_braid_length(config, float(centerline.length))
     _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
-    reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
+    reach = float(np.max(distance[passing], initial=0.0)) + config.process.largest_eccentricity
     warnings = _check_fit(config, reach)
     warnings += _braid_angle_warnings(config, s[passing], distance[passing])
     _check_time_step(config)
@@ -258,7 +258,9 @@ def _braid_angle_warnings(config, s, distance) -> list[str]:
     table = np.asarray(config.process.take_up_speed, dtype=float)
     v = np.interp(centre, table[:, 0], table[:, 1])  # braided length ~ arc length from the tip
     ma, y = config.machine, config.yarn
-    alpha = np.degrees(analytic.ko_braid_angle(ma.angular_speed, r, v))
+    speeds = np.asarray(ma.angular_speeds, dtype=float)
+    omega = np.interp(centre, speeds[:, 0], speeds[:, 1])
+    alpha = np.degrees(analytic.ko_braid_angle(omega, r, v))
     # the yarns narrow to the available width (paper §2.4.2): they jam only where even their
     # least width does not fit (mixed yarns: the mean least width of a group's carriers, whose
     # sum is what must fit round the section)
@@ -291,12 +293,13 @@ def _check_time_step(config) -> None:
     if mo.time_step is None:
         return
     between = 2.0 * math.pi / (ma.carriers / 2)
-    turn = ma.angular_speed * mo.time_step
+    fastest = max(speed for _, speed in ma.angular_speeds)
+    turn = fastest * mo.time_step
     if turn > between:
         raise ConfigError(
             f"[model] time_step = {mo.time_step:g} s turns the carriers by {math.degrees(turn):.3g} deg "
             f"a step, more than the {math.degrees(between):.3g} deg between two carriers of a group: "
-            f"expected at most {between / ma.angular_speed:.3g} s (leave time_step out for the "
+            f"expected at most {between / fastest:.3g} s (leave time_step out for the "
             "automatic step control)")
 
 
@@ -311,8 +314,78 @@ def _value_warnings(config) -> list[str]:
         if mu > HIGH_FRICTION:
             warnings.append(f"[yarn] {key} = {mu:g} is unusually high (measured yarn values: 0.15-0.4)")
     if mo.time_step is not None:
-        turn = ma.angular_speed * mo.time_step
+        turn = max(speed for _, speed in ma.angular_speeds) * mo.time_step
         if turn > TIME_STEP_FACTOR * tol.max_carrier_rotation:
             warnings.append(f"[model] time_step = {mo.time_step:g} turns the carriers by "
                             f"{math.degrees(turn):.3g} deg per step: results may be coarse")
     return warnings
+
+
+def _over_run(table, end: float) -> tuple[np.ndarray, np.ndarray]:
+    """(braided lengths, values (n, k)) where a table over the braided length has its extremes
+    on [0, end]: its rows inside, and both ends (linear between rows, constant beyond)."""
+    table = np.asarray(table, dtype=float)
+    L = np.unique(np.concatenate([[0.0, end], table[(table[:, 0] > 0.0) & (table[:, 0] < end), 0]]))
+    if len(table) == 1:
+        return L, np.repeat(table[:, 1:], len(L), axis=0)
+    return L, np.column_stack([np.interp(L, table[:, 0], table[:, j]) for j in range(1, table.shape[1])])
+
+
+def _range_line(name, unit, L, values, scale, digits=3):
+    """One setting's range over the run: constant, or least and most and where."""
+    lo, hi = int(np.argmin(values)), int(np.argmax(values))
+    show = lambda v: f"{v * scale:.{digits}g}"   # noqa: E731
+    if values[hi] == values[lo]:
+        return f"{name} {show(values[lo])} {unit} throughout"
+    return (f"{name} {show(values[lo])}-{show(values[hi])} {unit} over the run: least at "
+            f"{L[lo]:.3g} m braided, most at {L[hi]:.3g} m (where first reached)")
+
+
+def setting_ranges(config) -> list[str]:
+    """What ``preform check`` says of the process settings over the run: per setting (take-up
+    speed, angular speed, eccentricity) its value, or its least and largest over the braided
+    length ``[0, braid_length]`` and where; for a run driven by ``[process] trajectory`` the
+    path's spans instead (time, braided length, speeds, the origin's coordinates, the turn of
+    the orientation), with the rows where the speeds are least and largest."""
+    p, ma = config.process, config.machine
+    if p.trajectory is not None:
+        return _trajectory_ranges(config)
+    end = float(p.braid_length)
+    L, v = _over_run(p.take_up_speed, end)
+    lines = [_range_line("take-up speed", "mm/s", L, v[:, 0], 1e3)]
+    L, w = _over_run(ma.angular_speeds, end)
+    lines.append(_range_line("angular speed", "deg/s", L, w[:, 0], 180.0 / math.pi))
+    L, e = _over_run(p.eccentricities, end)
+    if not p.eccentricity_table:
+        lines.append(f"eccentricity [{p.eccentricity[0]:g}, {p.eccentricity[1]:g}] m throughout")
+    else:
+        lines.append(_range_line("eccentricity |[x, y]|", "mm", L, np.hypot(e[:, 0], e[:, 1]), 1e3))
+    return lines
+
+
+def _trajectory_ranges(config) -> list[str]:
+    from .config import MAX_ANGULAR_SPEED_DEG, MAX_TAKE_UP_SPEED
+    from .trajectory import read_trajectory
+
+    path = read_trajectory(config.process.trajectory, max_take_up_speed=MAX_TAKE_UP_SPEED,
+                           max_angular_speed_deg=MAX_ANGULAR_SPEED_DEG)
+    t = path.time
+
+    def span(name, unit, values, scale):
+        lo, hi = int(np.argmin(values)), int(np.argmax(values))
+        if values[lo] == values[hi]:
+            return f"{name} {values[lo] * scale:.3g} {unit} throughout"
+        return (f"{name} {values[lo] * scale:.3g}-{values[hi] * scale:.3g} {unit} (least at row "
+                f"{lo + 1}, t = {t[lo]:.4g} s; most at row {hi + 1}, t = {t[hi]:.4g} s)")
+
+    q = path.quaternion
+    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)))
+    x = path.position
+    return [f"trajectory {path.path}: {len(t)} rows over {t[-1] - t[0]:.4g} s, braided length "
+            f"{path.braided.min():.3g}-{path.braided.max():.3g} m",
+            span("take-up speed", "mm/s", path.take_up, 1e3),
+            span("angular speed", "deg/s", path.angular, 180.0 / math.pi),
+            "the mandrel frame's origin (machine frame) x from {:.4g} to {:.4g} m, y from {:.4g} "
+            "to {:.4g} m, z from {:.4g} to {:.4g} m; its orientation turns up to {:.3g} deg from "
+            "the first row's".format(x[:, 0].min(), x[:, 0].max(), x[:, 1].min(), x[:, 1].max(),
+                                     x[:, 2].min(), x[:, 2].max(), float(turn.max()))]

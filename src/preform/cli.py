@@ -274,6 +274,10 @@ def _cmd_check(args) -> int:
     from .pipeline import check, load   # the stages' imports (numba, SciPy): after the config
     # the run's load and check stages, without a results folder: every layer's checks and estimate
     _print_notes(check(load(config), None, force=args.force).notes)
+    from .checks import setting_ranges
+
+    for line in setting_ranges(config):
+        print(f"process: {line}")
     print(f"OK: {config.source or args.config}")
     return EXIT_DONE
 
@@ -335,7 +339,8 @@ def cmd_design(args) -> int:
 
     from .config import load_config
     from .studies.design import (DESIGN, design_speed, plot_design, read_target_table, shortfall,
-                                 write_design_config, write_design_runs, write_design_table)
+                                 write_design_config, write_design_process, write_design_runs,
+                                 write_design_table)
 
     config = load_config(args.config)
     if args.model:
@@ -364,6 +369,7 @@ def cmd_design(args) -> int:
     toml = write_design_config(config, design, out)
     csv = write_design_table(design, out.with_name(f"{out.stem}_design.csv"))
     runs = write_design_runs(design, out.with_name(f"{out.stem}_design_runs.csv"))
+    process = write_design_process(design, out.with_name(f"{out.stem}_process.csv"))
     title = f"Designed take-up speed: {source.stem} · {config.model.kind} model"
     png = plot_design(design, out.with_name(f"{out.stem}_design.png"), title)
     v = design.speed * 1e3
@@ -373,6 +379,7 @@ def cmd_design(args) -> int:
           f"take-up speed {v.min():.2f}-{v.max():.2f} mm/s in {len(v)} rows")
     print(f"design: config {toml} (results to {toml.parent / 'results' / toml.stem})")
     print(f"design: every row in {csv}; each forward run in {runs}; plot {png}")
+    print(f"design: the process (speeds and the mandrel's pose per step, a robot program) in {process}")
     if not design.met:
         print(f"error: design: the achieved braid angle is {design.max_error_deg():.2f} deg from the "
               f"target, above the tolerance {settings.tolerance_deg:g} deg, {shortfall(design)}; the "

@@ -49,13 +49,24 @@ class GuideRingConfig:
 class MachineConfig:
     carriers: int                   # total; half warp, half weft
     spool_radius: float             # m
-    angular_speed: float            # rad/s (config file: deg/s)
+    #: rad/s (config file: deg/s); of a table, its first speed (what the set-up's expectations
+    #: before the run, Ko's angle and H_inf at the start, are computed with)
+    angular_speed: float
     pattern: str = "regular"        # "diamond" | "regular" | "hercules"
     guide_ring: GuideRingConfig | None = None
     axial_yarns: int = 0            # triaxial braiding: yarns laid along the mandrel ([axial_yarn])
     #: the yarn type of every carrier of a group: a pattern of type names repeated round each
     #: group from its first carrier (warp and weft alike); ("yarn",): [yarn] on every carrier
     carrier_yarns: tuple[str, ...] = ("yarn",)
+    #: ``angular_speed`` given as a table over the braided length: ((braided_length_m, rad/s),
+    #: ...), lengths increasing; empty: the speed is ``angular_speed`` throughout
+    angular_speed_table: tuple[tuple[float, float], ...] = ()
+
+    @property
+    def angular_speeds(self) -> tuple[tuple[float, float], ...]:
+        """The angular speed over the braided length, ((braided_length_m, rad/s), ...): the
+        table, or the constant speed as one row (``stepping.setting_at`` reads either)."""
+        return self.angular_speed_table or ((0.0, self.angular_speed),)
 
     @property
     def pattern_m(self) -> int:
@@ -97,11 +108,29 @@ class ProcessConfig:
     take_up_speed: tuple[tuple[float, float], ...]
     initial_position: float         # m, mandrel tip to the supply plane at t = 0
     braid_length: float             # m of centerline to braid
-    eccentricity: tuple[float, float] = (0.0, 0.0)   # m, machine x, y
+    eccentricity: tuple[float, float] = (0.0, 0.0)   # m, machine x, y; of a table, its first row
+    #: ``eccentricity`` given as a table over the braided length: ((braided_length_m, x_m, y_m),
+    #: ...), lengths increasing; empty: ``eccentricity`` throughout
+    eccentricity_table: tuple[tuple[float, float, float], ...] = ()
+    #: a CSV of the mandrel's path (``preform.trajectory``; absolute path) that drives the run
+    #: instead of ``take_up_speed``, ``eccentricity``, ``pose_lead`` and ``[machine]
+    #: angular_speed`` (those then hold what the path gives, for the checks and estimates made
+    #: before the run); None: the pose follows the centerline
+    trajectory: Path | None = None
     #: axial distance (m) ahead of the supply plane where the pose puts the centerline on the axis
     #: (docs/architecture.md §2; see geometry/pose.py). None: "auto", chosen from the machine and the mandrel
     #: when the run is composed (``preform.reference.resolve_pose_lead``).
     pose_lead: float | None = None
+
+    @property
+    def eccentricities(self) -> tuple[tuple[float, float, float], ...]:
+        """The eccentricity over the braided length, ((braided_length_m, x_m, y_m), ...)."""
+        return self.eccentricity_table or ((0.0, *self.eccentricity),)
+
+    @property
+    def largest_eccentricity(self) -> float:
+        """The largest distance (m) of the eccentricity from the machine axis over the run."""
+        return max(math.hypot(x, y) for _, x, y in self.eccentricities)
 
 
 @dataclass(frozen=True)
@@ -338,7 +367,8 @@ KEYS = {
                 "carrier_yarns"),
     "yarn": ("width", "thickness", "tension", "friction", "ring_friction", "min_width",
              "linear_density_tex", "fibre_density", "fibre_radius"),
-    "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead"),
+    "process": ("take_up_speed", "initial_position", "eccentricity", "braid_length", "pose_lead",
+                "trajectory"),
     "model": ("kind", "time_step", "start", "seed", "solver", "frontal_iterations"),
     "output": ("dir", "field_edge_length", "snapshots", "input_mesh_fields", "pictures"),
     "rtm": ("cavity_thickness", "permeability", "packing", "k_ref", "vf_ref", "table"),
@@ -346,6 +376,11 @@ KEYS = {
     "material": ("preset", *MATERIAL_CONSTANTS),
 }
 GUIDE_RING_KEYS = ("radius", "offset")
+#: the dataclass fields a key sets where they are more than the key's own name (a table over
+#: the braided length is kept beside the key's first value)
+KEY_FIELDS = {("machine", "angular_speed"): ("angular_speed", "angular_speed_table"),
+              ("process", "eccentricity"): ("eccentricity", "eccentricity_table")}
+COMPANION_FIELDS = frozenset(name for names in KEY_FIELDS.values() for name in names[1:])
 #: the arrays of tables besides [[layer]], and their keys
 YARN_TYPE_KEYS = ("name", *KEYS["yarn"])
 FRICTION_PAIR_KEYS = ("types", "friction")
@@ -411,12 +446,17 @@ def config_from_dict(data: dict, base_dir, name: str = "config", source=None) ->
     types_raw, pairs_raw = data.get("yarn_type", None), data.get("friction_pair", None)
     data = {k: v for k, v in data.items() if k not in ARRAYS_OF_TABLES}
     _check_layout(data)
-    machine = _machine(_Section("machine", data))
+    if layers_raw is not None and "trajectory" in data.get("process", {}):
+        raise _Section("process", data).error(
+            "trajectory", data["process"]["trajectory"], "a trajectory drives a run of one "
+            "layer: leave it out of a config with [[layer]] tables")
+    process, path = _process_and_path(_Section("process", data), base_dir)
+    machine = _machine(_Section("machine", data), path)
     config = Config(
         mandrel=_mandrel(_Section("mandrel", data), base_dir),
         machine=machine,
         yarn=_yarn(_Section("yarn", data)),
-        process=_process(_Section("process", data)),
+        process=process,
         model=_model(_Section("model", data)),
         output=_output(_Section("output", data), base_dir, name),
         source=None if source is None else Path(source),
@@ -634,7 +674,7 @@ def _body(sec: _Section) -> str | int | None:
                     "list the mandrel check prints")
 
 
-def _machine(sec: _Section) -> MachineConfig:
+def _machine(sec: _Section, trajectory=None) -> MachineConfig:
     pattern = sec.choice("pattern", PATTERNS, default="regular")
     carriers = sec.integer("carriers", "an even integer number of carriers (warp + weft)")
     problem = carrier_count_problem(carriers, pattern)
@@ -642,15 +682,42 @@ def _machine(sec: _Section) -> MachineConfig:
         raise sec.error("carriers", carriers, problem)
     spool = sec.number("spool_radius", "m", positive=True)
     _implausible(sec, "spool_radius", spool, MAX_MACHINE_RADIUS, "m", "mm? divide by 1000")
-    speed_deg = sec.number("angular_speed", "deg/s", positive=True)
-    _implausible(sec, "angular_speed", speed_deg, MAX_ANGULAR_SPEED_DEG, "deg/s",
-                 "10 revolutions per second; the carrier speed about the machine axis is in deg/s, "
-                 "1 rpm = 6 deg/s")
+    speed, table = _angular_speed(sec, trajectory)
     ring = _guide_ring(sec, spool)
     axial = sec.integer("axial_yarns", "a non-negative integer number of axial yarns", default=0, minimum=0)
-    return MachineConfig(carriers=carriers, spool_radius=spool, angular_speed=math.radians(speed_deg),
+    return MachineConfig(carriers=carriers, spool_radius=spool, angular_speed=speed,
                          pattern=pattern, guide_ring=ring, axial_yarns=axial,
-                         carrier_yarns=_carrier_yarns(sec))
+                         angular_speed_table=table, carrier_yarns=_carrier_yarns(sec))
+
+
+def _angular_speed(sec: _Section, trajectory=None) -> tuple[float, tuple[tuple[float, float], ...]]:
+    """``[machine] angular_speed``: a number (deg/s) or a table [[braided_length_m, deg/s], ...]
+    as ``take_up_speed`` is; -> (the first speed, the table or ()) in rad/s. With a trajectory
+    (``preform.trajectory.Trajectory``) the path's angular speeds, and the key is refused."""
+    if trajectory is not None:
+        _refused_with_path(sec, "angular_speed", trajectory)
+        table = trajectory.angular_speed_table()
+        return table[0][1], (table if len(table) > 1 else ())
+    what = "a positive number (deg/s) or a table [[braided_length_m, speed_deg_s], ...]"
+    value = sec.raw("angular_speed", expected=what)
+    if isinstance(value, list):
+        table = _speed_table(sec, value, what, key="angular_speed")
+    else:
+        table = ((0.0, _real(sec, "angular_speed", value, what, positive=True)),)
+    for _, speed in table:
+        _implausible(sec, "angular_speed", speed, MAX_ANGULAR_SPEED_DEG, "deg/s",
+                     "10 revolutions per second; the carrier speed about the machine axis is in "
+                     "deg/s, 1 rpm = 6 deg/s")
+    radians = tuple((length, math.radians(speed)) for length, speed in table)
+    return radians[0][1], (radians if len(radians) > 1 else ())
+
+
+def _refused_with_path(sec: _Section, key: str, trajectory) -> None:
+    """A key the trajectory replaces, given anyway: an error naming both."""
+    if key in sec.table:
+        raise sec.error(key, sec.table[key], f"not with [process] trajectory = "
+                        f"{_fmt(trajectory.name)}: the path gives the mandrel's pose and the "
+                        "speeds; leave this key out")
 
 
 def _carrier_yarns(sec: _Section) -> tuple[str, ...]:
@@ -974,7 +1041,8 @@ def _layer(k: int, table: dict, data: dict) -> LayerConfig:
     overrides = []
     for sec, read in readers.items():   # the merged section validated; the layer's keys kept
         section = read(_Section(sec, merged, prefix=prefix))
-        overrides += [(sec, key, getattr(section, key)) for key in table.get(sec, {})]
+        overrides += [(sec, name, getattr(section, name)) for key in table.get(sec, {})
+                      for name in KEY_FIELDS.get((sec, key), (key,))]
     return LayerConfig(direction=direction, overrides=tuple(overrides))
 
 
@@ -1015,14 +1083,63 @@ def _friction(sec: _Section, key: str, required: bool = False) -> float:
 
 
 def _process(sec: _Section) -> ProcessConfig:
+    """``[process]`` of a [[layer]] table (no trajectory there)."""
+    return _process_and_path(sec, None)[0]
+
+
+def _process_and_path(sec: _Section, base_dir: Path | None):
+    """``[process]`` -> (ProcessConfig, the trajectory read from its CSV or None)."""
+    path = _trajectory(sec, base_dir)
+    if path is not None:
+        return _process_of_path(sec, path), path
+    position, table = _eccentricity(sec)
     return ProcessConfig(
         take_up_speed=_take_up_speed(sec),
         initial_position=sec.number("initial_position", "m, mandrel tip beyond the supply plane",
                                     minimum=0.0),
         braid_length=sec.number("braid_length", "m of centerline", positive=True),
-        eccentricity=sec.vector("eccentricity", 2, "m, machine x and y", default=(0.0, 0.0)),
+        eccentricity=position,
+        eccentricity_table=table,
         pose_lead=_pose_lead(sec),
-    )
+    ), None
+
+
+def _trajectory(sec: _Section, base_dir: Path | None):
+    """``[process] trajectory``: the path's CSV read and checked
+    (``preform.trajectory.read_trajectory``), or None when the key is absent."""
+    if "trajectory" not in sec.table:
+        return None
+    if base_dir is None or sec.prefix:
+        raise sec.error("trajectory", sec.table["trajectory"], "a trajectory drives a run of "
+                        "one layer: give it at the top level of a config without [[layer]] tables")
+    from .trajectory import read_trajectory
+
+    path = sec.path("trajectory", base_dir, "the path of a CSV of the mandrel's path (the "
+                    "columns of process.csv), relative to the config file")
+    return read_trajectory(path, max_take_up_speed=MAX_TAKE_UP_SPEED,
+                           max_angular_speed_deg=MAX_ANGULAR_SPEED_DEG)
+
+
+def _process_of_path(sec: _Section, path) -> ProcessConfig:
+    """The process of a run driven by a trajectory: ``take_up_speed`` the path's over its braided
+    length, the first pose's eccentricity and tip position resolved with the mandrel
+    (``reference.resolve_pose_lead``); the keys the path replaces are refused."""
+    for key in ("take_up_speed", "initial_position", "eccentricity", "pose_lead"):
+        _refused_with_path(sec, key, path)
+    return ProcessConfig(take_up_speed=path.take_up_speed_table(), initial_position=0.0,
+                         braid_length=sec.number("braid_length", "m of centerline", positive=True),
+                         pose_lead=0.0, trajectory=path.path)
+
+
+def _eccentricity(sec: _Section) -> tuple[tuple[float, float], tuple[tuple[float, float, float], ...]]:
+    """``[process] eccentricity``: [x, y] (m), or a table [[braided_length_m, x_m, y_m], ...]
+    with increasing lengths; -> (the first position, the table or ())."""
+    value = sec.table.get("eccentricity")
+    if isinstance(value, list) and value and all(isinstance(row, list) for row in value):
+        what = "a table [[braided_length_m, x_m, y_m], ...] (m, machine x and y)"
+        table = _speed_table(sec, value, what, key="eccentricity", columns=2)
+        return table[0][1:], (table if len(table) > 1 else ())
+    return sec.vector("eccentricity", 2, "m, machine x and y", default=(0.0, 0.0)), ()
 
 
 def _pose_lead(sec: _Section) -> float | None:
@@ -1045,19 +1162,25 @@ def _take_up_speed(sec: _Section) -> tuple[tuple[float, float], ...]:
     return table
 
 
-def _speed_table(sec: _Section, rows: list, what: str) -> tuple[tuple[float, float], ...]:
+def _speed_table(sec: _Section, rows: list, what: str, key: str = "take_up_speed",
+                 columns: int = 1) -> tuple[tuple[float, ...], ...]:
+    """A table over the braided length, [[braided_length_m, value, ...], ...] with ``columns``
+    values a row (speeds: positive; an eccentricity's coordinates: any) and strictly
+    increasing lengths; the setting between rows is interpolated linearly
+    (``stepping.setting_at``)."""
     if not rows:
-        raise sec.error("take_up_speed", rows, f"expected {what}, not an empty list")
+        raise sec.error(key, rows, f"expected {what}, not an empty list")
     table = []
     for row in rows:
-        if not isinstance(row, list) or len(row) != 2:
-            raise sec.error("take_up_speed", rows, f"expected {what}; row {_fmt(row)} is not a pair")
-        length = _real(sec, "take_up_speed", row[0], what, minimum=0.0, shown=rows)
-        speed = _real(sec, "take_up_speed", row[1], what, positive=True, shown=rows)
-        table.append((length, speed))
-    lengths = [length for length, _ in table]
+        if not isinstance(row, list) or len(row) != 1 + columns:
+            shape = "a pair" if columns == 1 else f"a list of {1 + columns} numbers"
+            raise sec.error(key, rows, f"expected {what}; row {_fmt(row)} is not {shape}")
+        length = _real(sec, key, row[0], what, minimum=0.0, shown=rows)
+        values = [_real(sec, key, v, what, positive=columns == 1, shown=rows) for v in row[1:]]
+        table.append((length, *values))
+    lengths = [row[0] for row in table]
     if any(b <= a for a, b in zip(lengths, lengths[1:])):
-        raise sec.error("take_up_speed", rows, f"expected {what} with strictly increasing lengths")
+        raise sec.error(key, rows, f"expected {what} with strictly increasing lengths")
     return tuple(table)
 
 
@@ -1126,7 +1249,8 @@ def _dump_layer(config: Config, k: int) -> dict:
     echoed = _dump_sections(config.layer_config(k))
     out = {"direction": layer.direction}
     for sec in LAYER_SECTIONS:
-        own = layer.fields(sec)
+        # a table's companion field is echoed under its key's name (KEY_FIELDS)
+        own = [key for key in layer.fields(sec) if key not in COMPANION_FIELDS]
         if own:
             out[sec] = {key: echoed[sec][key] for key in own}
     return out
@@ -1135,8 +1259,9 @@ def _dump_layer(config: Config, k: int) -> dict:
 def _dump_sections(config: Config) -> dict:
     """Plain JSON-able echo of the inputs (for summary.json): file units, degrees, paths as strings.
 
-    Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed`` is a
-    number when constant, else the table. Absent optional values are None; `"material"` is there
+    Keys and units are those of the TOML file (``angular_speed`` in deg/s); ``take_up_speed``,
+    ``angular_speed`` and ``eccentricity`` are the number (pair) when constant, else the table;
+    ``trajectory`` and its file's SHA-256 are there only when given. Absent optional values are None; `"material"` is there
     only when the config has the section.
     """
     mc, ma, y, p, mo, out = (config.mandrel, config.machine, config.yarn, config.process,
@@ -1149,7 +1274,10 @@ def _dump_sections(config: Config) -> dict:
                     "roll_reference": None if mc.roll_reference is None else list(mc.roll_reference),
                     "body": mc.body},
         "machine": {"carriers": ma.carriers, "spool_radius": ma.spool_radius,
-                    "angular_speed": math.degrees(ma.angular_speed), "pattern": ma.pattern,
+                    "angular_speed": (math.degrees(ma.angular_speed) if not ma.angular_speed_table
+                                      else [[length, math.degrees(speed)]
+                                            for length, speed in ma.angular_speed_table]),
+                    "pattern": ma.pattern,
                     "guide_ring": None if ring is None else {"radius": ring.radius, "offset": ring.offset},
                     "axial_yarns": ma.axial_yarns},
         "yarn": {"width": y.width, "thickness": y.thickness, "tension": y.tension,
@@ -1157,7 +1285,9 @@ def _dump_sections(config: Config) -> dict:
                  "linear_density_tex": y.linear_density_tex, "fibre_density": y.fibre_density,
                  "fibre_radius": y.fibre_radius},
         "process": {"take_up_speed": speeds[0][1] if len(speeds) == 1 else speeds,
-                    "initial_position": p.initial_position, "eccentricity": list(p.eccentricity),
+                    "initial_position": p.initial_position,
+                    "eccentricity": (list(p.eccentricity) if not p.eccentricity_table
+                                     else [list(row) for row in p.eccentricity_table]),
                     "braid_length": p.braid_length,
                     "pose_lead": "auto" if p.pose_lead is None else p.pose_lead},
         "model": {"kind": mo.kind, "time_step": mo.time_step, "start": mo.start, "seed": mo.seed,
@@ -1173,6 +1303,10 @@ def _dump_sections(config: Config) -> dict:
                 "k_ref": None if config.rtm.k_ref is None else list(config.rtm.k_ref),
                 "vf_ref": config.rtm.vf_ref, "table": None if config.rtm.table is None else str(config.rtm.table)},
     }
+    if p.trajectory is not None:   # echoed when given, with its digest (a checkpoint's inputs)
+        from .trajectory import file_digest
+
+        echo["process"].update(trajectory=str(p.trajectory), trajectory_sha256=file_digest(p.trajectory))
     if ma.carrier_yarns != MachineConfig.carrier_yarns:   # echoed when given, as below
         echo["machine"]["carrier_yarns"] = list(ma.carrier_yarns)
     if config.yarn_types:

@@ -92,13 +92,15 @@ class Machine:
 
     @classmethod
     def from_config(cls, machine_cfg) -> "Machine":
-        """Build from a :class:`preform.config.MachineConfig` (angular_speed already in rad/s)."""
+        """Build from a :class:`preform.config.MachineConfig` (angular_speed already in rad/s).
+        ``omega`` is the fastest speed of an angular-speed table: the reference speed of the
+        carriers' clock (``stepping.Clock``), which the step control bounds the turn by."""
         n = machine_cfg.carriers // 2
         k = np.arange(n, dtype=float)
         ring = machine_cfg.guide_ring
         return cls(
             n_per_group=n,
-            omega=float(machine_cfg.angular_speed),
+            omega=float(max(speed for _, speed in machine_cfg.angular_speeds)),
             spool_radius=float(machine_cfg.spool_radius),
             m=PATTERN_M[machine_cfg.pattern],
             group=np.repeat(np.array([WARP, WEFT], dtype=np.int8), n),

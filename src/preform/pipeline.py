@@ -116,6 +116,10 @@ def checked_geometry(config, settings=None):
     settings : ``preform.Settings`` (None: the defaults), for the work estimate's time step
     """
     mandrel, centerline = load_geometry(config)
+    if config.process.trajectory is not None:
+        # the path checked on the mandrel (its tip never behind the supply plane), and the
+        # tip's start ahead of the supply plane that the checks and references read
+        config = resolve_pose_lead(config, mandrel, centerline)
     notes = [f"mandrel: {repair}" for repair in mandrel.repairs]
     notes += [f"note: {line}" for line in mix_lines(config)]
     notes += [f"warning: {w}" for w in preflight(config, mandrel, centerline)]

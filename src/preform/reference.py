@@ -53,7 +53,9 @@ def references(config, s, perimeter) -> References:
     """The references at centerline arc lengths ``s`` (m) of sections of ``perimeter`` (m)."""
     s = np.asarray(s, dtype=float)
     r = np.asarray(perimeter, dtype=float) / (2.0 * math.pi)
-    omega = float(config.machine.angular_speed)
+    speeds = np.asarray(config.machine.angular_speeds, dtype=float)   # braided length ~ s
+    omega = (float(speeds[0, 1]) if len(speeds) == 1
+             else np.interp(s, speeds[:, 0], speeds[:, 1]))
     table = np.asarray(config.process.take_up_speed, dtype=float)
     v = np.full_like(s, table[0, 1]) if len(table) == 1 else np.interp(s, table[:, 0], table[:, 1])
     R = supply_radius(config.machine)
@@ -162,7 +164,33 @@ def resolve_pose_lead(config, mandrel, centerline):
     """``config`` with ``[process] pose_lead`` a number (the automatic one where it is "auto")."""
     import dataclasses
 
+    if config.process.trajectory is not None:
+        return resolve_trajectory(config, centerline)
     if config.process.pose_lead is not None:
         return config
     lead = automatic_pose_lead(config, mandrel, centerline)
     return dataclasses.replace(config, process=dataclasses.replace(config.process, pose_lead=lead))
+
+
+def resolve_trajectory(config, centerline):
+    """``config`` of a run driven by ``[process] trajectory``, checked against the mandrel: its
+    tip never behind the supply plane (ConfigError naming the row); ``initial_position`` the
+    tip's distance ahead of the supply plane at the path's first row (for the estimates made
+    before the run: Du and Popper's transient, the work)."""
+    import dataclasses
+
+    from .config import MAX_ANGULAR_SPEED_DEG, MAX_TAKE_UP_SPEED
+    from .errors import ConfigError
+    from .trajectory import quaternion_to_rotation, read_trajectory, tip_behind_problem
+
+    path = read_trajectory(config.process.trajectory, max_take_up_speed=MAX_TAKE_UP_SPEED,
+                           max_angular_speed_deg=MAX_ANGULAR_SPEED_DEG)
+    ring = config.machine.guide_ring
+    supply_z = 0.0 if ring is None else float(ring.offset)
+    tip = np.asarray(centerline.frame_values(0.0)[0], dtype=float)
+    problem = tip_behind_problem(path, tip, supply_z)
+    if problem:
+        raise ConfigError(problem)
+    z0 = float((quaternion_to_rotation(path.quaternion[0]) @ tip)[2] + path.position[0, 2])
+    return dataclasses.replace(config, process=dataclasses.replace(
+        config.process, initial_position=z0 - supply_z))

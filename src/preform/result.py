@@ -124,6 +124,9 @@ class Result:
     message : why it stopped when not "done"
     wall_time_s : float
     stop_signal : the signal that stopped an interrupted run ("SIGINT", "SIGTERM", "SIGHUP"), or ""
+    process : (n_steps, 10) float64 or None: per history row the process that made it
+        (``stepping.PROCESS_ROW``: time s, take-up speed m/s, angular speed rad/s, the mandrel
+        frame's origin m and orientation quaternion w, x, y, z in the machine frame)
     """
 
     config: object
@@ -138,6 +141,7 @@ class Result:
     message: str = ""
     wall_time_s: float = 0.0
     stop_signal: str = ""
+    process: np.ndarray | None = None
 
     @property
     def steps(self) -> int:

@@ -10,6 +10,7 @@ each free yarn runs to, and the depositor walks the fell points over the mandrel
 
 from __future__ import annotations
 
+import dataclasses
 import time as _time
 import warnings
 from dataclasses import dataclass
@@ -20,11 +21,12 @@ from . import plain
 from .config import DEFAULT_SNAPSHOTS
 from .laid import CenterlineProjector, mandrel_friction
 from .errors import PreformError, SimulationError
-from .geometry.pose import pose_at
+from .geometry.pose import Pose, pose_at
 from .kinematic import Depositor
 from .recording import Recording
 from .result import Result
 from .tolerances import Tolerances, tol
+from .trajectory import PathInterpolant, read_trajectory, rotation_to_quaternion
 from .zone import ZoneStep, zone_class
 
 
@@ -37,10 +39,15 @@ CHECKPOINT_EVERY_S = 30.0
 
 @dataclass(frozen=True)
 class Clock:
-    """Process state advanced by the stepper: time t (s) and the centerline length fed, travel (m)."""
+    """Process state advanced by the stepper: time t (s), the centerline length fed, travel (m)
+    (driven by a trajectory: the tip's distance past the spool plane), and the carriers' clock
+    ``carrier_t`` (s): the time the carriers would take at the machine's reference speed
+    (``Machine.omega``) to turn as far as they have; the zones place the carriers by it, so a
+    changing angular speed moves them as it should. With a constant speed it is ``t``."""
 
     t: float
     travel: float
+    carrier_t: float = 0.0
 
 
 def take_up_speed(table, braided_length):
@@ -49,6 +56,23 @@ def take_up_speed(table, braided_length):
     if len(table) == 1:
         return float(table[0, 1])
     return float(np.interp(braided_length, table[:, 0], table[:, 1]))
+
+
+def setting_at(table, braided_length) -> np.ndarray:
+    """A setting's values (the table's columns after the first) at a braided length, from a
+    table ((length, value, ...), ...) over the braided length: linear between rows, the end rows'
+    values beyond them (as :func:`take_up_speed`)."""
+    table = np.asarray(table, dtype=float)
+    if len(table) == 1:
+        return table[0, 1:].copy()
+    return np.array([np.interp(braided_length, table[:, 0], table[:, j])
+                     for j in range(1, table.shape[1])])
+
+
+#: the columns of the process rows a Stepper keeps (``Result.process``): time, take-up speed,
+#: angular speed, the mandrel frame's origin (machine frame) and the orientation's quaternion
+PROCESS_ROW = ("time_s", "take_up_speed_m_s", "angular_speed_rad_s", "x_m", "y_m", "z_m",
+               "qw", "qx", "qy", "qz")
 
 
 def default_time_step(config, machine, mandrel, centerline, tolerances: Tolerances = tol):
@@ -144,6 +168,8 @@ class Stepper:
         self.tolerances = tolerances
         self.project = CenterlineProjector(centerline, spacing=s.projector_spacing)
         self.dt = config.model.time_step or default_time_step(config, machine, mandrel, centerline, s)
+        #: the constant angular speed (rad/s) of a run without a table or a trajectory
+        self.machine_speed = float(config.machine.angular_speed)
         # every yarn's own thickness (mixed yarns: its type's); the walk's piece of the narrowest
         thickness, width = yarn_dimensions(config)
         clearance = np.maximum(s.catch_clearance_thickness * thickness,
@@ -151,12 +177,18 @@ class Stepper:
         self.depositor = Depositor(mandrel, clearance=clearance,
                                    h_max=s.walk_piece_widths * float(width.min()),
                                    bridge_depth=s.bridge_depth_thickness * thickness)
-        self.ecc = np.asarray(config.process.eccentricity, dtype=float)
-        self.lead = config.process.pose_lead
+        p = config.process
+        self.ecc_table = p.eccentricity_table or None
+        self.ecc = np.asarray(p.eccentricity if self.ecc_table is None
+                              else setting_at(self.ecc_table, 0.0), dtype=float)
+        self.omega_table = config.machine.angular_speed_table or None
+        self.lead = p.pose_lead
+        self.path = (None if p.trajectory is None else PathInterpolant(read_trajectory(
+            p.trajectory, max_take_up_speed=np.inf, max_angular_speed_deg=np.inf)))
         # travel counts from the spool plane; initial_position from the supply plane (the guide
         # ring's, offset from the spool plane, when there is one)
-        self.clock = Clock(0.0, config.process.initial_position + machine.supply_z)
-        pose = self.pose(self.clock.travel)
+        self.clock = Clock(0.0, p.initial_position + machine.supply_z, 0.0)
+        pose = self.pose(self.clock.travel) if self.path is None else self.path_pose(0.0)
         rng = np.random.default_rng(config.model.seed)
         self.F, self.face = tie_points(config, machine, mandrel, centerline, pose, rng, s)
         self.recording = Recording(len(self.F))
@@ -165,9 +197,11 @@ class Stepper:
         self.snapshot_stride = 0 if n_snap <= 0 else self._snapshot_stride(n_snap)
         self.zone = zone
         self.zone.start(0.0, pose.to_machine(self.F), pose)
-        self._record(pose, ZoneStep.kinematic(machine.supply_points(0.0)))
         self.step = 0
         self.braided = self.braided_length_estimate()
+        self.process_rows = []
+        self._speeds = self.speeds()    # row 0 holds the speeds of the first step
+        self._record(pose, ZoneStep.kinematic(machine.supply_points(0.0)))
         self.stop_requested = False
         self.stop_signal = ""        # the signal that asked for the stop ("SIGINT", "SIGTERM", ...)
         self.checkpoint_failed = False
@@ -176,6 +210,21 @@ class Stepper:
     # -- process kinematics -------------------------------------------------------------------
     def pose(self, travel):
         return pose_at(self.centerline, travel, eccentricity=self.ecc, lead=self.lead)
+
+    def path_pose(self, t):
+        """The pose of a run driven by a trajectory at time ``t`` (s)."""
+        R, origin = self.path.pose(t)
+        return Pose(R=R, t=origin)
+
+    def speeds(self) -> tuple[float, float | None]:
+        """(take-up speed m/s, angular speed rad/s or None where it is the machine's constant
+        one) of the step from the present state: the config's tables at the braided length, or
+        the trajectory's speeds at the time."""
+        if self.path is not None:
+            return self.path.speeds(self.clock.t)
+        v = take_up_speed(self.config.process.take_up_speed, self.braided)
+        omega = None if self.omega_table is None else float(setting_at(self.omega_table, self.braided)[0])
+        return v, omega
 
     def braided_length_estimate(self):
         """Cheap braided length for the stopping test: mean arc length of the fell points."""
@@ -198,8 +247,14 @@ class Stepper:
             while self.braided < target and (max_steps is None or self.step < max_steps):
                 if self.stop_requested:
                     raise KeyboardInterrupt
-                v = take_up_speed(cfg.process.take_up_speed, self.braided)
-                self.advance(v)
+                v, omega = self.speeds()
+                if self.path is not None and self.clock.t + self.dt > self.path.end * (1 + 1e-12):
+                    raise SimulationError(
+                        f"[process] trajectory {self.path.trajectory.path} ends at "
+                        f"t = {self.path.end:.6g} s with {self.braided:.4g} m braided, before "
+                        f"[process] braid_length = {target:g} m: extend the path or shorten "
+                        "braid_length")
+                self.advance(v, omega)
                 if self.step % self.tolerances.braided_length_every == 0:
                     self.braided = self.braided_length_estimate()
                     bar(self.braided)
@@ -231,21 +286,37 @@ class Stepper:
             self.checkpoint_failed = True
             return False
 
-    def advance(self, v):
-        """One time step; the state changes only at the end (an error leaves the last good step)."""
+    def advance(self, v, omega=None):
+        """One time step at take-up speed ``v`` (m/s) and angular speed ``omega`` (rad/s; None:
+        the machine's constant one); the state changes only at the end (an error leaves the
+        last good step)."""
         self.consistent = False   # a zone with state (interaction) changes during its step
         s = self.tolerances
         t0, dt = self.clock.t, self.dt
-        travel_end = self.clock.travel + v * dt
-        pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
-        pose_end = self.pose(travel_end)
         t1 = t0 + dt
+        if self.path is None:
+            if self.ecc_table is not None:
+                self.ecc = setting_at(self.ecc_table, self.braided)
+            travel_end = self.clock.travel + v * dt
+            pose_mid = self.pose(self.clock.travel + 0.5 * v * dt)
+            pose_end = self.pose(travel_end)
+        else:
+            pose_mid, pose_end = self.path_pose(t0 + 0.5 * dt), self.path_pose(t1)
+            travel_end = float(pose_end.to_machine(self.centerline.frame_values(0.0)[0])[2])
+        # the carriers' clock (Clock): the zones place the carriers by it
+        tau0, dtau = self.clock.carrier_t, dt
+        if self.path is not None:
+            dtau = self.path.turn(t1) / self.machine.omega - tau0
+        elif omega is not None:
+            dtau = dt * (omega / self.machine.omega)
+        tau1 = t1 if self.path is None and omega is None else tau0 + dtau
+        self._speeds = (v, omega)
         model = f"the {self.config.model.kind} model"
         # the zone keeps the state it solves for the snapshot the record takes after this step
         self.zone.snapshot_due = bool(self.snapshot_stride) and (
             self.recording.n_rows % self.snapshot_stride == 0)
         try:
-            zs = self.zone.step(t0, dt, pose_end.to_machine(self.F), pose_end)
+            zs = self.zone.step(tau0, dtau, pose_end.to_machine(self.F), pose_end)
         except PreformError:
             raise
         except Exception as exc:
@@ -273,7 +344,7 @@ class Stepper:
                 extra.append((k, order, p, f, t1, fl))
         self.recording.lay(laid.moved, laid.end_flag, extra)
         self.F, self.face = laid.final_F, laid.final_face
-        self.clock = Clock(t1, travel_end)
+        self.clock = Clock(t1, travel_end, tau1)
         self.step += 1
         self._record(pose_end, zs, G_end)
         self.consistent = True
@@ -313,8 +384,14 @@ class Stepper:
             G_end = pose.to_mandrel(zs.G_end)
         rec.record(self.clock.t, self.F, self.face, H, G_end - self.F,
                    zs.contacts, zs.iterations, zs.residual)
+        v, omega = self._speeds
+        omega = self.machine_speed if omega is None else omega
+        self.process_rows.append((self.clock.t, v, omega, *pose.t, *rotation_to_quaternion(pose.R)))
         if self.snapshot_stride and (rec.n_rows - 1) % self.snapshot_stride == 0:
-            rec.snapshots.append(self.zone.snapshot(self.clock.t, F_machine))
+            snap = self.zone.snapshot(self.clock.carrier_t, F_machine)
+            if snap.time_s != self.clock.t:     # the zone places by the carriers' clock
+                snap = dataclasses.replace(snap, time_s=self.clock.t)
+            rec.snapshots.append(snap)
 
     def _snapshot_stride(self, n_snap):
         """Steps between snapshots so that a run writes about n_snap of them."""
@@ -334,18 +411,26 @@ class Stepper:
         return Result(config=self.config, mandrel=self.mandrel, centerline=self.centerline,
                       yarns=yarns, history=history, snapshots=list(rec.snapshots), fell_s=fell_s,
                       convergence_length=rec.H.array.copy(), status=status, message=message,
-                      wall_time_s=wall)
+                      wall_time_s=wall, process=self.process_array())
+
+    def process_array(self) -> np.ndarray:
+        """(rows, len(PROCESS_ROW)) float64: the process of every history row (``PROCESS_ROW``:
+        the speeds of the step that ended there, row 0 those of the first step; the pose at the
+        row)."""
+        return np.array(self.process_rows, dtype=np.float64).reshape(-1, len(PROCESS_ROW))
 
     # -- checkpoints --------------------------------------------------------------------------
     def state_arrays(self) -> dict:
         """The run's whole state as named plain arrays: the stepper's own (``stepper.*``: clock,
-        fell points, step count, braided length, and the time step and snapshot stride it runs
-        with, so that a run resumed by a version with other step control goes on as it started),
+        fell points, step count, braided length, the carriers' clock, the process rows, and the
+        time step and snapshot stride it runs with, so that a run resumed by a version with
+        other step control goes on as it started),
         the record (``recording.*``) and the zone's (``zone.*``)."""
         out = {"clock": np.array([self.clock.t, self.clock.travel]), "F": self.F.copy(),
                "face": self.face.copy(), "step": np.int64(self.step),
                "braided": np.float64(self.braided), "dt": np.float64(self.dt),
-               "snapshot_stride": np.int64(self.snapshot_stride)}
+               "snapshot_stride": np.int64(self.snapshot_stride),
+               "carrier_t": np.float64(self.clock.carrier_t), "process": self.process_array()}
         return {**plain.prefixed("stepper.", {k: np.asarray(v) for k, v in out.items()}),
                 **plain.prefixed("recording.", self.recording.to_arrays()),
                 **plain.prefixed("zone.", self.zone.export_state())}
@@ -363,13 +448,17 @@ class Stepper:
         braided = plain.finite("braided", plain.take(own, "braided", (), np.float64)).item()
         dt = plain.scalar(own, "dt", np.float64)
         stride = plain.scalar(own, "snapshot_stride", np.int64)
+        carrier_t = plain.finite("carrier_t", plain.take(own, "carrier_t", (), np.float64)).item()
+        process = plain.finite("process", plain.take(own, "process", (step + 1, len(PROCESS_ROW)),
+                                                     np.float64))
         if not (np.isfinite(dt) and dt > 0.0) or stride < 0:
             raise ValueError(f"time step {dt} s or snapshot stride {stride} out of range")
         recording = Recording.from_arrays(plain.unprefixed("recording.", arrays), ny, n_faces)
         if recording.n_rows != step + 1 or recording.moved.n != step:
             raise ValueError(f"{recording.n_rows} history rows for {step} steps")
         self.zone.import_state(plain.unprefixed("zone.", arrays))
-        self.clock = Clock(float(clock[0]), float(clock[1]))
+        self.clock = Clock(float(clock[0]), float(clock[1]), float(carrier_t))
+        self.process_rows = [tuple(row) for row in process.tolist()]
         self.F, self.face, self.step, self.braided = F, face, step, braided
         self.dt, self.snapshot_stride, self.recording = dt, stride, recording
 

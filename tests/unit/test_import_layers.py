@@ -25,7 +25,7 @@ LAYERS = (
               "preform.drawing")),
     ("kernels", ("preform._kernels",)),
     ("geometry", ("preform.geometry",)),
-    ("inputs", ("preform.config", "preform.machine")),
+    ("inputs", ("preform.config", "preform.machine", "preform.trajectory")),
     ("models", ("preform.kinematic", "preform.interaction", "preform.laid", "preform.reference",
                 "preform.recording", "preform.stepping", "preform.checkpoint", "preform.simulation")),
     ("analysis", ("preform.analysis", "preform.checks", "preform.budget", "preform.structural.layup",

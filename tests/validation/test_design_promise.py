@@ -129,3 +129,26 @@ def test_the_runs_csv_has_one_row_per_forward_run(unmet):
     best = [r for r in runs if r["best"] == "1"]
     assert len(best) == 1
     assert float(best[0]["largest_error_deg"]) == min(float(r["largest_error_deg"]) for r in runs)
+
+
+def test_the_process_of_the_designed_table_is_written_beside_it(unmet):
+    from preform.trajectory import COLUMNS
+
+    path = unmet["out"].with_name("designed_process.csv")
+    assert f"the process (speeds and the mandrel's pose per step, a robot program) in {path}" \
+        in unmet["stdout"]
+    table = np.genfromtxt(path, delimiter=",", names=True)
+    assert tuple(table.dtype.names) == COLUMNS
+    designed = [row for row in rows(unmet["out"].with_name("designed_design.csv"))]
+    L = np.array([float(r["braided_length_m"]) for r in designed])
+    v = np.array([float(r["take_up_speed_m_s"]) for r in designed])
+    # each step's take-up speed is the designed table's at the braided length the stepper had
+    # read (every few steps, so up to a few steps behind): within the table's own spread over
+    # the 2 cm before the row, and the 6 significant digits the table is written with
+    for length, speed in zip(table["braided_length_m"][50:], table["take_up_speed_m_s"][50:]):
+        near = np.interp([length - 0.02, length], L, v)
+        assert near.min() * (1 - 1e-5) <= speed <= near.max() * (1 + 1e-5)
+    # the mandrel is fed along the machine axis (a straight cone): the origin's z advances by the
+    # take-up speed times the step, to rounding
+    dz, dt = np.diff(table["z_m"]), np.diff(table["time_s"])
+    np.testing.assert_allclose(dz, table["take_up_speed_m_s"][1:] * dt, rtol=1e-9)

@@ -136,7 +136,8 @@ def test_the_jamming_warning_fires_only_below_the_least_width():
     from preform.checks import _braid_angle_warnings
 
     def config(least):
-        return NS(machine=NS(carriers=144, angular_speed=np.radians(13.232)),
+        omega = np.radians(13.232)
+        return NS(machine=NS(carriers=144, angular_speed=omega, angular_speeds=((0.0, omega),)),
                   yarn=NS(width=4e-3, least_width=least), process=NS(take_up_speed=((0.0, 0.01),)))
 
     s, distance = np.linspace(0.0, 1.0, 200), np.full(200, 0.075)

@@ -24,7 +24,7 @@ from .fields import fields_on_input
 from .key_numbers import key_numbers
 from .quality import QUALITY, assess, run_interlacing, surface_reasons, verdict
 from .rtm import SolverProperties, solver_properties
-from .steady import steady_state
+from .steady import setting_changes, steady_state, transients
 
 
 @dataclass(frozen=True)
@@ -189,6 +189,9 @@ def summary_dict(result, extra=None, quality_reasons=(), settings=None, steady=N
         "interlacing": _interlacing(interlaced),
         "inputs": echo_inputs(config),
     }
+    changes = setting_changes(config) if config is not None and result.steps else []
+    if changes:     # a setting that changes during the run: the transient after each change
+        summary["transients"] = transients(result.history, changes, settings.steady)
     if extra:
         summary.update(extra)
     return jsonable(summary)

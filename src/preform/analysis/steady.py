@@ -191,3 +191,57 @@ def _read(L, columns, end, settings):
                convergence_length_m=fits["convergence_length_m"]["asymptote"],
                braid_angle_deg={"warp": fits["warp"]["asymptote"], "weft": fits["weft"]["asymptote"]})
     return out
+
+
+def setting_changes(config) -> list[dict]:
+    """Where the run's settings change (their tables over the braided length, ``[machine]
+    angular_speed``, ``[process] take_up_speed`` and ``eccentricity``): per change the setting,
+    the braided length where its value starts changing and where it has its new value (the
+    table's rows around a run of rows with differing values: a ramp over several rows is one
+    change), and the values before and after in the config's units, sorted by start."""
+    import math
+
+    tables = {"angular_speed": [(row[0], (math.degrees(row[1]),))
+                                for row in config.machine.angular_speeds],
+              "take_up_speed": [(row[0], tuple(row[1:])) for row in config.process.take_up_speed],
+              "eccentricity": [(row[0], tuple(row[1:])) for row in config.process.eccentricities]}
+    units = {"angular_speed": "deg/s", "take_up_speed": "m/s", "eccentricity": "m"}
+    changes = []
+    for name, rows in tables.items():
+        k = 0
+        while k + 1 < len(rows):
+            if rows[k + 1][1] == rows[k][1]:
+                k += 1
+                continue
+            j = k + 1
+            while j + 1 < len(rows) and rows[j + 1][1] != rows[j][1]:
+                j += 1
+            value = (lambda v: v[0] if len(v) == 1 else list(v))
+            changes.append({"setting": name, "unit": units[name], "starts_at_m": rows[k][0],
+                            "ends_at_m": rows[j][0], "from": value(rows[k][1]),
+                            "to": value(rows[j][1])})
+            k = j
+    return sorted(changes, key=lambda c: (c["starts_at_m"], c["setting"]))
+
+
+def transients(history, changes, settings: SteadySettings = STEADY) -> list[dict]:
+    """The transient after each of ``changes`` (:func:`setting_changes`): the history from the
+    change's end to the next change's start (or the run's end) read as :func:`steady_state`
+    reads a run; per change, with its own keys, whether the braid ``settled`` there, where
+    (``settled_at_m``, braided length) and the transient's ``length_m`` from the change's start,
+    with the steady braid angles and convergence length after it (null where not settled)."""
+    L = np.asarray(history["braided_length_m"], dtype=float)
+    out = []
+    for k, change in enumerate(changes):
+        later = [c["starts_at_m"] for c in changes[k + 1:] if c["starts_at_m"] > change["ends_at_m"]]
+        stop = min(later) if later else np.inf
+        rows = (L >= change["ends_at_m"]) & (L < stop)
+        part = {name: np.asarray(values)[rows] for name, values in history.items()}
+        steady = steady_state(part, settings) if np.count_nonzero(rows) >= MIN_TAIL_ROWS else {}
+        settled = bool(steady.get("reached"))
+        at = steady["braided_length_m"] if settled else None
+        out.append({**change, "settled": settled, "settled_at_m": at,
+                    "length_m": None if at is None else at - change["starts_at_m"],
+                    "braid_angle_deg": steady["braid_angle_deg"] if settled else None,
+                    "convergence_length_m": steady["convergence_length_m"] if settled else None})
+    return out

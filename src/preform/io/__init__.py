@@ -18,11 +18,12 @@ from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
 from .rtm_files import write_rtm
 from ..drawing import PICTURES as PICTURE_SETTINGS
 from .surface import INPUT_VTU, layer_pictures, write_input_mesh_fields, write_surface
-from .tables import write_history, write_summary
+from .tables import write_history, write_process, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp, yarn_types_of
 
 SUMMARY = "summary.json"
 HISTORY = "history.csv"
+PROCESS = "process.csv"
 YARNS = "yarns.vtp"
 PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
@@ -169,6 +170,15 @@ def _relative(path, out_dir) -> str:
     return path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else str(path)
 
 
+def _process_file(result, folder) -> list[Path]:
+    """``process.csv`` of a simulated result (a Result put together without a run, which holds
+    no process rows, has none; an earlier one in the folder is removed)."""
+    if result.process is None:
+        (Path(folder) / PROCESS).unlink(missing_ok=True)
+        return []
+    return [write_process(result, Path(folder) / PROCESS)]
+
+
 @dataclass
 class Writing:
     """The files of one run as they are written (:func:`write_data`, :func:`draw_pictures`,
@@ -186,7 +196,7 @@ class Writing:
 
 def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing:
     """Write the data files of ``analysed`` (``preform.analysis.derived.Analysed``) into
-    ``out_dir``: ``history.csv``, ``yarns.vtp``, ``convergence.pvd``, a stack's ``layer{k}/``,
+    ``out_dir``: ``history.csv``, ``process.csv``, ``yarns.vtp``, ``convergence.pvd``, a stack's ``layer{k}/``,
     the surface files, ``rtm/`` and ``fe/`` where they were analysed; an earlier summary is
     removed first. The pictures are set up, not drawn (:func:`draw_pictures`).
 
@@ -209,11 +219,12 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
             if background:             # the worker's (drawn by its finish() where it cannot fork)
                 rendered = []
         written = [write_history(result, out_dir / HISTORY),
+                   *_process_file(result, out_dir),
                    write_yarns_vtp(result.yarns, out_dir / YARNS, yarn_types_of(result.config)),
                    *write_convergence(result.snapshots, out_dir)]
         for k, layer in enumerate(analysed.layer_results, start=2):
             folder = safe_folder(out_dir, f"layer{k}")
-            written += [write_history(layer, folder / HISTORY),
+            written += [write_history(layer, folder / HISTORY), *_process_file(layer, folder),
                         write_yarns_vtp(layer.yarns, folder / YARNS, yarn_types_of(layer.config))]
         if fields is not None:
             written += [Path(p) for p in write_surface(fields, out_dir, pictures=False)]
@@ -290,6 +301,7 @@ __all__ = [
     "start_pictures",
     "write_summary",
     "write_history",
+    "write_process",
     "write_yarns_vtp",
     "write_convergence",
     "plot_history",

@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import SimulationError
 from ..plain import jsonable
 from ..result import HISTORY_COLUMNS
+from ..trajectory import COLUMNS as PROCESS_COLUMNS
 from .atomic import atomic_write_text
 
 #: history columns that count things; written as integers
@@ -69,6 +70,43 @@ def format_history(result) -> str:
 def write_history(result, path) -> Path:
     """Write ``history.csv`` atomically; refuses non-finite values (SimulationError)."""
     return atomic_write_text(path, format_history(result))
+
+
+# ---------------------------------------------------------------- process.csv
+
+def process_table(result) -> np.ndarray:
+    """process.csv as a (n_steps, len(PROCESS_COLUMNS)) float64 array: per history row the time,
+    the braided length (the history's), the take-up and angular (deg/s) speeds of the step that
+    ended there (row 0: of the first step) and the mandrel's pose in the machine frame (origin
+    m, unit quaternion w, x, y, z: ``preform.trajectory``). SimulationError where the run kept
+    no process rows or one is not finite."""
+    process = result.process
+    n = len(np.asarray(result.history["time_s"]))
+    if process is None or process.shape != (n, len(PROCESS_COLUMNS) - 1):
+        shape = None if process is None else process.shape
+        raise SimulationError(f"process: {shape} process rows for {n} history rows; expected "
+                              f"({n}, {len(PROCESS_COLUMNS) - 1})")
+    table = np.empty((n, len(PROCESS_COLUMNS)))
+    table[:, 0] = process[:, 0]
+    table[:, 1] = np.asarray(result.history["braided_length_m"], dtype=float)
+    table[:, 2] = process[:, 1]
+    table[:, 3] = np.degrees(process[:, 2])
+    table[:, 4:] = process[:, 3:]
+    bad = np.argwhere(~np.isfinite(table))
+    if len(bad):
+        k, j = (int(i) for i in bad[0])
+        raise SimulationError(f"process: column {PROCESS_COLUMNS[j]}, row {k} is {table[k, j]!r}; "
+                              "expected a finite number")
+    return table
+
+
+def write_process(result, path) -> Path:
+    """Write ``process.csv`` atomically (header :data:`PROCESS_COLUMNS`, floats as :func:`repr`:
+    the shortest text that reads back to the same float64, so a run driven by the file,
+    ``[process] trajectory``, starts from the poses to the last bit)."""
+    lines = [",".join(PROCESS_COLUMNS)]
+    lines += [",".join(repr(float(v)) for v in row) for row in process_table(result)]
+    return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 # ---------------------------------------------------------------- summary.json

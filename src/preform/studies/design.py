@@ -345,6 +345,16 @@ def write_design_table(design: Design, path) -> Path:
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
+def write_design_process(design: Design, path) -> Path:
+    """The process of the designed speed table (``process.csv``'s columns: the time, braided
+    length, speeds and the mandrel's pose per step) from the best forward run, the run of the
+    table before its rounding to :data:`SPEED_DIGITS` digits: the robot program of the design,
+    which ``[process] trajectory`` also reads."""
+    from ..io.tables import write_process
+
+    return write_process(design.result, path)
+
+
 def write_design_runs(design: Design, path) -> Path:
     """One row per forward run: its number, its largest error where judged (deg), and whether its
     speed is the answer (the best run), as a CSV."""
