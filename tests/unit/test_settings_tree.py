@@ -152,7 +152,7 @@ def captured_step(interaction_case):
     bounds, f_top = relax.start_bounds(st, bc)
     args = (relax.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, centres[:m],
             bc.fell, bc.top, f_top, bounds)
-    return args, dict(f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width, plane=bc.plane,
+    return args, dict(f_spool=bc.f_spool, friction=bc.friction, h=bc.h, width=bc.width, plane=bc.plane,
                       top_tensions=relax.ring_top_tensions(st, bc))
 
 

@@ -251,12 +251,19 @@ TIGHT = 1e-10
 POSED_TIGHT = 1e-9
 
 
+#: the posed iteration's re-solves from the last one's factorisation of K, to a share of the
+#: change that posed them (``RelaxSettings.reuse_factor``, ``posed_inexact``)
+LEVERS = dict(reuse_factor=True, posed_inexact=0.1)
+
+
+@pytest.mark.parametrize("levers", [{}, LEVERS], ids=["exact", "levers"])
 @pytest.mark.parametrize("mu", [0.0, 0.25, 0.5])
-def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
+def test_ring_steps_land_on_the_newton_solution(mu, levers, ring_steps):
     """Captured steps of the case-B-like run through a guide ring, solved with the ring's
     preconditioner (``RelaxSettings.ring_preconditioner``, ``"full"``): the same state as the
     Newton reference (positions within 1e-6 m), every crossing in balance to the
-    tolerance."""
+    tolerance; also with the re-solves from a stale K and to a share of the change
+    (``LEVERS``): they change the path of the posed iteration, not its fixed point."""
     st, bc, s_old = ring_steps(mu, 150)
     m = st.m
     ref = st.copy()
@@ -267,7 +274,7 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
     rep = frontal.solve_zone_inplace(ref, bc, centre=s_old, tol=TIGHT, settings=model)
     assert rep.posed_converged
     b0, f0 = R.start_bounds(st, bc)
-    rs = R.RelaxSettings(max_iter=300, ring_stall=60)
+    rs = R.RelaxSettings(max_iter=300, ring_stall=60, **levers)
     res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old[:m],
                   bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, friction=bc.friction, h=bc.h,
                   width=bc.width, plane=bc.plane,

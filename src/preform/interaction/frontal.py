@@ -209,6 +209,10 @@ class SolveReport:
     #: (``PosedIteration``), and whether its change fell below ``posed_tolerance``
     posed_solves: int = 0
     posed_converged: bool = True
+    #: the relaxation's time (s) by part (``relax.RelaxResult.times``), summed over its solves,
+    #: and its factorisations of the preconditioner (None and 0 for Newton's alone)
+    relax_times: dict | None = None
+    factorisations: int = 0
 
 
 #: what a zone solve is for (``solve_zone_inplace``'s and ``relax.solve_zone``'s ``mode``):

@@ -147,6 +147,7 @@ class BlockStiffness:
         self._x = np.empty((m, nb))
         self._rhs = np.zeros((m, nb))
         self._out = np.empty((m, nb))
+        self.factored = 0
 
     #: the last structure built with an order that depends on the lattice alone ("metis"):
     #: (nb, order, low, structure); the frontal iterations of a snapshot solve the same
@@ -169,8 +170,10 @@ class BlockStiffness:
         return blk
 
     def factor(self):
-        """Factorise the current ``vals``; False if a pivot is not positive definite."""
+        """Factorise the current ``vals``; False if a pivot is not positive definite. Each
+        call counts in ``factored`` (which factor ``Lx``, ``Dinv`` hold: ``FactorCarry``)."""
         f = LDL.ldl_numeric if self.nb == 3 else LDL.ldl_numeric5
+        self.factored += 1
         return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
                  self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
                  self._y, self._D)
@@ -200,6 +203,34 @@ class BlockStiffness:
         LDL.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,
                        self._out, self._x)
         out[:] = self._out[:, :3]
+
+
+class FactorCarry:
+    """The preconditioner's factorisation a relaxation left, for the next solve of the same
+    lattice to start from (``RelaxSettings.reuse_factor``): the structure ``blk`` whose ``Lx``,
+    ``Dinv`` hold it, which factorisation that was (``BlockStiffness.factored``), and the
+    wall's active set and the jammed segments it was made with. A solve takes it where the
+    structure still holds that factor and its start has the same active set; K then differs
+    from one factorised at its start only by the change of the held bounds and the iterate's
+    moves since, and the iteration refreshes K as it would a stale one (``due``)."""
+
+    def __init__(self):
+        self.blk = None
+        self.count = -1
+        self.active = None
+        self.jam = None
+
+    def keep(self, blk, active, jam):
+        """Record the last factorisation of ``blk``, made with ``active`` (m,) and ``jam``
+        (m, 2) bool."""
+        self.blk, self.count = blk, blk.factored
+        self.active, self.jam = active.copy(), jam.copy()
+
+    def valid_for(self, blk, active) -> bool:
+        """Whether ``blk`` still holds the recorded factor, made with the active set
+        ``active``."""
+        return (blk is not None and blk is self.blk and blk.factored == self.count
+                and self.active.shape == active.shape and bool(np.all(self.active == active)))
 
 
 class Anderson:

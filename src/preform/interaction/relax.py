@@ -201,11 +201,15 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     friction_tol = fr.friction_tolerance if friction_tol is None else float(friction_tol)
     kw = dict(f_spool=f_spool, friction=friction, h=h, width=width, plane=plane,
               settings=settings, model=model, tol=tol)
-    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
+    posed_loop = fresh is not None and not consistent
+    # the posed iteration's solves start from K as the last one left it
+    carry = PC.FactorCarry() if posed_loop else None
+    res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, carry=carry,
+                              **kw)
     m = lat.m
-    if fresh is not None and not consistent and res.converged and m:
+    if posed_loop and res.converged and m:
         res, bounds, res.posed = _posed_fixed_point(lat, res, s_fell, s_old, fell, top,
-                                                    bounds, fresh, top_tensions, kw)
+                                                    bounds, fresh, top_tensions, kw, carry)
     if not consistent or not res.converged:
         if res.converged and m:
             # bounds held at the last step's (lagged): how far they are from those of the
@@ -215,6 +219,7 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
                                            model.frontal.change_scale_floor)[0]
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
+    factorisations = res.factorisations
     change = np.inf
     for _ in range(bound_iterations):
         change, f_top = (_lag_change(lat, res, bounds, top_tensions, f_top,
@@ -225,18 +230,21 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
         res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
                                   **kw)
         iterations += res.iterations
+        factorisations += res.factorisations
         history.append(res.history)
         for key, v in res.times.items():
             times[key] += v
         if not res.converged:
             break
     res.iterations, res.history, res.times = iterations, np.concatenate(history), times
+    res.factorisations = factorisations
     res.bound_change = change
     res.converged = res.converged and change < friction_tol
     return res
 
 
-def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_tensions, kw):
+def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_tensions, kw,
+                       carry=None):
     """The step solved again with what has no state of its own taken of its converged
     geometry (``FrontalSettings.posed_iterations``, ``frontal.PosedIteration``): the top
     tensions behind a guide ring (``top_tensions`` of the result's positions: Capstan, eq. 9)
@@ -245,14 +253,19 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
     by less than ``posed_tolerance`` relative to the tensions or after ``posed_iterations``
     solves; each solve starts from the last one's result. The iterations, histories and times
     of all are summed into the returned result (the last one; not converged where a solve did
-    not converge, which gives the step to Newton), with the iteration (``posed``). Returns
-    (result, the bounds it held, the iteration)."""
+    not converge, which gives the step to Newton), with the iteration (``posed``); each solve
+    starts from the last one's factorisation of K (``carry``, ``RelaxSettings.reuse_factor``).
+    Returns (result, the bounds it held, the iteration)."""
     from .frontal import PosedIteration
     fr = kw["model"].frontal
     iterations, history, times = res.iterations, [res.history], dict(res.times)
+    factorisations = res.factorisations
     held_top = res.f_top
     pi = PosedIteration(fr, fresh, bound_scale(lat.up, lat.yarn, res.tension, res.f_top,
                                                fr.change_scale_floor), res.f_top)
+    rs, tol = kw["settings"], kw["tol"]
+    loose = rs.posed_inexact > 0.0      # re-solves to a share of the change, then finished
+    solved_to = tol
     while True:
         bound1 = np.where(fresh, res.bounds, bounds)
         change = _bound_change(lat, bound1, bounds, res.tension, res.f_top,
@@ -262,11 +275,19 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
             f_top1 = np.asarray(top_tensions(res.pos), dtype=float)
             change = max(change, float(np.max(np.abs(f_top1 - res.f_top) / f_top1)))
         x = pi.step(bounds, held_top, bound1, f_top1, change)
-        if x is None:
+        if x is None and solved_to > tol:
+            # the iteration stops at a solve short of the balance tolerance: that solve is
+            # finished (the same held bounds, from its result) and its change measured again,
+            # which the iteration then judges in place of the loose one
+            pi.changes.pop()
+            x, loose = (bounds, held_top), False
+        elif x is None:
             break
+        solved_to = max(tol, rs.posed_inexact * change) if loose else tol
         nxt = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, x[1], x[0],
-                                  **kw)
+                                  carry=carry, **dict(kw, tol=solved_to))
         iterations += nxt.iterations
+        factorisations += nxt.factorisations
         history.append(nxt.history)
         for key, v in nxt.times.items():
             times[key] = times.get(key, 0.0) + v
@@ -276,18 +297,19 @@ def _posed_fixed_point(lat, res, s_fell, s_old, fell, top, bounds, fresh, top_te
             break
         bounds, held_top = x
     res.iterations, res.history, res.times = iterations, np.concatenate(history), times
+    res.factorisations = factorisations
     return res, bounds, pi
 
 
 def _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, settings,
-                        **kw):
+                        carry=None, **kw):
     """``_relax_held``; where the block preconditioner stalls (no new lowest residual in
     ``block_stall`` iterations: steps with friction 0.5 and jammed crossings, where it moves
     the crossings too far) and ``full_retry`` (or ``scalar_retry``), the step again from the
     same start with the "full" (or the scalar) one, the iterations and times of both counted
     (``fallback_scalar`` set for either)."""
     res = _relax_held(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, settings=settings,
-                      **kw)
+                      carry=carry, **kw)
     retry = "full" if settings.full_retry else "scalar" if settings.scalar_retry else None
     if res.converged or settings.preconditioner != "block" or retry is None:
         return res
@@ -323,10 +345,12 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool,
-                friction, h, width, plane, settings, model, tol):
+                friction, h, width, plane, settings, model, tol, carry=None):
     """The iteration with the bounds and top tensions held (``relax``), to the relative
     residual ``tol``: sweep, forces and residual, then the preconditioner's update, wall step
-    and mixing (``preconditioners``)."""
+    and mixing (``preconditioners``). ``carry``: a ``preconditioners.FactorCarry``; the solve
+    starts from its factorisation where it is valid (``RelaxSettings.reuse_factor``) and
+    leaves its own last one in it."""
     st = settings
     e = model.energy
     m, ny = lat.m, lat.n_yarns
@@ -377,6 +401,12 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
     best, best_it = np.inf, 0
     best_f, best_f_it = np.inf, 0
     factorisations = 0
+    blk = getattr(pc, "blk", None)
+    if carry is not None and st.reuse_factor and carry.valid_for(blk, x.active):
+        # the last solve's K: the same lattice, active set and (as far as K holds it) jam
+        factored_active = carry.active.copy()
+        pc.factored_jam = carry.jam.copy()
+        pc.jammed[:] = carry.jam
     while True:
         t0 = time.perf_counter()
         if not pc.take_sweep(x):
@@ -417,6 +447,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
             factored = pc.factor(x)
             factored_active = x.active.copy()
             if not factored:
+                factored_active = None      # no factor to hand on
                 break
         t3 = time.perf_counter()
         pc.update(x, delta)
@@ -440,6 +471,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         times["factor"] += t3 - t2
         times["solve"] += t4 - t3
         times["mix"] += time.perf_counter() - t5
+    if carry is not None and blk is not None and factored_active is not None:
+        carry.keep(blk, factored_active, pc.factored_jam)
     # the friction bounds of the last (converged) geometry, for the next step
     seg, tension, active, force = x.seg, x.tension, x.active, x.fo.force
     g_new = np.empty((m, 2))
@@ -658,7 +691,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
             # jammed crossings): the Newton reference solves that step instead
             report = frontal.solve_zone_inplace(state, bc, settings=settings, where=where,
                                                 centre=centres, start=start)
-            return dataclasses.replace(report, relax_iterations=res.iterations, fallback=True)
+            return dataclasses.replace(report, relax_iterations=res.iterations, fallback=True,
+                                       relax_times=res.times,
+                                       factorisations=res.factorisations)
         raise SimulationError(
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
@@ -669,4 +704,5 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     return frontal.SolveReport(res.iterations, max(res.residual, res.bound_change),
                                res.history, res.f_top.copy(),
                                lagged=not (passes and res.converged),
-                               relax_iterations=res.iterations, **posed)
+                               relax_iterations=res.iterations, relax_times=res.times,
+                               factorisations=res.factorisations, **posed)

@@ -391,6 +391,24 @@ class RelaxSettings:
     #: slowly (a 48-carrier case-B-like step: 55 iterations, stalled at ring_stall; with 3, 18
     #: iterations and 2 factorisations; neutral on the bent tube's steps)
     ring_refactor_stall: int = 3
+    #: behind a guide ring the posed iteration's solves of a time step (``relax``'s
+    #: ``fresh``) start from the factorisation of K the last one left, where it was made for
+    #: the same wall active set (the iteration refreshes a stale K by
+    #: ``ring_refactor_stall``): factorisations a step 24 -> 14 on the bent tube's steps,
+    #: relaxation iterations up 10-20 % (at 16 carriers 2.3x), 11 % less CPU at 1200
+    #: crossings. Off: the results move within the posed iteration's band (its stopping
+    #: point, ``posed_tolerance``), by more than the relaxation and Newton are held to agree
+    #: in ``tests/validation/test_ring_steps.py`` (tensions 3.9e-3 of f_spool on one step at
+    #: yarn friction 0.5, against 2.9e-3) (docs/decisions.md, "Speed behind the ring")
+    reuse_factor: bool = False
+    #: the posed iteration's re-solves stop at this share of the change of the bounds and top
+    #: tensions that posed them (not below the balance tolerance), and the one it stops at is
+    #: finished to it (an inexact fixed-point iteration: a bound the next solve replaces needs no
+    #: geometry balanced beyond its own change); 0: every re-solve to ``tol``. 0.1 with
+    #: ``reuse_factor``: 41 % less CPU on the bent tube's steps, 31 % on case B's, the same
+    #: re-solves; off for the same reason as ``reuse_factor`` (median tension difference to
+    #: Newton 4.2e-5 of f_spool against the 2.9e-5 the test holds)
+    posed_inexact: float = 0.0
     #: the full preconditioner's elimination order: "metis" (METIS's nested dissection of the
     #: lattice, pymetis, ~3 ms at 1230 crossings: 27 % less fill than "band" and half its
     #: factorisation work; bent tube 0.6 m end to end: 31 s of CPU against 40 s) or "band"
