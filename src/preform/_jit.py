@@ -29,6 +29,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .zone import zone_class
+
 #: environment variable naming a file to which the command and the worker append one JSON line per
 #: numba compilation and per worker job (``benchmarks/bench_pipeline.py --jit``, the tests)
 LOG_ENV = "PREFORM_JIT_LOG"
@@ -256,15 +258,17 @@ def _idle_core(settings) -> bool:
 
 class Warmup:
     """While entered: at the command's first numba compilation, the worker for ``config`` (read
-    from ``config_path``, ``[model] kind`` replaced by ``model`` when given), for the kinematic
-    model and when a core is idle then (``settings``); on exit it is stopped if still running
+    from ``config_path``, ``[model] kind`` replaced by ``model`` when given), for a model whose
+    zone asks for it (``Zone.first_run_worker``: the kinematic one) and when a core is idle
+    then (``settings``); on exit it is stopped if still running
     (SIGTERM, then killed after ``settings.stop_wait_s``)."""
 
     def __init__(self, config, config_path, model: str = "", settings: WarmupSettings = WARMUP):
         self.argv = [sys.executable, "-m", "preform._jit", str(config_path), model]
         self.settings = settings
         self.process = None
-        self.compiles = _Listener("main", self.start if config.model.kind == "kinematic" else None)
+        worker = zone_class(config.model.kind).first_run_worker
+        self.compiles = _Listener("main", self.start if worker else None)
 
     def start(self):
         if not _idle_core(self.settings):

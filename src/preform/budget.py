@@ -45,19 +45,10 @@ class WorkEstimate:
     result_bytes: int
     field_edge_m: float = math.nan
     time_step_s: float = math.nan
-    model: str = "kinematic"
 
     def lines(self) -> list[str]:
         return [f"estimated work: {self.field_faces:,} field faces, {self.steps:,} time steps, "
                 f"about {self.result_bytes / 1e6:.0f} MB of results"]
-
-    def model_line(self) -> str:
-        """What the run's model costs, said before it starts ("" for the kinematic model)."""
-        if self.model != "interaction":
-            return ""
-        return (f'[model] kind = "interaction": about {self.steps:,} time steps, each a solve '
-                "of every crossing of the convergence zone; a step that does not converge "
-                "stops the run, which keeps the results up to it")
 
 
 def braiding_time(config) -> float:
@@ -92,8 +83,7 @@ def estimate_work(config, mandrel_area: float, time_step: float, convergence_len
     points = config.machine.carriers * min(steps, 1e12)
     size = BYTES_PER_FACE * min(faces, 1e15) + BYTES_PER_YARN_STEP * points
     return WorkEstimate(field_faces=_count(faces), steps=_count(steps), result_bytes=_count(size),
-                        field_edge_m=float(edge), time_step_s=float(time_step),
-                        model=str(config.model.kind))
+                        field_edge_m=float(edge), time_step_s=float(time_step))
 
 
 def _ratio(a: float, b: float) -> float:

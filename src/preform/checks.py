@@ -45,16 +45,17 @@ def preflight(config, mandrel, centerline) -> list[str]:
     implausible for the machine (much larger than the machine and not fitting it, or smaller than
     two yarn widths), when the part of the mandrel that passes the machine
     (``s <= initial_position + braid_length``) plus the eccentricity does not fit inside the guide
-    ring and the spool circle, when ``initial_position + braid_length`` exceeds the centerline,
-    or when a kinematic run's mandrel end would pass the machine before braid_length is braided
-    (:func:`mandrel_end_problem`; a warning for the interaction model).
+    ring and the spool circle, when the mandrel's end has passed the machine at the start
+    (:func:`_check_start`), or when a kinematic run's mandrel end would pass the machine before
+    braid_length is braided (:func:`mandrel_end_problem`, the run's own rule and message; a
+    warning for the interaction model).
     """
     vertices = np.asarray(mandrel.vertices, dtype=float)
     if vertices.ndim != 2 or len(vertices) == 0:
         raise MandrelError(f"{config.mandrel.stl}: the mandrel has no vertices")
     s, distance = (np.asarray(a, dtype=float) for a in centerline.project(vertices))
     _check_unit(config, float(mandrel.diagonal), float(distance.max()))
-    _check_length(config, float(centerline.length))
+    _check_braid_length(config, float(centerline.length))
     _check_centerline_inside(config, mandrel, centerline)
     passing = s <= config.process.initial_position + config.process.braid_length
     reach = float(np.max(distance[passing], initial=0.0)) + math.hypot(*config.process.eccentricity)
@@ -64,6 +65,7 @@ def preflight(config, mandrel, centerline) -> list[str]:
     from .reference import resolve_pose_lead
 
     lead = float(resolve_pose_lead(config, mandrel, centerline).process.pose_lead)
+    _check_start(config, float(centerline.length), lead)
     radius = float(np.median(distance[passing])) if np.any(passing) else 0.0
     warnings += _check_mandrel_end(config, float(centerline.length), radius, lead,
                                    _section_changes(s[passing], distance[passing]))
@@ -125,21 +127,35 @@ def _check_centerline_inside(config, mandrel, centerline) -> None:
             "expected a centerline inside the mandrel, tip first, in the STL's frame and unit")
 
 
-def _check_length(config, length: float) -> None:
-    """The mandrel must reach past the supply plane by initial_position + braid_length; a guide
-    ring offset from the spool plane takes its offset of mandrel too (initial_position counts
-    from the ring)."""
+def _check_braid_length(config, length: float) -> None:
+    """The braided length is centerline arc length from the tip: braid_length cannot exceed the
+    centerline, whatever the convergence zone (how much less the mandrel holds is
+    :func:`mandrel_end_problem`'s)."""
+    p = config.process
+    if p.braid_length > length:
+        raise ConfigError(f"[process] braid_length = {p.braid_length:g}: expected at most the "
+                          f"centerline length {length:.4g} m of the mandrel (less its convergence "
+                          "zone at the end)")
+
+
+def _check_start(config, length: float, lead: float = 0.0) -> None:
+    """The mandrel must still be in the machine at the start: its tip ``initial_position`` past
+    the supply plane (plus a guide ring's offset from the spool plane) within the centerline's
+    length plus the pose lead (:func:`end_passed`, the rule the run stops by). How much braid the
+    mandrel then holds is :func:`mandrel_end_problem`'s: a run started beyond H_inf needs less
+    than ``initial_position + braid_length``, its convergence zone shrinking as it braids."""
     p = config.process
     ring = config.machine.guide_ring
     offset = ring.offset if ring is not None else 0.0
-    need = p.initial_position + p.braid_length + offset
-    if need > length:
-        terms = (f"[process] braid_length = {p.braid_length:g} plus [process] initial_position = "
-                 f"{p.initial_position:g}")
+    if end_passed(p.initial_position + offset, length, lead):
+        terms = f"[process] initial_position = {p.initial_position:g}"
         if offset:
             terms += f" plus [machine] guide_ring offset = {offset:g}"
-        raise ConfigError(f"{terms} is {need:.4g} m: expected at most the centerline length "
-                          f"{length:.4g} m of the mandrel")
+        lead_text = f" plus the pose lead {lead:.3g} m" if lead else ""
+        raise ConfigError(f"{terms} puts the mandrel's tip {p.initial_position + offset:.4g} m past the "
+                          f"spool plane at the start, beyond the {length:.4g} m centerline{lead_text}: "
+                          "its end has passed the machine before braiding begins; expected a smaller "
+                          "initial_position")
 
 
 def mandrel_end_problem(config, length: float, radius: float, lead: float = 0.0,

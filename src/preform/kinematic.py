@@ -183,6 +183,11 @@ class KinematicZone:
     """The kinematic model's zone (``preform.zone.Zone``): free yarns straight from fell point to
     supply point (spool, or guide-ring point), docs/theory.md §3. It has no state of its own."""
 
+    #: seconds a run: nothing to say before it starts (``Zone.cost_note``)
+    cost_note = ""
+    #: the first-run worker's jobs are this model's kernels (``Zone.first_run_worker``)
+    first_run_worker = True
+
     def __init__(self, config, machine, mandrel=None):
         self.config = config
         self.machine = machine

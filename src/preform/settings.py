@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .budget import WorkLimits
+from .drawing import PICTURES, PictureSettings  # noqa: F401 - a branch of the tree
 from .geometry.offset import OffsetSettings
 from .geometry.remesh import RemeshSettings
 from .interaction.settings import InteractionSettings
@@ -60,6 +61,9 @@ class Settings:
     #: how finely the shell deck's plies are binned into element groups
     #: (``structural.layup.structural_layup``)
     binning: BinSettings = field(default_factory=BinSettings)
+    #: how the pictures are drawn: sizes, the steady marker's flatness, the yarns' thinning
+    #: (``io.draw_pictures`` and the picture worker)
+    pictures: PictureSettings = field(default_factory=PictureSettings)
 
 
 #: the defaults of every stage

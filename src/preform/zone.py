@@ -87,6 +87,13 @@ class Zone(Protocol):
     of a fault inside it.
     """
 
+    #: what a run of this model costs, said before it starts, with ``{steps}`` its estimated
+    #: time steps (``str.format``); "" where nothing need be said
+    cost_note: str
+    #: whether a first run starts the worker that compiles its later kernels meanwhile
+    #: (``preform._jit``, whose jobs are the kinematic run's)
+    first_run_worker: bool
+
     @classmethod
     def for_run(cls, config, machine, mandrel, settings=None) -> "Zone":
         """The zone of a run of ``config``: ``mandrel`` (mandrel frame) for its contact tests;

@@ -7,6 +7,7 @@ H_inf = 0.054 m), kinematic runs of a few hundred steps.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 
@@ -140,3 +141,39 @@ def test_the_transient_note_gives_advice_the_part_can_follow(tmp_path, capsys):
     assert "braid at least" not in note
     assert "the 0.15 m mandrel cannot hold 0.21 m of braid" in note and "initial_position = 0.0541 m" in note
 
+
+
+def test_a_run_started_beyond_h_inf_needs_less_than_its_start_plus_its_braid(tmp_path, capsys):
+    """From 0.12 m (beyond H_inf = 0.054 m) the zone shrinks as the braid grows: 0.2 m of braid
+    needs the tip about 0.2 + 0.056 m past the spool plane, less than initial_position +
+    braid_length = 0.32 m, which exceeds the 0.3 m mandrel. check passes (the stepper's own
+    rule, ``stepping.end_passed``), and the run is done."""
+    path = cylinder_case(tmp_path, 0.2)
+    path.write_text(path.read_text().replace(START, "initial_position = 0.12"))
+    assert main(["check", str(path)]) == 0
+    assert "mandrel's end" not in capsys.readouterr().err
+    cfg = pf.load_config(path)
+    assert cfg.process.initial_position + cfg.process.braid_length > 0.3
+    mandrel, centerline = load_geometry(cfg)
+    assert pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=centerline).status == "done"
+
+
+def test_the_interaction_step_estimate_takes_its_own_zone(tmp_path):
+    """From 0.03 m the kinematic zone grows towards H_inf = 0.054 m, the interaction model's
+    stays near its start: its estimate counts the travel braid_length + initial_position -
+    initial_position, the kinematic one braid_length + H_end - initial_position."""
+    from preform.pipeline import estimate
+    from preform.reference import end_convergence_length
+
+    path = cylinder_case(tmp_path, 0.1)
+    kin = pf.load_config(path)
+    inter = pf.load_config(path)
+    inter = dataclasses.replace(inter, model=dataclasses.replace(inter.model, kind="interaction"))
+    mandrel, centerline = load_geometry(kin)
+    h_end = end_convergence_length(kin, 0.075)
+    assert h_end > kin.process.initial_position
+    k, i = estimate(kin, mandrel, centerline), estimate(inter, mandrel, centerline)
+    # per unit time step the counts differ by the travel alone (0.1 m against 0.1 + H_end -
+    # 0.03 m), to the rounding of the counts (one step)
+    per_step = k.steps * k.time_step_s / i.time_step_s
+    assert i.steps == pytest.approx(per_step * 0.1 / (0.1 + h_end - 0.03), abs=1.0)

@@ -19,7 +19,8 @@ from preform.pipeline import write_results
 from preform.io.maps import face_raster, rounded_limits, surface_map_figure, unrolled_coordinates
 from preform.io.plots import braid_angle_figure, convergence_length_figure
 from preform.io.render3d import TIP_COLOUR, whole_stride
-from preform.io.surface import BAR_HEIGHT_PX, PICTURES
+from preform.io.surface import PICTURES
+from preform.settings import PICTURES as PICTURE_SETTINGS
 from preform.analysis.steady import steady_state
 from support.simcase import make_config, write_centerline, write_stl
 
@@ -64,7 +65,7 @@ def test_surface_pictures_fill_the_width_and_keep_the_tip_on_the_left_in_both_vi
     _, _, out = run
     for name, *_ in PICTURES:
         image = _image(out / "plots" / name)
-        h = (image.shape[0] - BAR_HEIGHT_PX) // 2
+        h = (image.shape[0] - PICTURE_SETTINGS.surface_bar_height_px) // 2
         width = image.shape[1]
         for view in (image[:h], image[h:2 * h]):
             # the part (not the title text in the top 30 px) spans most of the frame's width:
@@ -76,6 +77,48 @@ def test_surface_pictures_fill_the_width_and_keep_the_tip_on_the_left_in_both_vi
             tip = _tip_columns(view)
             assert len(tip) > 20, name
             assert np.median(tip) < 0.25 * width, name
+
+
+@pytest.fixture(scope="module")
+def short_thick(tmp_path_factory):
+    """The surface pictures of a short, thick part: a cylinder 0.1 m long and 0.08 m across,
+    braided over 0.05 m (a kinematic run of 16 carriers, Ko's 60 deg on r = 40 mm, spool radius
+    80 mm: H_inf 0.04 m, so the mandrel holds the braid and its convergence zone)."""
+    from preform.geometry import shapes
+    from preform.io.surface import write_surface_pictures
+
+    folder = tmp_path_factory.mktemp("short_thick")
+    v, f = shapes.cylinder(0.04, 0.1, n_around=48)
+    stl = write_stl(folder / "short.stl", v, f)
+    csv = write_centerline(folder / "short.csv", [[0, 0, 0], [0, 0, 0.1]])
+    config = make_config(stl, centerline=csv, carriers=16, spool_radius=0.08,
+                         angular_speed=np.sqrt(3.0) * 0.01 / 0.04, initial_position=0.03,
+                         braid_length=0.05, snapshots=0, out=folder / "results")
+    result = pf.simulate(config, progress=False)
+    assert result.status == "done", result.message
+    fields = pf.map_to_surface(result)
+    return write_surface_pictures(fields, folder / "plots", "short", centerline=result.centerline)
+
+
+def _views(path):
+    image = _image(path)
+    h = (image.shape[0] - PICTURE_SETTINGS.surface_bar_height_px) // 2
+    return image, (image[:h], image[h:2 * h])
+
+
+def test_a_short_thick_part_fills_the_width_of_its_views(short_thick):
+    """A braid 0.05 m long on a section 0.08 m across: the view as tall as the part at the
+    width's scale (within the largest view height) or, beyond that, a narrower picture; the
+    part spans more than 80 % of the width in both views, the tip on the left."""
+    assert len(short_thick) == len(PICTURES)
+    for path in short_thick:
+        image, views = _views(path)
+        width = image.shape[1]
+        for view in views:
+            cols = np.nonzero(_drawn(view[PICTURE_SETTINGS.surface_view_room_px[0]:]).any(axis=0))[0]
+            assert cols.max() - cols.min() > 0.8 * width, path.name
+            tip = _tip_columns(view)
+            assert len(tip) > 20 and np.median(tip) < 0.25 * width, path.name
 
 
 def test_the_braided_mandrel_keeps_the_tip_on_the_left_and_divides_its_panels(run):
@@ -93,7 +136,7 @@ def test_the_braided_mandrel_keeps_the_tip_on_the_left_and_divides_its_panels(ru
 
 def test_the_whole_view_thins_the_yarns_on_a_long_mandrel_only():
     # case A: 144 yarns on 75 mm at 60 deg, 2 m across 1600 px: 3.3 mm apart = 2.4 px; every
-    # 3rd yarn is 7 px apart, every 2nd only 4.9 px (below MIN_YARN_SPACING_PX = 5)
+    # 3rd yarn is 7 px apart, every 2nd only 4.9 px (below PictureSettings.min_yarn_spacing_px = 5)
     history = {"braid_angle_warp_deg": np.array([60.0]), "braid_angle_weft_deg": np.array([60.0])}
     yarns = type("Y", (), {"n_yarns": 144})()
     case_a = type("R", (), {"yarns": yarns, "history": history, "steps": 1})()

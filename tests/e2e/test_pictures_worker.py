@@ -267,7 +267,7 @@ def test_the_data_files_do_not_wait_for_the_early_worker(small_result, fields, t
 
     out = tmp_path / "out"
 
-    def after_the_data(result, path):
+    def after_the_data(result, path, *drawing):
         (out / "seen").write_text(str(_wait_for(out / "surface.vtu")))
         return _touch(path)[0]
 
@@ -330,7 +330,7 @@ def test_without_fork_background_draws_each_picture_once(small_result, tmp_path,
 
     calls = []
 
-    def counted(result, path):
+    def counted(result, path, *drawing):
         calls.append(path)
         return _touch(path)[0]
 

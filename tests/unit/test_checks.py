@@ -130,12 +130,19 @@ def test_only_the_part_that_passes_the_machine_must_fit():
         preflight(config(machine=ring(0.17)), *cylinder(flange_at=1.45, flange_radius=0.3))
 
 
-def test_braid_length_plus_initial_position_must_fit_the_centerline():
-    with pytest.raises(ConfigError) as info:
+def test_a_braid_the_mandrel_cannot_hold_is_refused_with_the_run_s_message():
+    # 1.5 m of braid on a 1.6 m centerline: the fell points get there with the tip 1.5 m plus
+    # the convergence length past the spool plane, beyond the mandrel's end
+    with pytest.raises(ConfigError, match=r"the mandrel's end passes the machine before \[process\] "
+                                          r"braid_length = 1.5 m.*beyond the 1.6 m centerline"):
         preflight(config(process={"braid_length": 1.5}), *cylinder(length=1.6))
+
+
+def test_a_tip_past_the_mandrel_s_end_at_the_start_is_refused_by_name():
+    with pytest.raises(ConfigError) as info:
+        preflight(config(process={"braid_length": 0.1, "initial_position": 1.7}), *cylinder(length=1.6))
     msg = str(info.value)
-    assert "[process] braid_length = 1.5" in msg and "[process] initial_position = 0.2" in msg
-    assert "1.7 m" in msg and "centerline length 1.6 m" in msg
+    assert "[process] initial_position = 1.7" in msg and "beyond the 1.6 m centerline" in msg
 
 
 def test_no_vertices_is_a_mandrel_error():
@@ -241,8 +248,12 @@ def test_a_time_step_that_skips_carrier_passes_is_refused_naming_time_step():
 
 def test_a_guide_ring_offset_is_named_when_the_mandrel_is_too_short():
     ring = {"guide_ring": GuideRingConfig(radius=0.17, offset=1.0)}
-    with pytest.raises(ConfigError, match=r"plus \[machine\] guide_ring offset = 1 is 2.5 m"):
+    # 1.3 m of braid and the zone behind a ring 1 m from the spool plane on a 1.6 m mandrel
+    with pytest.raises(ConfigError, match=r"plus the guide ring's offset 1 m\), beyond the 1.6 m centerline"):
         preflight(config(machine=ring), *cylinder())
+    # a tip past the end at the start: the offset named with initial_position
+    with pytest.raises(ConfigError, match=r"initial_position = 0.7 plus \[machine\] guide_ring offset = 1 "):
+        preflight(config(machine=ring, process={"initial_position": 0.7, "braid_length": 0.1}), *cylinder())
 
 
 def test_a_braid_the_mandrel_cannot_last_for_is_refused_or_warned_before_running():
@@ -260,3 +271,10 @@ def test_a_braid_the_mandrel_cannot_last_for_is_refused_or_warned_before_running
                          *cylinder())
     assert any(w.startswith("likely: the mandrel's end passes the machine before") for w in warnings)
     assert not any("mandrel's end" in w for w in preflight(config(machine=ring), *cylinder()))
+
+
+def test_a_braid_longer_than_the_centerline_is_refused_naming_braid_length():
+    for kind in ("kinematic", "interaction"):
+        with pytest.raises(ConfigError, match=r"\[process\] braid_length = 5: expected at most the "
+                                              r"centerline length 1.6 m"):
+            preflight(config(process={"braid_length": 5.0}, model={"kind": kind}), *cylinder(length=1.6))

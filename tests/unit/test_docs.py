@@ -114,3 +114,22 @@ def test_the_configuration_reference_names_every_key():
             assert f"| `{key}` |" in page, f"[{section}] {key}"
     for key in (*GUIDE_RING_KEYS, *LAYER_KEYS):
         assert f"`{key}" in page or f"{key} =" in page, key
+
+
+def _github_anchor(title: str) -> str:
+    """The anchor GitHub gives a heading: lower case, punctuation but ``-`` and ``_`` dropped,
+    spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", title.strip().lower()).replace(" ", "-")
+
+
+def test_the_decisions_index_links_every_record_once():
+    """``docs/decisions.md`` opens with an index by topic: every record (a ``###`` heading)
+    appears in it exactly once, linked to its heading's anchor, and it links to nothing else."""
+    text = (ROOT / "docs" / "decisions.md").read_text(encoding="utf-8")
+    start = text.index("\n## Index\n")
+    index = text[start:text.index("\n## ", start + 1)]
+    records = re.findall(r"^### (.+)$", text, flags=re.M)
+    links = re.findall(r"^  - \[(.+)\]\(#([\w-]+)\)$", index, flags=re.M)   # one a line
+    assert len(links) == index.count("](#")
+    assert sorted(title for title, _ in links) == sorted(records)
+    assert all(anchor == _github_anchor(title) for title, anchor in links)

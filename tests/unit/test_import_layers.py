@@ -21,7 +21,8 @@ from support.modules import SRC, imports_in, module_names
 #: ``__init__`` alone.
 LAYERS = (
     ("base", ("preform.errors", "preform.plain", "preform.tolerances", "preform.analytic",
-              "preform.result", "preform.zone", "preform._version", "preform.materials")),
+              "preform.result", "preform.zone", "preform._version", "preform.materials",
+              "preform.drawing")),
     ("kernels", ("preform._kernels",)),
     ("geometry", ("preform.geometry",)),
     ("inputs", ("preform.config", "preform.machine")),

@@ -128,3 +128,21 @@ def test_braided_mandrel_png_shows_the_mandrel_and_the_yarns(small_result, tmp_p
     red = np.sum((img[:, 0] > img[:, 2] + 60) & (img[:, 0] > 120))
     grey = np.sum((np.ptp(img, axis=1) < 12) & (img[:, 0] > 100) & (img[:, 0] < 235))
     assert blue > 500 and red > 500 and grey > 5000
+
+
+def _marks(fig):
+    """The labels of the braid angle plot's lines and its notes."""
+    ax = fig.axes[0]
+    return [line.get_label() for line in ax.get_lines()] + [t.get_text() for t in ax.texts]
+
+
+def test_the_history_plots_mark_the_steady_state_they_are_given(small_result):
+    """The steady-state mark is the analysis stage's (``Analysed.steady``), drawn as given and
+    not read again from the history: a made-up start at 40 % of the run labels the plot with
+    that start (a dotted line where the curves are flat from there, a note where not); none
+    given, the plot has no steady-state mark."""
+    start = 0.4 * float(small_result.history["braided_length_m"][-1])
+    marked = _marks(braid_angle_figure(small_result, steady={"reached": True,
+                                                             "braided_length_m": start}))
+    assert any(f"from {start:.2f} m" in text for text in marked)
+    assert not any("steady" in text for text in _marks(braid_angle_figure(small_result)))

@@ -9,7 +9,8 @@ import pytest
 from vtkmodules.util.numpy_support import vtk_to_numpy
 
 from preform.analysis.fields import map_to_surface
-from preform.io.surface import BAR_HEIGHT_PX, H5, PICTURES, VTU, WIDTH_PX, XDMF, write_surface
+from preform.io.surface import H5, PICTURES, VTU, XDMF, write_surface
+from preform.settings import PICTURES as PICTURE_SETTINGS
 from support.field_standins import cylinder, helices, make_result
 
 
@@ -88,7 +89,7 @@ def test_pictures_show_the_mandrel(written):
         path = out / "plots" / file_name
         assert path in paths and path.exists()
         image = np.asarray(Image.open(path).convert("RGB")).astype(int)
-        assert image.shape[1] == WIDTH_PX
+        assert image.shape[1] == PICTURE_SETTINGS.surface_width_px[1]
         background = image[0, 0]
         drawn = np.abs(image - background).sum(axis=2) > 30
         assert drawn.mean() > 0.05, file_name  # not a blank frame
@@ -96,7 +97,7 @@ def test_pictures_show_the_mandrel(written):
         rgb_spread = image.max(axis=2) - image.min(axis=2)
         assert (rgb_spread > 60).mean() > 0.02, file_name
         # two views above the colour bar's row: each shows the mandrel
-        half = (image.shape[0] - BAR_HEIGHT_PX) // 2
+        half = (image.shape[0] - PICTURE_SETTINGS.surface_bar_height_px) // 2
         assert drawn[:half].mean() > 0.02 and drawn[half:2 * half].mean() > 0.02, file_name
 
 

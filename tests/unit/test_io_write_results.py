@@ -56,7 +56,7 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
         path.write_text("stub")
         return [path]
 
-    def write_surface_pictures(fields, plots_dir, title="", centerline=None):
+    def write_surface_pictures(fields, plots_dir, title="", centerline=None, pictures=None):
         calls.append((fields, plots_dir, title))
         assert "kinematic model" in title
         return []
@@ -79,7 +79,8 @@ def test_fields_go_to_the_surface_writer(small_result, tmp_path, monkeypatch):
 
 def test_the_writer_imports_no_analysis():
     """``io`` writes what it is given: its package imports neither the verdict, the steady state,
-    the RTM properties nor the structural plies, nor does it time anything (a fresh interpreter)."""
+    the RTM properties nor the structural plies (a fresh interpreter), reads no steady state
+    of its own (the history plots mark ``Analysed.steady``), nor does it time anything."""
     import subprocess
     import sys
 
@@ -94,3 +95,4 @@ def test_the_writer_imports_no_analysis():
 
     source = "".join(p.read_text() for p in Path(preform.io.__file__).parent.glob("*.py"))
     assert "perf_counter" not in source and "time.time(" not in source
+    assert "steady import" not in source and "steady_state(" not in source

@@ -3,8 +3,12 @@
 
 Checked: that ``Settings()`` is, branch by branch, the default each stage's own function takes
 when given none (read from the functions' signatures, so a default changed in one place and not
-the other fails here), and that a non-default knob given through the tree reaches the stage that
-uses it: a relaxation tolerance the relaxation's own failure message names, a near clearance the
+the other fails here), that each knob is one field (the relaxation solves to the Newton
+reference's tolerances and floor; what differs by model is the zone's, reached through
+``zone.ZONES``), and that a non-default knob given through the tree reaches the stage that
+uses it: a balance tolerance the relaxation's own failure message names, the frontal
+tolerance and iterations its consistent bounds stop by, the geometric floor its
+preconditioner uses, a near clearance the
 interaction zone's mandrel look-ups hold, the tolerances the stepper's time step follows, the
 work limits the estimate refuses by, and the verdict's, steady state's, interlacing's and field
 mesh's settings in the files of one short run, each against the stage called directly with the
@@ -38,6 +42,11 @@ from preform.simulation import load_geometry, make_stepper, make_zone
 from preform.analysis.steady import STEADY, steady_state
 from preform.structural.layup import BinSettings, bin_plies
 from preform.tolerances import tol
+from preform.io.maps import write_surface_map
+from preform.io.plots import plot_history
+from preform.io.render3d import render_braided_mandrel
+from preform.io.surface import write_surface_pictures
+from preform.settings import PICTURES
 from support.simcase import write_cylinder_case
 
 
@@ -65,9 +74,11 @@ def test_the_tree_is_the_defaults_every_stage_takes():
     assert s.binning == BinSettings() == _default(bin_plies, "settings")
     assert s.rtm == BINNING == _default(bin_cells, "settings")
     assert _default(solver_properties, "settings") is None and _default(solver_properties, "n_sets") is None
+    assert s.pictures == PICTURES == _default(plot_history, "pictures") == _default(write_surface_pictures, "pictures")
+    assert s.pictures == _default(render_braided_mandrel, "pictures") == _default(write_surface_map, "pictures")
     # frozen all the way down: a knob is changed by building another tree
     with pytest.raises(dataclasses.FrozenInstanceError):
-        s.interaction.relax.tol = 1.0
+        s.interaction.relax.max_iter = 1
 
 
 def test_a_branch_instead_of_the_tree_is_refused_by_name(tmp_path):
@@ -95,18 +106,115 @@ def test_a_near_clearance_reaches_the_zones_mandrel_look_ups(interaction_case):
     assert make_zone(cfg, Machine.from_config(cfg.machine), mandrel).distance.settings == NEAR
 
 
-def test_a_relaxation_tolerance_reaches_the_relaxation(interaction_case):
+def test_the_balance_tolerance_reaches_the_relaxation(interaction_case):
     """One relaxation iteration a step, no Newton fallback, no staged retry of a failed step,
-    and a tolerance of 3.21e-9: the run stops at its first step with crossings, with the
-    relaxation's own message naming that iteration limit and that tolerance (the defaults
-    converge: 200 iterations, 1e-7)."""
+    and a balance tolerance (``NewtonSettings.balance_tolerance``, the one both solvers take)
+    of 3.21e-9: the run stops at its first step with crossings, with the relaxation's own
+    message naming that iteration limit and that tolerance (the defaults converge: 200
+    iterations, 1e-7)."""
     cfg, mandrel, centerline = interaction_case
-    rs = dataclasses.replace(INTERACTION.relax, tol=3.21e-9, max_iter=1, newton_fallback=False)
+    rs = dataclasses.replace(INTERACTION.relax, max_iter=1, newton_fallback=False)
     tree = Settings(interaction=dataclasses.replace(
-        INTERACTION, relax=rs, zone=dataclasses.replace(INTERACTION.zone, boundary_stages=())))
+        INTERACTION, relax=rs, zone=dataclasses.replace(INTERACTION.zone, boundary_stages=()),
+        newton=dataclasses.replace(INTERACTION.newton, balance_tolerance=3.21e-9)))
     res = pf.simulate(cfg, progress=False, mandrel=mandrel, centerline=centerline, settings=tree)
     assert res.status == "failed"
     assert "after 1 iterations (tolerance 3.21e-09" in res.message
+
+
+def test_the_relaxation_has_no_knob_of_the_model_twice():
+    """The relaxation's own settings are its iteration's; the tolerances, iteration limits and
+    constants of the equations it shares with the Newton reference are fields of the Newton,
+    frontal and energy settings only (no name of theirs, nor the short names a tolerance or a
+    floor went by, among the relaxation's)."""
+    own = {f.name for f in dataclasses.fields(relax.RelaxSettings)}
+    shared = {f.name for branch in (INTERACTION.newton, INTERACTION.frontal, INTERACTION.energy)
+              for f in dataclasses.fields(branch)}
+    assert not own & shared
+    assert not own & {"tol", "floor", "friction_tol", "bound_iterations"}
+
+
+@pytest.fixture(scope="module")
+def captured_step(interaction_case):
+    """(args, keywords) of ``relax.relax`` for the first step of ``interaction_case``'s run with
+    at least 20 crossings, as its zone poses it to the solver."""
+    from support.simcase import advance, advanced_stepper, capture_step
+
+    cfg = interaction_case[0]
+    stepper, speed = advanced_stepper(cfg, 0)
+    for _ in range(400):
+        st, bc, _, centres = capture_step(stepper, speed)
+        if st.m >= 20:
+            break
+        advance(stepper, cfg, 1)
+    assert st.m >= 20
+    m = st.m
+    bounds, f_top = relax.start_bounds(st, bc)
+    args = (relax.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, centres[:m],
+            bc.fell, bc.top, f_top, bounds)
+    return args, dict(f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width, plane=bc.plane,
+                      top_tensions=relax.ring_top_tensions(st, bc))
+
+
+def _model(**branches):
+    """The interaction settings with ``branch={field: value}`` changed."""
+    return dataclasses.replace(INTERACTION, **{
+        name: dataclasses.replace(getattr(INTERACTION, name), **fields)
+        for name, fields in branches.items()})
+
+
+def test_the_geometric_floor_reaches_the_relaxation(captured_step):
+    """``EnergySettings.geometric_floor`` is the least force density of the relaxation's
+    preconditioner too: a floor of 10 N (above every tension, 4.7 N spool tension) changes the
+    iteration, not its fixed point (positions within 1e-6 m, the relaxation tests' bound)."""
+    args, kw = captured_step
+    plain = relax.relax(*args, **kw)
+    floored = relax.relax(*args, model=_model(energy=dict(geometric_floor=10.0)), **kw)
+    assert plain.converged and floored.converged
+    assert not np.array_equal(plain.history, floored.history)
+    assert np.abs(plain.pos - floored.pos).max() < 1e-6
+
+
+def test_the_frontal_tolerance_and_iterations_reach_the_consistent_relaxation(captured_step):
+    """With consistent bounds the relaxation solves the step again up to
+    ``FrontalSettings.max_iterations - 1`` times, until the bounds change by less than
+    ``friction_tolerance``: with 3 iterations and a tolerance of 1e300 (every change is below it)
+    it stops after the first solve; with a tolerance of 1e-300 it takes all three solves."""
+    args, kw = captured_step
+    once = relax.relax(*args, **kw)
+    loose = relax.relax(*args, consistent=True, **kw,
+                        model=_model(frontal=dict(max_iterations=3, friction_tolerance=1e300)))
+    tight = relax.relax(*args, consistent=True, **kw,
+                        model=_model(frontal=dict(max_iterations=3, friction_tolerance=1e-300)))
+    assert loose.iterations == once.iterations and loose.converged
+    assert tight.iterations > loose.iterations and not tight.converged
+
+
+def test_what_differs_by_model_is_the_zones(interaction_case):
+    """The cost note said before a run and whether a first run starts the compiling worker are
+    the zone class's (``zone.ZONES``, ``Zone.cost_note`` and ``first_run_worker``): the load
+    stage's notes carry the interaction zone's note with the estimate's steps, and none for
+    the kinematic model."""
+    from preform import _jit
+    from preform.pipeline import checked_geometry, estimate
+    from preform.zone import ZONES, Zone, zone_class
+
+    cfg = interaction_case[0]
+    for kind in ZONES:
+        zone = zone_class(kind)
+        assert isinstance(zone.cost_note, str) and isinstance(zone.first_run_worker, bool)
+        assert {"cost_note", "first_run_worker"} <= set(Zone.__annotations__)
+        on = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, kind=kind))
+        mandrel, centerline, notes = checked_geometry(on)
+        said = [n for n in notes if n.startswith('note: [model] kind = ')]
+        if zone.cost_note:
+            steps = estimate(on, mandrel, centerline, force=True).steps
+            assert said == [f"note: {zone.cost_note.format(steps=steps)}"]
+        else:
+            assert said == []
+        warmup = _jit.Warmup(on, "unused.toml")
+        assert (warmup.compiles.first is not None) == zone.first_run_worker
+    assert zone_class("interaction").cost_note and not zone_class("kinematic").cost_note
 
 
 def test_the_tolerances_reach_the_stepper(interaction_case):
@@ -215,3 +323,22 @@ def test_the_rtm_sets_reach_the_rtm_files(strict_run):
     _, summary, out = strict_run
     assert summary["rtm"]["written"] and (out / "rtm" / "rtmsim.bdf").is_file()
     assert summary["rtm"]["sets"] == 2
+
+
+def test_the_picture_settings_reach_the_pictures(strict_run, tmp_path):
+    """History figures at 50 dots per inch through the tree: 7.2 in x 50 = 360 px wide (the
+    default 150 dpi: 1080 px), drawn by the job the results' writer runs."""
+    from PIL import Image
+
+    from preform.io import _picture_jobs
+
+    result = strict_run[0]
+    result = dataclasses.replace(result, config=dataclasses.replace(
+        result.config, output=dataclasses.replace(result.config.output, pictures=True)))
+    tree = Settings(pictures=dataclasses.replace(PICTURES, history_dpi=50))
+    (plot,) = [job for job in _picture_jobs(result, None, tmp_path,
+                                                      pictures=tree.pictures)[0]
+               if "plots/braid_angle.png" in job.names]
+    paths = plot.draw()
+    assert Image.open(paths[0]).size[0] == 360
+    assert PICTURES.history_dpi * PICTURES.history_size_in[0] == 1080

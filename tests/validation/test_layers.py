@@ -22,6 +22,7 @@ from preform import analytic
 from preform.config import load_config
 from preform.errors import ConfigError
 from preform.geometry import offset, shapes
+from preform.settings import PICTURES
 from support.simcase import write_centerline, write_stl
 
 R, LENGTH, CARRIERS, WIDTH, THICK, TEX, RHO = 0.02, 0.22, 16, 4e-3, 2e-3, 6400.0, 1780.0
@@ -59,6 +60,7 @@ kind = "kinematic"
 
 [output]
 snapshots = 0
+pictures = false    # the files' numbers are checked here; pictures: tests/e2e
 {layers}
 """
 
@@ -362,6 +364,57 @@ def test_the_two_layers_example_runs_forward_then_backward(tmp_path):
     z1 = np.asarray(pv.read(tmp_path / "out" / "yarns.vtp").points)[:, 2]
     z2 = np.asarray(pv.read(tmp_path / "out" / "layer2" / "yarns.vtp").points)[:, 2]
     assert z1.max() < 0.2 and z2.min() > 0.8
+    # every layer pictured, named by its number, each where it lies: tip (narrow end) on the
+    # left in every picture, so layer 1's braid on the left, layer 2's (from the far end) right
+    plots = tmp_path / "out" / "plots"
+    for k, side in ((1, "left"), (2, "right")):
+        # the field of layer k lies at its end of the part
+        name = f"surface_braid_angle_layer{k}.png"
+        assert f"plots/{name}" in summary["files"], name
+        image = _png(plots / name)
+        columns = np.nonzero(_field_pixels(image))[1]
+        assert len(columns) > 200, name
+        where = np.median(columns) / image.shape[1]
+        assert where < 0.35 if side == "left" else where > 0.65, (name, where)
+        # the braided-mandrel picture frames layer k's braid: the unbraided rest of the part
+        # lies on its right for layer 1 (the tip's side left), on its left for layer 2
+        name = f"braided_mandrel_layer{k}.png"
+        assert f"plots/{name}" in summary["files"], name
+        image = _png(plots / name)[: PICTURES.mandrel_window_px[1] // 2]   # the whole-part view
+        yarn = np.nonzero(_yarn_pixels(image))[1]
+        bare = np.nonzero(np.abs(image - [200, 200, 200]).sum(axis=2) < 30)[1]
+        assert len(yarn) > 200 and len(bare) > 200, name
+        assert (np.median(bare) > np.median(yarn)) == (side == "left"), name
+    for name in ("surface_cover_factor.png", "surface_thickness.png"):   # the stack's totals
+        assert f"plots/{name}" in summary["files"]
+    assert not (plots / "braided_mandrel.png").exists() and not (plots / "surface_braid_angle.png").exists()
+
+
+def _png(path):
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB")).astype(int)
+
+
+def _yarn_pixels(image):
+    """Pixels of the warp (blue) and weft (red) lines of ``io.render3d.COLOURS``."""
+    from preform.io.render3d import COLOURS
+
+    top = image
+    near = [np.abs(top - [int(c[k:k + 2], 16) for k in (1, 3, 5)]).sum(axis=2) < 90 for c in COLOURS.values()]
+    return near[0] | near[1]
+
+
+def _field_pixels(image):
+    """Coloured pixels of a surface picture's front view (not the grey of unbraided faces, not
+    the white background, not the tip's orange label), above its colour bar."""
+    from preform.io.render3d import TIP_COLOUR
+    from preform.settings import PICTURES
+
+    h = (image.shape[0] - PICTURES.surface_bar_height_px) // 2
+    view = image[:h]
+    tip = np.array([int(TIP_COLOUR[k:k + 2], 16) for k in (1, 3, 5)])
+    return ((view.max(axis=2) - view.min(axis=2)) > 60) & (np.abs(view - tip).sum(axis=2) > 60)
 
 
 def test_resume_continues_at_the_first_unfinished_layer(two_layers, tmp_path):

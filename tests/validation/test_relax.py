@@ -58,14 +58,14 @@ def _newton(st, bc, f_top, s_old, tol):
     return stN
 
 
-def _relax(st, bc, s_old, settings, plane="bc", pos=None, bounds=None):
+def _relax(st, bc, s_old, settings, plane="bc", pos=None, bounds=None, tol=None):
     b0, f0 = R.start_bounds(st, bc)
     m = st.m
     return R.relax(R.lattice_of(st), st.pos[:m] if pos is None else pos, st.material[:m],
                    st.material_fell,
                    s_old[:m], bc.fell, bc.top, f0, b0 if bounds is None else bounds,
                    f_spool=bc.f_spool, mu=bc.mu, h=bc.h, width=bc.width,
-                   plane=bc.plane if plane == "bc" else plane, settings=settings)
+                   plane=bc.plane if plane == "bc" else plane, settings=settings, tol=tol)
 
 
 def _model_args(bc):
@@ -190,7 +190,7 @@ def test_step_lands_on_the_newton_solution(carriers, mu, steps, captured):
     # max_iter: at 1e-10 the 48-carrier step with friction 0.5 takes 216 iterations (the block-
     # Jacobi corrections stall at a jammed crossing and stop after 30; 285 without them)
     # scalar_retry: where the block preconditioner stalls (friction 0.5), the scalar one
-    res = _relax(st, bc, s_old, R.RelaxSettings(tol=TIGHT, max_iter=400, scalar_retry=True))
+    res = _relax(st, bc, s_old, R.RelaxSettings(max_iter=400, scalar_retry=True), tol=TIGHT)
     m = st.m
     assert res.converged and res.residual < TIGHT
     assert np.abs(res.pos - ref.pos[:m]).max() < 1e-6
@@ -211,7 +211,7 @@ def test_wall_is_exact_and_pushes(mu, captured):
     plane[:, 2] = st.pos[:m, 2]
     bcw = dataclasses.replace(bc, plane=plane)
     ref = _newton(st, bcw, f_top, s_old, 1e-9)
-    res = _relax(st, bcw, s_old, R.RelaxSettings(tol=1e-9))
+    res = _relax(st, bcw, s_old, R.RelaxSettings(), tol=1e-9)
     assert res.converged
     dist = np.einsum("ij,ij->i", res.pos - plane[:, :3], plane[:, 3:])
     assert dist.min() > -1e-6
@@ -291,7 +291,7 @@ def test_settings_change_the_iteration_not_its_solution(settings, captured):
     lands on the same state (they change the map, not its fixed point)."""
     st, bc, f_top, s_old = captured(48, 0.25, 250)
     ref = _newton(st, bc, f_top, s_old, TIGHT)
-    res = _relax(st, bc, s_old, R.RelaxSettings(tol=TIGHT, **settings))
+    res = _relax(st, bc, s_old, R.RelaxSettings(**settings), tol=TIGHT)
     assert res.converged and not res.fallback_scalar
     assert np.abs(res.pos - ref.pos[: st.m]).max() < 1e-6
 
@@ -308,7 +308,7 @@ def test_jammed_step_refactorises_and_lands_on_newton(captured):
     width = float(np.quantile(np.linalg.norm(d, axis=1)[inner], 0.1))
     bcj = dataclasses.replace(bc, width=width)
     ref = _newton(st, bcj, f_top, s_old, TIGHT)
-    res = _relax(st, bcj, s_old, R.RelaxSettings(tol=TIGHT))
+    res = _relax(st, bcj, s_old, R.RelaxSettings(), tol=TIGHT)
     assert res.converged and not res.fallback_scalar
     assert res.factorisations > 1
     assert np.abs(res.pos - ref.pos[:m]).max() < 1e-6

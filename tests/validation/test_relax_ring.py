@@ -267,13 +267,13 @@ def test_ring_steps_land_on_the_newton_solution(mu, ring_steps):
     rep = frontal.solve_zone_inplace(ref, bc, centre=s_old, tol=TIGHT, settings=model)
     assert rep.posed_converged
     b0, f0 = R.start_bounds(st, bc)
-    rs = R.RelaxSettings(tol=TIGHT, max_iter=300, ring_stall=60)
+    rs = R.RelaxSettings(max_iter=300, ring_stall=60)
     res = R.relax(R.lattice_of(st), st.pos[:m], st.material[:m], st.material_fell, s_old[:m],
                   bc.fell, bc.top, f0, b0, f_spool=bc.f_spool, mu=bc.mu, h=bc.h,
                   width=bc.width, plane=bc.plane,
                   settings=dataclasses.replace(rs, preconditioner=rs.ring_preconditioner),
                   model=model, top_tensions=R.ring_top_tensions(st, bc),
-                  fresh=R._posed_bounds(st, model))
+                  fresh=R._posed_bounds(st, model), tol=TIGHT)
     assert res.converged and res.residual < TIGHT
     assert res.posed.converged and res.bound_change < POSED_TIGHT
     assert np.abs(res.pos - ref.pos[:m]).max() < 1e-6

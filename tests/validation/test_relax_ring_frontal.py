@@ -65,7 +65,7 @@ def test_frontal_iteration_by_the_relaxation_lands_on_newtons_fixed_point(mu, ri
     frontal.solve_zone_inplace(newton, bc, centre=s_old, max_iter=400, friction_tol=1e-9,
                                tol=TIGHT, mode="final")
     relaxed = st.copy()
-    rs = R.RelaxSettings(tol=TIGHT, max_iter=300, ring_stall=60)
+    rs = R.RelaxSettings(max_iter=300, ring_stall=60)
     rep = R._ring_frontal(relaxed, bc, DEFAULT, rs, "", s_old, TIGHT, 1e-9, 400, finish=False)
     assert rep is not None and not rep.lagged
     assert np.abs(relaxed.pos[:m] - newton.pos[:m]).max() < 1e-7

@@ -228,7 +228,7 @@ def test_steps_the_plain_iteration_stalls_on_land_on_newton(mu, steps, carriers,
     full = dataclasses.replace(base, preconditioner=base.ring_preconditioner)
     plain = R.relax(*args, settings=dataclasses.replace(full, **PLAIN), **kw)
     assert not plain.converged
-    res = R.relax(*args, settings=dataclasses.replace(full, tol=TIGHT, max_iter=300), **kw)
+    res = R.relax(*args, settings=dataclasses.replace(full, max_iter=300), tol=TIGHT, **kw)
     assert res.converged and res.residual < TIGHT
     ref = st.copy()
     # the relaxation above solves the step with its posed bounds and top tensions, so the

@@ -81,7 +81,8 @@ def _case(folder, material):
 
     tow = "linear_density_tex = 800.0\nfibre_density = 1780.0\nfibre_radius = 3.5e-6" if material else ""
     return write_cylinder_case(folder, length=0.4, braid=0.08, snapshots=0, friction=0.0,
-                               yarn_extra=tow, extra="[rtm]\ncavity_thickness = 1e-4")
+                               yarn_extra=tow, extra="[rtm]\ncavity_thickness = 1e-4",
+                               output_extra="pictures = false")   # the RTM files, not pictures
 
 
 def test_preform_run_writes_the_rtm_files_with_tow_data_and_says_why_not_without(tmp_path, capsys):

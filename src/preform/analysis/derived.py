@@ -43,7 +43,11 @@ class Analysed:
     layers : summary.json's ``layers`` entries of a stack, or None for one layer
     input_mesh_fields : the fields on the mandrel's own triangles (``[output]
         input_mesh_fields``: ``fields.fields_on_input``), or None
-    settings : the run's ``preform.Settings`` (the history plots mark its steady state)
+    steady : the steady state of the run's history (``analysis.steady.steady_state`` with the
+        settings' ``steady``), which summary.json gives and the history plots mark; None for a
+        run without steps
+    pictures : how the run's pictures are drawn (the settings' ``pictures``,
+        ``preform.settings.PictureSettings``; None: the defaults)
     """
 
     result: object
@@ -56,7 +60,8 @@ class Analysed:
     structural_reason: str = ""
     layers: list | None = None
     input_mesh_fields: object = None
-    settings: object = None
+    steady: dict | None = None
+    pictures: object = None
 
 
 def analyse_run(result, fields, layer_results=(), layers=None, settings=None) -> Analysed:
@@ -80,12 +85,13 @@ def analyse_run(result, fields, layer_results=(), layers=None, settings=None) ->
     on_input = None
     if fields is not None and output is not None and output.input_mesh_fields and result.mandrel is not None:
         on_input = fields_on_input(fields, result.mandrel)
+    steady = steady_state(result.history, settings.steady) if result.steps else None
     return Analysed(result=result, fields=fields, layer_results=tuple(layer_results),
                     summary=summary_dict(result, key_numbers(result, fields), quality_reasons=reasons,
-                                         settings=settings), rtm=rtm,
+                                         settings=settings, steady=steady), rtm=rtm,
                     rtm_reason=rtm_reason, structural=structural,
                     structural_reason=structural_reason, layers=layers, input_mesh_fields=on_input,
-                    settings=settings)
+                    steady=steady, pictures=settings.pictures)
 
 
 # ---------------------------------------------------------------- the summary's figures
@@ -135,7 +141,7 @@ def _interlacing(il):
             "per_m2": il.measured_per_m2, "pattern_per_m2": il.pattern_per_m2}
 
 
-def summary_dict(result, extra=None, quality_reasons=(), settings=None) -> dict:
+def summary_dict(result, extra=None, quality_reasons=(), settings=None, steady=None) -> dict:
     """summary.json's figures of ``result``, as JSON-able data (non-finite numbers become null).
 
     quality_reasons : reasons to doubt the run found beyond its own (its fields', a stack's
@@ -143,11 +149,13 @@ def summary_dict(result, extra=None, quality_reasons=(), settings=None) -> dict:
     extra : merged in at the top level
     settings : the run's ``preform.Settings`` (None: the defaults), whose ``steady``,
         ``interlacing`` and ``quality`` read the run
+    steady : the run's steady state as :func:`analyse_run` read it; None: read here
     """
     settings = resolved(settings)
     config = result.config
     model = config.model.kind if config is not None else None
-    steady = steady_state(result.history, settings.steady) if result.steps else None
+    if steady is None and result.steps:
+        steady = steady_state(result.history, settings.steady)
     steady = steady or {}
     interlaced = run_interlacing(result, settings.interlacing)
     q = assess(result, settings.quality, interlacing=interlaced)

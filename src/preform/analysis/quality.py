@@ -71,8 +71,9 @@ class QualitySettings:
     #: would stay
     max_slip_share: float = 0.1
     #: m, a snapshot's crossing further than this many yarn widths from where the re-balance
-    #: that checks it puts it: the written state is far from a converged one (measured: case A
-    #: 16 carriers, friction 0.25: up to 1.5 mm at 8 of 9 snapshots, 15 mm at one)
+    #: of its step's own problem puts it: the written state is far from a converged one
+    #: (measured: behind a ring, converged, at most 1.2 mm; not converged, up to 28 mm; case A
+    #: 16 carriers, friction 0.25, 0.3 m: up to 1 mm at 8 of 11 snapshots, 14 and 35 mm at two)
     max_snapshot_shift_widths: float = 5.0
 
 
@@ -353,9 +354,10 @@ def snapshot_reasons(snapshots, mu, settings: QualitySettings = QUALITY,
         k, (v, t) = worst("shift")
         reasons.append(f"{k} of {n} convergence-zone snapshots (the run's own states) have "
                        f"crossings more than {settings.max_snapshot_shift_widths:g} yarn widths "
-                       f"from where the re-balance that checks them puts them, up to "
-                       f"{v * 1e3:.3g} mm at t = {t:.4g} s: the steps were far from balance with "
-                       f"their converged friction bounds")
+                       f"from where their step's own problem puts them balanced (its fell and "
+                       f"ring points held, its friction bounds converged), up to "
+                       f"{v * 1e3:.3g} mm at t = {t:.4g} s: those steps had not converged "
+                       f"(history.csv's residual)")
     return reasons
 
 

@@ -100,6 +100,13 @@ class InteractionZone:
     (failure-injection tests).
     """
 
+    #: said before a run starts (``Zone.cost_note``)
+    cost_note = ('[model] kind = "interaction": about {steps:,} time steps, each a solve of every '
+                 "crossing of the convergence zone; a step that does not converge stops the run, "
+                 "which keeps the results up to it")
+    #: the first-run worker's jobs are the kinematic run's kernels (``Zone.first_run_worker``)
+    first_run_worker = False
+
     def __init__(self, config, machine, mandrel=None, *, distance=None,
                  settings: InteractionSettings | None = None, solve_zone=None):
         self.config = config
@@ -135,6 +142,7 @@ class InteractionZone:
         self.stage = ""               # the part of the step under way (a fault's message names it)
         self.snapshot_due = False     # set by the stepper before a step whose state it snapshots
         self._own = None              # the Snapshot of the last such step's solved state
+        self._own_problem = None      # (state, boundary) that step solved
         self.pose_end = None          # the mandrel's pose at the end of the last step
         self.pending = []             # carrier passes waiting for their ring points (``_ready_passes``)
         self.ring_theta = None        # (2n,) rad, ring angles (guide ring only)
@@ -279,9 +287,11 @@ class InteractionZone:
             self.ring_theta = self.slide_rings(st, bc, self.ring_anchor)
             self._ring_flow()
         if self.snapshot_due:
-            # the state the step solved, before its deposit: what its snapshot writes
+            # the state the step solved, before its deposit: what its snapshot writes, and its
+            # boundary, which its check holds
             self._own = _snapshot(st, bc, self.last_report.f_top, t1, self.machine,
                                   self.settings, wall="reaction")
+            self._own_problem = (st.copy(), bc)
         self.stage = "the deposit of crossings on the mandrel"
         deposits = self._deposit(pose_end)
         self.fell_ref = bc.fell.copy()       # where the next step's boundary moves from
@@ -354,16 +364,37 @@ class InteractionZone:
         points at the crossings are from the re-balanced ones (``rebalance_error`` where the
         re-balance failed)."""
         snap, self._own = self._own, None
+        problem, self._own_problem = self._own_problem, None
         if snap is None or snap.time_s != float(t):
             bc = self._with_wall(self.boundary(t, F_machine))
             snap = _snapshot(self.state, bc, self.f_top, t, self.machine, self.settings,
                              wall="reaction")
+            problem = None
         try:
-            checked = self._rebalanced(t, F_machine)
+            checked = (self._rebalanced(t, F_machine) if problem is None else
+                       self._rebalanced_own(t, *problem))
         except SimulationError as err:
             return dataclasses.replace(snap, rebalance_error=str(err))
         return dataclasses.replace(snap, rebalance_shift_m=crossing_shift(snap, checked),
                                    rebalanced=checked)
+
+    def _rebalanced_own(self, t, state, bc) -> Snapshot:
+        """The state a step solved, re-balanced on a copy with its boundary held (the fell points
+        and ring points it was solved with), each yarn's friction centre at each crossing where
+        the step left it, and the friction bounds iterated to those of the geometry
+        (``FrontalSettings.snapshot_tolerance``): a converged state is its own fixed point, a
+        state out of balance or outside its friction cone moves. The ring points' slide and
+        the fell points' walk after the step belong to the next step, not to this one's
+        balance (sliding the ring points to their fixed point moved the crossings of converged
+        runs behind a ring by up to 112 mm), and friction centres from before the step would
+        let the re-balance slide crossings along the zone's neutral directions."""
+        st = state.copy()
+        fr = self.settings.frontal
+        report = self.solve_zone(st, bc, settings=self.settings, max_iter=fr.snapshot_iterations,
+                                 where=f"in the snapshot at t = {t:.6g} s",
+                                 centre=frontal.friction_centres(st),
+                                 friction_tol=fr.snapshot_tolerance, mode="final")
+        return _snapshot(st, bc, report.f_top, t, self.machine, self.settings)
 
     def _rebalanced(self, t, F_machine) -> Snapshot:
         """The zone re-balanced on a copy with the fell points given: the ring points and the

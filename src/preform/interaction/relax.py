@@ -170,7 +170,8 @@ class RelaxResult:
 
 def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu, h,
           width, plane=None, settings: RelaxSettings = DEFAULT.relax,
-          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False):
+          model: InteractionSettings = DEFAULT, top_tensions=None, fresh=None, consistent=False,
+          tol=None, bound_iterations=None, friction_tol=None):
     """Solve one step of the zone (module docstring) from the start ``pos`` (m, 3), ``s`` (m, 2)
     (not modified). s_fell (2n,) material of the fell points (anchored), s_old (m, 2) the friction
     centres, fell, top (2n, 3) m, f_top (2n,) N top tensions, bounds (m, 2) N friction bounds
@@ -182,16 +183,24 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
     the positions (m, 3) giving the top tensions (2n,) (the guide ring's Capstan); None: f_top
     held. fresh: (m, 2) bool, the bounds a step behind a guide ring takes of its converged
     geometry (``_posed_bounds``); given, a step with held bounds is solved again with them and
-    the top tensions taken of its converged geometry (``_posed_fixed_point``). Returns a
+    the top tensions taken of its converged geometry (``_posed_fixed_point``). tol: the balance
+    tolerance (relative residual; None: the Newton reference's
+    ``NewtonSettings.balance_tolerance``, so that both solve to the same). Returns a
     :class:`RelaxResult` (``converged`` False if ``tol`` was not reached).
 
     Consistent bounds (``consistent``; else the bounds are held): an outer fixed point, as
     Newton's frontal loop (``frontal.solve_zone``): the step is solved with the bounds held, the
     bounds (and ring top tensions) are taken anew from its converged geometry and tensions, and
-    the step is solved again from there until they change by less than ``friction_tol``
-    relative to the tensions."""
+    the step is solved again from there, at most ``bound_iterations`` times (None: a step's
+    frontal iterations after the first, ``FrontalSettings.max_iterations - 1``), until they
+    change by less than ``friction_tol`` relative to the tensions (None:
+    ``FrontalSettings.friction_tolerance``)."""
+    fr = model.frontal
+    tol = model.newton.balance_tolerance if tol is None else float(tol)
+    bound_iterations = fr.max_iterations - 1 if bound_iterations is None else int(bound_iterations)
+    friction_tol = fr.friction_tolerance if friction_tol is None else float(friction_tol)
     kw = dict(f_spool=f_spool, mu=mu, h=h, width=width, plane=plane, settings=settings,
-              model=model)
+              model=model, tol=tol)
     res = _held_with_fallback(lat, pos, s, s_fell, s_old, fell, top, f_top, bounds, **kw)
     m = lat.m
     if fresh is not None and not consistent and res.converged and m:
@@ -207,15 +216,14 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
         return res
     iterations, history, times = res.iterations, [res.history], dict(res.times)
     change = np.inf
-    for _ in range(settings.bound_iterations):
+    for _ in range(bound_iterations):
         change, f_top = (_lag_change(lat, res, bounds, top_tensions, f_top,
                                      model.frontal.change_scale_floor) if m else (0.0, f_top))
-        if change < settings.friction_tol:
+        if change < friction_tol:
             break
         bounds = res.bounds
         res = _held_with_fallback(lat, res.pos, res.s, s_fell, s_old, fell, top, f_top, bounds,
-                                  f_spool=f_spool, mu=mu, h=h, width=width, plane=plane,
-                                  settings=settings, model=model)
+                                  **kw)
         iterations += res.iterations
         history.append(res.history)
         for key, v in res.times.items():
@@ -224,7 +232,7 @@ def relax(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_sp
             break
     res.iterations, res.history, res.times = iterations, np.concatenate(history), times
     res.bound_change = change
-    res.converged = res.converged and change < settings.friction_tol
+    res.converged = res.converged and change < friction_tol
     return res
 
 
@@ -315,9 +323,10 @@ def _bound_change(lat, new, old, tension, f_top, floor=DEFAULT.frontal.change_sc
 
 
 def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *, f_spool, mu,
-                h, width, plane, settings, model):
-    """The iteration with the bounds and top tensions held (``relax``): sweep, forces and
-    residual, then the preconditioner's update, wall step and mixing (``preconditioners``)."""
+                h, width, plane, settings, model, tol):
+    """The iteration with the bounds and top tensions held (``relax``), to the relative
+    residual ``tol``: sweep, forces and residual, then the preconditioner's update, wall step
+    and mixing (``preconditioners``)."""
     st = settings
     e = model.energy
     m, ny = lat.m, lat.n_yarns
@@ -341,7 +350,8 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         has_wall = True
     x = PC.Iterate(
         lat=lat, law=KZ.law(EA, e.compression, model.frontal.friction_creep, e.kappa0, h,
-                            e.length_smoothing, e.top_smoothing2, l_jam, k_jam, st.floor),
+                            e.length_smoothing, e.top_smoothing2, l_jam, k_jam,
+                            e.geometric_floor),
         prob=KZ.problem(fell, top, s_fell, s_old, g, f_top), settings=st, pos=pos, s=s,
         tension=np.empty((m, 2)), seg=KZ.segments(m, ny), fo=KZ.forces(m, ny), plane=plane,
         active=np.zeros(m, dtype=np.bool_), has_wall=has_wall,
@@ -382,7 +392,7 @@ def _relax_held(lat: Lattice, pos, s, s_fell, s_old, fell, top, f_top, bounds, *
         t2 = time.perf_counter()
         times["sweep"] += t1 - t0
         times["forces"] += t2 - t1
-        if residual < st.tol:
+        if residual < tol:
             converged = True
             break
         # safeguard: the block-Jacobi corrections can undo the force-density move where the
@@ -485,16 +495,16 @@ def _ring_frontal(state, bc, settings, rs, where, centre, tol, friction_tol, max
     bounds, ft = start_bounds(state, bc, settings)
     if m == 0:
         return None
-    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner,
-                              bound_iterations=max_iter - 1, friction_tol=friction_tol,
-                              **({} if tol is None else dict(tol=float(tol))))
+    rsc = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
+    balance = settings.newton.balance_tolerance if tol is None else float(tol)
     pos0, s0 = (state.pos, state.material) if start is None else start
     res = relax(lattice_of(state), pos0[:m], s0[:m], state.material_fell,
                 centres, bc.fell, bc.top, ft, bounds, f_spool=bc.f_spool,
                 mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
                 settings=rsc, model=settings,
-                top_tensions=ring_top_tensions(state, bc), consistent=True)
-    if not res.residual < rsc.tol:
+                top_tensions=ring_top_tensions(state, bc), consistent=True, tol=balance,
+                bound_iterations=max_iter - 1, friction_tol=friction_tol)
+    if not res.residual < balance:
         return None
     _accept(state, res, centres, fr)
     if finish:
@@ -604,7 +614,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     ``relax_iterations``: the relaxation's iterations of a time step, converged or not.
     Behind a guide ring the relaxation uses
     ``relax_settings.ring_preconditioner``. ``tol``: the balance tolerance (default
-    ``relax_settings.tol``). ``state`` as handed in is the step's posed state, which defines
+    ``NewtonSettings.balance_tolerance``, as Newton's). ``state`` as handed in is the step's posed state, which defines
     the problem (the bounds of new crossings and the top tensions, ``start_bounds``); ``start``
     ``(pos (m, 3), material (m, 2))`` is only the initial iterate (default: the posed one), as in
     ``frontal.solve_zone_inplace``.
@@ -626,8 +636,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         return frontal.solve_zone_inplace(state, bc, settings=settings, tol=tol,
                                           friction_tol=friction_tol, max_iter=max_iter,
                                           where=where, centre=centre, start=start, mode=mode)
-    if tol is not None:
-        rs = dataclasses.replace(rs, tol=float(tol))
+    balance = settings.newton.balance_tolerance if tol is None else float(tol)
     if bc.has_ring and rs.ring_preconditioner != rs.preconditioner:
         rs = dataclasses.replace(rs, preconditioner=rs.ring_preconditioner)
     fr = settings.frontal
@@ -635,9 +644,6 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
     # last one's converged state (its bounds and top tensions), until they change by less than
     # ``friction_tolerance``; not reaching it is the lag, not a failure
     passes = fr.max_iterations > 1
-    if passes:
-        rs = dataclasses.replace(rs, bound_iterations=fr.max_iterations - 1,
-                                 friction_tol=fr.friction_tolerance)
     m = state.m
     centres = np.array((frontal.friction_centres(state) if centre is None else centre)[:m],
                        dtype=float)
@@ -650,8 +656,9 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
                 mu=bc.crossing_mu(state.yarn[:m]), h=bc.h, width=bc.width, plane=bc.plane,
                 settings=rs, model=settings,
                 top_tensions=ring_top_tensions(state, bc),
-                fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes)
-    if not (res.residual < rs.tol if passes else res.converged):
+                fresh=_posed_bounds(state, settings) if bc.has_ring else None, consistent=passes,
+                tol=balance)
+    if not (res.residual < balance if passes else res.converged):
         if rs.newton_fallback:
             # the relaxation stalls on some steps (the first rows of a run; friction 0.5 with
             # jammed crossings): the Newton reference solves that step instead
@@ -661,7 +668,7 @@ def solve_zone(state, bc, *, settings: InteractionSettings = DEFAULT, where="", 
         raise SimulationError(
             f"the force-density solver of the yarn-interaction model did not converge {where}: "
             f"relative force imbalance (residual) {res.residual:.3g} after {res.iterations} "
-            f"iterations (tolerance {rs.tol:.3g}, {m} crossings)")
+            f"iterations (tolerance {balance:.3g}, {m} crossings)")
     _accept(state, res, centres, fr)
     posed = {} if res.posed is None else dict(posed_solves=res.posed.solves,
                                               posed_converged=res.posed.converged)

@@ -273,15 +273,14 @@ class RingSettings:
 @dataclass(frozen=True)
 class RelaxSettings:
     """The force-density relaxation (``interaction/relax.py``, ``[model] solver = "relax"``).
-    The model's constants (tow strain, friction creep, jamming, ...) are not here: they come
-    from the same :class:`InteractionSettings` the Newton reference uses, so that both solve
-    the same equations. Whether a solve holds the friction bounds or iterates them to its
-    converged geometry is the solver's mode (``relax``'s ``consistent``), set from
-    ``FrontalSettings``."""
+    The model's constants (tow strain, friction creep, jamming, the geometric floor, ...) and
+    its tolerances are not here: they come from the same :class:`InteractionSettings` the
+    Newton reference uses, so that both solve the same equations to the same balance
+    (``NewtonSettings.balance_tolerance``) and bounds (``FrontalSettings.friction_tolerance``).
+    Whether a solve holds the friction bounds or iterates them to its converged geometry, and
+    how often, is the solver's mode (``relax``'s ``consistent`` and ``bound_iterations``), set
+    from ``FrontalSettings``."""
 
-    #: largest relative imbalance at convergence: Newton's BALANCE_TOLERANCE (1e4 below the 1e-3
-    #: the snapshots must meet)
-    tol: float = 1e-7
     #: iterations before the step is declared failed (a case A step takes 10-17 with the block
     #: preconditioner, 15-45 with the scalar one; one that has not converged by then stalls)
     max_iter: int = 200
@@ -304,12 +303,6 @@ class RelaxSettings:
     stall_iterations: int = 30
     #: longest block-Jacobi move, as a fraction of the crossing's shortest segment
     smoothing_cap: float = 0.1
-    #: relative change of the bounds between outer iterations below which consistent bounds
-    #: have converged (Newton's FRICTION_TOLERANCE)
-    friction_tol: float = 1e-6
-    #: outer (bound) iterations at most with consistent bounds; Newton's frontal loop needs
-    #: 16 on a 48-carrier case A step with friction 0.25
-    bound_iterations: int = 100
     #: a crossing within this distance (m) of its tangent plane at the start rests on the wall
     wall_contact: float = 1e-7
     #: hysteresis of the wall's active set (m): a resting crossing leaves when its own balance
@@ -329,8 +322,6 @@ class RelaxSettings:
     material_predict: bool = True
     #: Newton steps of one material sweep at most
     material_newton: int = 60
-    #: N, least net segment force in the force densities (Newton's GEOMETRIC_FLOOR)
-    floor: float = 1e-3
     #: the position update's preconditioner: "block", the lattice's geometric stiffness with
     #: each crossing's 3 x 3 blocks (block LDL^T; a yarn has no stiffness along itself),
     #: "full", the Hessian in the positions and materials (5 x 5 blocks), or "scalar", the

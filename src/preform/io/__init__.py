@@ -16,7 +16,8 @@ from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, safe_fol
 from .fe_files import write_structural
 from .pictures import LaterJob, PictureJob, PictureWorker, run_jobs
 from .rtm_files import write_rtm
-from .surface import INPUT_VTU, PICTURES, write_input_mesh_fields, write_surface
+from ..drawing import PICTURES as PICTURE_SETTINGS
+from .surface import INPUT_VTU, layer_pictures, write_input_mesh_fields, write_surface
 from .tables import write_history, write_summary
 from .vtk_yarns import write_convergence, write_yarns_vtp, yarn_types_of
 
@@ -27,29 +28,49 @@ PLOTS = "plots"
 YARNS_PNG = "braided_mandrel.png"
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()):
-    """``preform.io.plots.plot_history`` (matplotlib imported on the first call)."""
+def plot_history(result, plots_dir, refs=None, steady=None, layers=(), pictures=None):
+    """``preform.io.plots.plot_history`` (matplotlib imported on the first call); ``pictures``:
+    ``preform.settings.PictureSettings`` (None: the defaults)."""
     from .plots import plot_history as plot
 
-    return plot(result, plots_dir, refs, steady_settings, layers)
+    return plot(result, plots_dir, refs, steady, layers, pictures or PICTURE_SETTINGS)
 
 
-def plot_yarns_3d(result, path):
+def plot_yarns_3d(result, path, pictures=None, layer=None, frame=None):
     """``preform.io.plots.plot_yarns_3d`` (pyvista or matplotlib imported on the first call)."""
     from .plots import plot_yarns_3d as plot
 
-    return plot(result, path)
+    return plot(result, path, pictures or PICTURE_SETTINGS, layer, frame)
 
 
-def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
+def _drawing(settings):
+    """The pictures' branch of ``settings`` (``preform.Settings``; None: the defaults)."""
+    return PICTURE_SETTINGS if settings is None else settings.pictures
+
+
+def mandrel_pictures(result, layer_results=()) -> list[tuple]:
+    """(file name, Result, (k, direction) or None) of each braided-mandrel picture of a run:
+    ``braided_mandrel.png`` for a single layer; for a stack (``layer_results``: the layers above
+    the first) ``braided_mandrel_layer<k>.png`` per layer braided, each on its own surface."""
+    layers = getattr(result.config, "layers", ()) if result.config is not None else ()
+    if not layers:
+        return [(YARNS_PNG, result, None)]
+    runs = [result, *layer_results]
+    return [(f"braided_mandrel_layer{k}.png", run, (k, layers[k - 1].direction))
+            for k, run in enumerate(runs, start=1)]
+
+
+def _picture_jobs(result, fields, out_dir, steady=None, layer_results=(), pictures=None):
     """(matplotlib jobs, 3-D render jobs, the 3-D render jobs of the fields as
     ``io.pictures.LaterJob`` s) of the pictures of a run (``io.pictures``). The render jobs
     include those of ``fields`` (None: the result's alone); the later jobs take the fields as
     the arrays of :func:`fields_arrays`, for a worker started before the fields were mapped.
-    ``settings``: ``preform.Settings`` (None: the defaults), the steady state the history
-    plots mark."""
+    ``steady``: the run's steady state (``Analysed.steady``), which the history plots mark
+    (None: no mark); ``layer_results``: a stack's layers above the first (their lines, their
+    braided-mandrel pictures); ``pictures``: how every picture is drawn
+    (``preform.settings.PictureSettings``; None: the defaults)."""
     plots = out_dir / PLOTS
-    steady = None if settings is None else settings.steady
+    pictures = pictures or PICTURE_SETTINGS
     drawn, rendered = [], []
     output = getattr(result.config, "output", None)
     if output is not None and not output.pictures:    # [output] pictures = false
@@ -62,24 +83,28 @@ def _picture_jobs(result, fields, out_dir, settings=None, layer_results=()):
             from .plots import run_title
 
             return [write_surface_map(fields, result.centerline, plots / MAP,
-                                      run_title(result, "Surface fields, unrolled"))]
+                                      run_title(result, "Surface fields, unrolled"), pictures=pictures)]
 
         drawn.append(PictureJob((f"{PLOTS}/{MAP}",), surface_map))
     if result.steps:
         drawn.append(PictureJob((f"{PLOTS}/braid_angle.png", f"{PLOTS}/convergence_length.png"),
-                                lambda: plot_history(result, plots, steady_settings=steady,
-                                                     layers=layer_results)))
+                                lambda: plot_history(result, plots, steady=steady,
+                                                     layers=layer_results, pictures=pictures)))
 
     def surface_pictures(shown):
         from .plots import run_label
         from .surface import write_surface_pictures
 
-        return write_surface_pictures(shown, plots, run_label(result), centerline=result.centerline)
+        return write_surface_pictures(shown, plots, run_label(result), centerline=result.centerline,
+                                      pictures=pictures)
 
-    names = tuple(f"{PLOTS}/{name}" for name, *_ in PICTURES)
+    layers = getattr(result.config, "layers", ()) if result.config is not None else ()
+    names = tuple(f"{PLOTS}/{name}" for name, *_ in layer_pictures(len(layers)))
     if fields is not None:
         rendered.append(PictureJob(names, lambda: surface_pictures(fields)))
-    rendered.append(PictureJob((f"{PLOTS}/{YARNS_PNG}",), lambda: [plot_yarns_3d(result, plots / YARNS_PNG)]))
+    for name, run, layer in mandrel_pictures(result, layer_results):
+        rendered.append(PictureJob((f"{PLOTS}/{name}",), lambda name=name, run=run, layer=layer: [
+            plot_yarns_3d(run, plots / name, pictures, layer, result.centerline)]))
     later = [LaterJob(names, lambda arrays: surface_pictures(fields_from_arrays(arrays)))]
     return drawn, rendered, later
 
@@ -122,19 +147,21 @@ def _prepare_folder(out_dir) -> Path:
     return out_dir
 
 
-def start_pictures(result, out_dir):
+def start_pictures(result, out_dir, settings=None, layer_results=()):
     """Start the 3-D pictures of ``result`` in a worker process before its fields are mapped
     (``preform run`` calls it right after the simulation): the worker imports pyvista and renders
     the braided mandrel while this process maps the fields and writes the data files, then draws
     the surface pictures from the fields :func:`write_results` hands it (``pictures=``).
     Returns the ``io.pictures.PictureWorker`` (without fork it draws them in ``write_results``),
-    or None when the folder cannot be prepared (``write_results`` then says why)."""
+    or None when the folder cannot be prepared (``write_results`` then says why).
+    ``settings``: the run's ``preform.Settings`` (None: the defaults; its ``pictures``);
+    ``layer_results``: as :func:`write_data` has them."""
     try:
         out_dir = _prepare_folder(out_dir)
     except OSError:
         return None
-    _, rendered, later = _picture_jobs(result, None, out_dir)
-    return PictureWorker(rendered, later=later)
+    _, rendered, later = _picture_jobs(result, None, out_dir, None, layer_results, _drawing(settings))
+    return PictureWorker(rendered, later=later, timeout_s=_drawing(settings).worker_timeout_s)
 
 
 def _relative(path, out_dir) -> str:
@@ -171,13 +198,14 @@ def write_data(analysed, out_dir, *, background=False, pictures=None) -> Writing
     result, fields = analysed.result, analysed.fields
     try:
         out_dir = _prepare_folder(out_dir)
-        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.settings,
-                                           analysed.layer_results)
+        drawn, rendered, _ = _picture_jobs(result, fields, out_dir, analysed.steady,
+                                           analysed.layer_results, analysed.pictures)
         if pictures is not None:       # the early worker renders the fields too
             rendered = []
             pictures.send(fields_arrays(fields) if fields is not None else None)
         else:
-            pictures = PictureWorker(rendered if background else [])
+            pictures = PictureWorker(rendered if background else [],
+                                     timeout_s=(analysed.pictures or PICTURE_SETTINGS).worker_timeout_s)
             if background:             # the worker's (drawn by its finish() where it cannot fork)
                 rendered = []
         written = [write_history(result, out_dir / HISTORY),

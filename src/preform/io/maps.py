@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .atomic import atomic_path
 
 MAP = "surface_map.png"
@@ -31,16 +32,14 @@ POSITIVE_ONLY = ("braid_angle_deg", "permeability_k1_m2", "permeability_k2_m2", 
 RTM_PANELS = (("fibre_volume_fraction", "fibre volume fraction (-)", 1.0),
               ("permeability_k1_m2", "permeability K1 (1e-12 m^2, log scale)", 1e12),
               ("porosity", "porosity (-)", 1.0))
-DPI = 130
 #: arrays that are >= 0 by their physics: their colour bars start at 0
 NON_NEGATIVE = ("cover_factor", "thickness_m", "fibre_volume_fraction", "porosity", "areal_weight_kg_m2")
-#: ticks a colour bar's rounded range aims for
-BAR_TICKS = 5
 
 
-def rounded_limits(lo: float, hi: float, zero: bool = False) -> tuple[float, float]:
+def rounded_limits(lo: float, hi: float, zero: bool = False,
+                   ticks: int = PICTURE_SETTINGS.bar_ticks) -> tuple[float, float]:
     """Colour-bar limits holding [lo, hi] on round numbers (multiples of a 1-2-5 step giving about
-    BAR_TICKS ticks), from 0 when ``zero`` (a quantity >= 0); a uniform field gets a range of
+    ``ticks`` ticks), from 0 when ``zero`` (a quantity >= 0); a uniform field gets a range of
     one step around its value."""
     if zero:
         lo = min(lo, 0.0)
@@ -49,7 +48,7 @@ def rounded_limits(lo: float, hi: float, zero: bool = False) -> tuple[float, flo
         span = max(0.02 * abs(hi), 1e-12)
         lo, hi = (0.0 if zero and lo - span < 0 else lo - span), hi + span
         span = hi - lo
-    raw = span / BAR_TICKS
+    raw = span / ticks
     power = 10.0 ** np.floor(np.log10(raw))
     step = next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw * (1 - 1e-9))
     lo_r = np.floor(lo / step + 1e-9) * step
@@ -159,7 +158,7 @@ def _panel_rects(n):
     return rects
 
 
-def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
+def surface_map_figure(fields, centerline, title: str, panels=PANELS, pictures=PICTURE_SETTINGS) -> Figure:
     """The unrolled panels (see module docstring); ``panels``: (cell array, label, scale) each.
 
     Each panel is an image at the picture's resolution (:func:`face_raster`: the face under each
@@ -178,7 +177,8 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         panels = layer_panels(data)
     reached = fields.reached()
     n = len(panels)
-    fig = Figure(figsize=(WIDTH_IN, PANEL_IN * n), dpi=DPI)
+    dpi = pictures.map_dpi
+    fig = Figure(figsize=(WIDTH_IN, PANEL_IN * n), dpi=dpi)
     fig.suptitle(title, y=1.0 - 0.12 / (PANEL_IN * n), va="top")
     s_all = polys[..., 0]
     extent = (float(s_all.min()), float(s_all.max()), -180.0, 180.0)
@@ -201,7 +201,7 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         values = np.asarray(data[name], dtype=float) * scale
         positive = name in POSITIVE_ONLY or name.endswith("_braid_angle_deg")
         shown = reached & (values > 0) if positive else reached
-        shape = (max(1, round(rect[3] * PANEL_IN * n * DPI)), max(1, round(rect[2] * WIDTH_IN * DPI)))
+        shape = (max(1, round(rect[3] * PANEL_IN * n * dpi)), max(1, round(rect[2] * WIDTH_IN * dpi)))
         if shape not in rasters:                  # panels of one size share one raster
             raster = face_raster(wrapped, extent, shape)
             rasters[shape] = np.where(raster >= 0, owner[np.maximum(raster, 0)], -1)
@@ -213,7 +213,7 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
         if np.any(shown):
             lo, hi = float(values[shown].min()), float(values[shown].max())
             if not (name.startswith("permeability") and lo > 0):   # decades: log colours below
-                lo, hi = rounded_limits(lo, hi, zero=name in NON_NEGATIVE)
+                lo, hi = rounded_limits(lo, hi, zero=name in NON_NEGATIVE, ticks=pictures.bar_ticks)
             # permeability spans decades: log colours
             norm = LogNorm(lo, hi) if name.startswith("permeability") and lo > 0 else Normalize(lo, hi)
             mappable = ScalarMappable(norm=norm, cmap="viridis")
@@ -240,12 +240,14 @@ def surface_map_figure(fields, centerline, title: str, panels=PANELS) -> Figure:
     return fig
 
 
-def write_surface_map(fields, centerline, path, title: str, panels=PANELS) -> Path:
-    """Write ``surface_map.png`` (or another map of ``panels``) atomically; return its path."""
+def write_surface_map(fields, centerline, path, title: str, panels=PANELS,
+                      pictures=PICTURE_SETTINGS) -> Path:
+    """Write ``surface_map.png`` (or another map of ``panels``) atomically; return its path;
+    ``pictures``: ``preform.settings.PictureSettings``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    fig = surface_map_figure(fields, centerline, title, panels)
+    fig = surface_map_figure(fields, centerline, title, panels, pictures)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=DPI)
+        fig.savefig(tmp, dpi=pictures.map_dpi)
     return Path(path)

@@ -38,8 +38,7 @@ from typing import Callable
 
 import numpy as np
 
-#: seconds the parent waits for the picture worker after its own work, before stopping it
-TIMEOUT_S = 600.0
+from ..drawing import PICTURES as PICTURE_SETTINGS
 
 
 @dataclass(frozen=True)
@@ -87,11 +86,14 @@ class PictureWorker:
     it and returns (paths written, failure sentences), re-emitting the child's warnings here.
     Without fork the jobs are drawn by :meth:`finish` itself (in this process).
 
+    timeout_s : seconds :meth:`finish` waits for the child after the parent's own work
+        (``PictureSettings.worker_timeout_s``)
+
     later : :class:`LaterJob` s the child draws after ``jobs``, once :meth:`send` gave it their
         arrays (skipped when the parent sends None or never sends)
     """
 
-    def __init__(self, jobs, timeout_s: float = TIMEOUT_S, later=()):
+    def __init__(self, jobs, timeout_s: float = PICTURE_SETTINGS.worker_timeout_s, later=()):
         self.jobs = list(jobs)
         self.later = list(later)
         self.timeout_s = float(timeout_s)
@@ -138,6 +140,8 @@ class PictureWorker:
                 with os.fdopen(os.dup(self._memory), "wb") as file:
                     np.savez(file, **arrays)
                 os.write(self._ready, b"1")
+        except BrokenPipeError:
+            pass    # the child is gone already: finish() reports these pictures with its end
         except Exception as error:  # noqa: BLE001 - costs those pictures, reported by finish()
             names = ", ".join(n for job in self.later for n in job.names)
             self.unsent = f"{names} not drawn (could not hand their arrays to the picture worker: " \

@@ -11,20 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .atomic import atomic_path
 
 GROUP_COLOURS = {0: "tab:blue", 1: "tab:red"}   # warp, weft
-#: size (inches) and fixed margins (figure fractions) of the history figures: a fixed layout,
-#: as matplotlib's constrained layout measured every tick label again (0.3 s a figure)
-HISTORY_SIZE = (7.2, 6.0)
-#: the two panels of a history figure (left, bottom, width, height; figure fractions): the
+#: the history figures' fixed margins (figure fractions; their size and resolution are
+#: ``PictureSettings.history_size_in`` and ``history_dpi``): a fixed layout, as matplotlib's
+#: constrained layout measured every tick label again (0.3 s a figure).
+#: The two panels of a history figure (left, bottom, width, height; figure fractions): the
 #: quantity over the whole run, and below it its distance from the steady value (log scale)
 HISTORY_MAIN = (0.115, 0.39, 0.86, 0.51)
 HISTORY_DEV = (0.115, 0.075, 0.86, 0.22)
 GROUP_NAMES = {0: "warp", 1: "weft"}
-DPI = 150
-#: the 3D picture draws at most this many points per yarn (every k-th point beyond that)
-MAX_POINTS_PER_YARN = 2000
 
 
 def _figure(**kwargs):
@@ -35,12 +33,12 @@ def _figure(**kwargs):
     return Figure(**kwargs)
 
 
-def _save(fig: Figure, path) -> Path:
+def _save(fig: Figure, path, dpi) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=DPI)
+        fig.savefig(tmp, dpi=dpi)
     return Path(path)
 
 
@@ -62,23 +60,18 @@ def run_title(result, what: str) -> str:
     return f"{what}\n{run_label(result)}"
 
 
-#: the start-up rows of a history: while the yarns wind from their tie points to tangency the
-#: fell points stay put and the laid angle climbs from 0; the wind-up ends where the braided
-#: length has grown by this fraction of the run (the axes show it: it is the start-up)
-START_FRACTION = 1e-3
-#: a steady-state marker is drawn only where every curve after it moves by at most this many
-#: pixels of the plot (flat to the eye); elsewhere the plot says where the tolerances put it
-FLAT_PIXELS = 2.0
 #: colours of the layers above the first in a layered run's history (one line per layer)
 LAYER_COLOURS = ("tab:purple", "tab:brown", "tab:olive", "tab:cyan", "tab:pink")
 
 
-def start_rows(length) -> int:
-    """Rows of the wind-up at the start of a history (see START_FRACTION), at least one."""
+def start_rows(length, fraction: float = PICTURE_SETTINGS.start_fraction) -> int:
+    """Rows of the wind-up at the start of a history, at least one: while the yarns wind from
+    their tie points to tangency the fell points stay put and the laid angle climbs from 0; the
+    wind-up ends where the braided length has grown by ``fraction`` of the run."""
     length = np.asarray(length, dtype=float)
     if len(length) < 2:
         return 0
-    grown = np.nonzero(length > length[0] + START_FRACTION * (length.max() - length[0]))[0]
+    grown = np.nonzero(length > length[0] + fraction * (length.max() - length[0]))[0]
     return int(grown[0]) + 1 if len(grown) else 1
 
 
@@ -111,24 +104,24 @@ def _range(ax, zero, *columns):
     ax.set_ylim(lo_t, hi_t)
 
 
-def _pixel(ax) -> float:
-    """One pixel of the axes' height in data units (the figure drawn at DPI)."""
+def _pixel(ax, dpi) -> float:
+    """One pixel of the axes' height in data units (the figure drawn at ``dpi``)."""
     lo, hi = ax.get_ylim()
-    height = ax.get_position().height * ax.figure.get_size_inches()[1] * DPI
+    height = ax.get_position().height * ax.figure.get_size_inches()[1] * dpi
     return (hi - lo) / max(height, 1.0)
 
 
-def flat_after(ax, length, columns, start) -> bool:
-    """Whether every curve of ``columns`` moves by at most FLAT_PIXELS pixels of ``ax`` from the
-    braided length ``start`` on."""
+def flat_after(ax, length, columns, start, pictures=PICTURE_SETTINGS) -> bool:
+    """Whether every curve of ``columns`` moves by at most ``pictures.flat_pixels`` pixels of
+    ``ax`` (drawn at ``pictures.history_dpi``) from the braided length ``start`` on."""
     after = np.asarray(length) >= start
     if not np.any(after):
         return False
     spread = max(float(np.ptp(np.asarray(c, dtype=float)[after])) for c in columns)
-    return spread <= FLAT_PIXELS * _pixel(ax)
+    return spread <= pictures.flat_pixels * _pixel(ax, pictures.history_dpi)
 
 
-def _steady_mark(ax, steady, length, columns, asymptotes, unit):
+def _steady_mark(ax, steady, length, columns, asymptotes, unit, pictures):
     """A dotted line where steady state starts and the asymptote the run approaches, if every
     curve is flat on this plot from there on; a note otherwise. ``asymptotes``: the steady values
     of this plot's quantity ({label: value})."""
@@ -140,7 +133,7 @@ def _steady_mark(ax, steady, length, columns, asymptotes, unit):
         for name, value in asymptotes.items():
             ax.axhline(value, color="0.2", linestyle="-.", linewidth=0.8,
                        label=f"steady {name}: {value:.{2 if unit == 'deg' else 3}f} {unit} (asymptote)")
-        if flat_after(ax, length, columns, start):
+        if flat_after(ax, length, columns, start, pictures):
             ax.axvline(start, color="0.3", linestyle=":", linewidth=1.2, label=f"steady from {start:.2f} m")
         else:
             _note(ax, f"within the steady tolerances from {start:.2f} m (still changing at this scale)")
@@ -196,12 +189,13 @@ def _layer_xlim(ax, layers):
         ax.set_xlim(lo, max(hi, 1.02 * max(ends)))
 
 
-def braid_angle_figure(result, refs=None, steady=None, layers=()) -> Figure:
+def braid_angle_figure(result, refs=None, steady=None, layers=(), pictures=PICTURE_SETTINGS) -> Figure:
     """Warp and weft braid angle (deg) against braided length (m), the spread round the section
     (least to largest angle over the yarns, a band), Ko's angle (``refs``, a
     :class:`preform.reference.References`), the asymptote and start of steady state
-    (``steady``), and the mean angle of each layer above the first (``layers``: their Results)."""
-    fig = _figure(figsize=HISTORY_SIZE)
+    (``steady``), and the mean angle of each layer above the first (``layers``: their Results);
+    ``pictures``: ``preform.settings.PictureSettings``."""
+    fig = _figure(figsize=pictures.history_size_in)
     fig.layered = bool(layers)
     ax = fig.add_axes(HISTORY_MAIN)
     length = _column(result, "braided_length_m")
@@ -227,13 +221,14 @@ def braid_angle_figure(result, refs=None, steady=None, layers=()) -> Figure:
     ko = None if refs is None else (refs.ko_deg, refs.s, "Ko (quasi-static)")
     _finish(ax, result, length, columns, [warp, weft], ko, steady,
             _asymptotes(steady, {"warp": "warp", "weft": "weft"}), "deg", "braid angle α (deg)",
-            "Braid angle at the fell points")
-    _deviation(fig, ax, length, {"warp": warp, "weft": weft}, steady, "deg")
+            "Braid angle at the fell points", pictures)
+    _deviation(fig, ax, length, {"warp": warp, "weft": weft}, steady, "deg", pictures)
     _layer_xlim(ax, layers)
     return fig
 
 
-def _finish(ax, result, length, columns, judged, reference, steady, asymptotes, unit, ylabel, title):
+def _finish(ax, result, length, columns, judged, reference, steady, asymptotes, unit, ylabel, title,
+            pictures):
     """The shared part of the history figures: the quasi-static reference curve (``reference`` =
     (values, s, label) or None), the whole run's range from 0, the steady-state mark (judged flat
     on ``judged``), labels."""
@@ -245,7 +240,7 @@ def _finish(ax, result, length, columns, judged, reference, steady, asymptotes, 
     _range(ax, True, *columns, *asymptotes.values())
     if len(length):
         ax.set_xlim(0.0, float(np.max(length)) * 1.02 if np.max(length) > 0 else 1.0)
-    _steady_mark(ax, steady, length, judged, asymptotes, unit)
+    _steady_mark(ax, steady, length, judged, asymptotes, unit, pictures)
     ax.set_ylabel(ylabel)
     ax.set_title(run_title(result, title))
     ax.grid(True, alpha=0.3)
@@ -256,7 +251,7 @@ def _finish(ax, result, length, columns, judged, reference, steady, asymptotes, 
 DEVIATION_FLOOR = 1e-3
 
 
-def _deviation(fig, ax, length, series, steady, unit):
+def _deviation(fig, ax, length, series, steady, unit, pictures):
     """The lower panel: each series' distance from its fitted asymptote (log scale) with the
     steady tolerance as a line, so where the curve enters the tolerance band (steady state) and
     how fast it still approaches the steady value can be read; the run's own axis below."""
@@ -277,7 +272,7 @@ def _deviation(fig, ax, length, series, steady, unit):
         return
     tol = float(fits[shown[0]]["tolerance"])
     floor = DEVIATION_FLOOR * tol
-    skip = start_rows(length)
+    skip = start_rows(length, pictures.start_fraction)
     for name in shown:
         d = np.abs(np.asarray(series[name], dtype=float) - float(fits[name]["asymptote"]))
         colour = {"warp": GROUP_COLOURS[0], "weft": GROUP_COLOURS[1]}.get(name, "tab:green")
@@ -298,18 +293,19 @@ def _deviation(fig, ax, length, series, steady, unit):
     dev.legend(loc="upper right", fontsize=8)
 
 
-def convergence_length_figure(result, refs=None, steady=None, layers=()) -> Figure:
+def convergence_length_figure(result, refs=None, steady=None, layers=(), pictures=PICTURE_SETTINGS) -> Figure:
     """Mean convergence length (m) with its min-max band over yarns, against braided length (m),
     with the kinematic steady value H_inf (``refs``), the asymptote and start of steady state,
-    and the mean of each layer above the first (``layers``)."""
-    fig = _figure(figsize=HISTORY_SIZE)
+    and the mean of each layer above the first (``layers``); ``pictures``: as
+    :func:`braid_angle_figure`'s."""
+    fig = _figure(figsize=pictures.history_size_in)
     fig.layered = bool(layers)
     ax = fig.add_axes(HISTORY_MAIN)
     length = _column(result, "braided_length_m")
     lo, hi = _column(result, "convergence_length_min_m"), _column(result, "convergence_length_max_m")
     mean = _column(result, "convergence_length_mean_m")
     suffix = f", {_layer_label(1)}" if layers else ""
-    skip = start_rows(length)
+    skip = start_rows(length, pictures.start_fraction)
     width = float(np.max(hi[skip:] - lo[skip:])) if len(lo) > skip else 0.0
     # edged, so that a narrow band still shows; its width is in the legend
     apart = f"up to {width * 1e3:.1f} mm apart" if width >= 5e-5 else "under 0.1 mm apart: on the mean's line"
@@ -327,8 +323,8 @@ def convergence_length_figure(result, refs=None, steady=None, layers=()) -> Figu
     h_inf = None if refs is None else (refs.h_inf, refs.s, "H∞ (kinematic, quasi-static)")
     _finish(ax, result, length, columns, [mean], h_inf, steady,
             _asymptotes(steady, {"convergence_length_m": "H"}), "m", "convergence length H (m)",
-            "Convergence zone length")
-    _deviation(fig, ax, length, {"convergence_length_m": mean}, steady, "m")
+            "Convergence zone length", pictures)
+    _deviation(fig, ax, length, {"convergence_length_m": mean}, steady, "m", pictures)
     _layer_xlim(ax, layers)
     return fig
 
@@ -349,25 +345,28 @@ def history_references(result, n=60):
     return references(result.config, s[ok], perimeter[ok])
 
 
-def plot_history(result, plots_dir, refs=None, steady_settings=None, layers=()) -> list[Path]:
+def plot_history(result, plots_dir, refs=None, steady=None, layers=(),
+                 pictures=PICTURE_SETTINGS) -> list[Path]:
     """Write ``braid_angle.png`` and ``convergence_length.png`` in ``plots_dir``; return the paths.
 
     refs : preform.reference.References, or None to compute them from the result's geometry.
-    steady_settings : the steady-state reading's (``steady.SteadySettings``; None: the defaults)
+    steady : the run's steady state as the analysis read it (``Analysed.steady``: the dict of
+        ``analysis.steady.steady_state``), marked on both plots; None: no mark
     layers : the Results of the layers above the first (a line each)
+    pictures : ``preform.settings.PictureSettings``
     """
-    from ..analysis.steady import STEADY, steady_state
-
     plots_dir = Path(plots_dir)
     refs = refs if refs is not None else history_references(result)
-    steady = steady_state(result.history, steady_settings or STEADY) if result.steps else None
-    return [_save(braid_angle_figure(result, refs, steady, layers), plots_dir / "braid_angle.png"),
-            _save(convergence_length_figure(result, refs, steady, layers),
-                  plots_dir / "convergence_length.png")]
+    dpi = pictures.history_dpi
+    return [_save(braid_angle_figure(result, refs, steady, layers, pictures),
+                  plots_dir / "braid_angle.png", dpi),
+            _save(convergence_length_figure(result, refs, steady, layers, pictures),
+                  plots_dir / "convergence_length.png", dpi)]
 
 
-def yarns_figure(result) -> Figure:
-    """3D view of the deposited yarns (mandrel frame, m), warp blue, weft red."""
+def yarns_figure(result, pictures=PICTURE_SETTINGS) -> Figure:
+    """3D view of the deposited yarns (mandrel frame, m), warp blue, weft red, at most
+    ``pictures.fallback_points_per_yarn`` points a yarn."""
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
     yarns = result.yarns
@@ -379,7 +378,7 @@ def yarns_figure(result) -> Figure:
         paths = []
         for k in np.flatnonzero(np.asarray(yarns.group) == group):
             yarn = yarns.yarn(k)
-            stride = max(1, int(np.ceil(len(yarn) / MAX_POINTS_PER_YARN)))
+            stride = max(1, int(np.ceil(len(yarn) / pictures.fallback_points_per_yarn)))
             if len(yarn) >= 2:
                 paths.append(np.vstack([yarn[::stride], yarn[-1:]]))
         if paths:
@@ -402,24 +401,29 @@ def yarns_figure(result) -> Figure:
     return fig
 
 
-def plot_yarns_3d(result, path) -> Path:
-    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``).
+def plot_yarns_3d(result, path, pictures=PICTURE_SETTINGS, layer=None, frame=None) -> Path:
+    """Write the 3D picture of the braided mandrel (``braided_mandrel.png``, or a layer's).
 
     The mandrel with its yarns rendered from two sides (``io.render3d``); where off-screen
     rendering fails (no OpenGL) or there is no mandrel, a matplotlib picture of the yarns alone
-    with a warning saying why.
+    with a warning saying why. ``layer``: (k, direction) of a stack's layer, named in the title;
+    ``frame``: the mandrel's centerline the views are oriented by (``render_braided_mandrel``).
     """
-    title = run_title(result, "Braided mandrel").replace("\n", " – ")
+    what = "Braided mandrel"
+    if layer is not None:
+        k, direction = layer
+        what += f", layer {k} ({direction}" + (", over the layers below)" if k > 1 else ")")
+    title = run_title(result, what).replace("\n", " – ")
     if result.mandrel is not None:
         from .render3d import render_braided_mandrel
 
         try:
             with atomic_path(path) as tmp:
-                render_braided_mandrel(result, tmp, title)
+                render_braided_mandrel(result, tmp, title, pictures, frame)
             return Path(path)
         except Exception as error:  # noqa: BLE001 - any VTK/GL failure: fall back to matplotlib
             warnings.warn(f"{path}: off-screen rendering failed ({type(error).__name__}: {error}); "
                           "drew the yarns without the mandrel", RuntimeWarning, stacklevel=2)
-    fig = yarns_figure(result)
+    fig = yarns_figure(result, pictures)
     fig.axes[0].set_title(title)
-    return _save(fig, path)
+    return _save(fig, path, pictures.history_dpi)

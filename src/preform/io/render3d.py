@@ -14,19 +14,10 @@ import os
 
 import numpy as np
 
-#: picture size, pixels (width, height): two wide views stacked
-WINDOW_SIZE = (1600, 1000)
+from ..drawing import PICTURES as PICTURE_SETTINGS
+
 COLOURS = {0: "#1f77b4", 1: "#d62728"}   # warp, weft: matplotlib's tab:blue, tab:red
 MANDREL_COLOUR = "#c8c8c8"
-#: the yarns' points drawn per yarn at most (every k-th beyond that): case A's 4 m yarns then
-#: have 4 mm segments, whose chord sag on its 0.1 m radius (l^2 / 8 r, 20 um) is a thirtieth of a
-#: pixel of the close-ups (0.6 mm), and the frame draws a quarter of the lines of 4000 points
-MAX_POINTS_PER_YARN = 1000
-#: multisampling of the render window: none. With 4 samples Mesa's software rasteriser (llvmpipe,
-#: the usual off-screen EGL) took 1.5 s for this frame of 3 x 576 k line points, 0.6 s without
-MULTI_SAMPLES = 0
-#: a view's half extents are its content's times this (a margin around the part)
-_VIEW_MARGIN = 1.08
 
 
 def view_axes(points):
@@ -64,15 +55,15 @@ def part_axes(points, centerline=None):
     return centre, axis, np.cross(third, axis), third
 
 
-def _yarn_polylines(yarns, group):
+def _yarn_polylines(yarns, group, max_points):
     """The yarns of ``group`` as point blocks (each (k, 3), every ``stride``-th point and the
-    last, at most ``MAX_POINTS_PER_YARN``), one per yarn with two points or more."""
+    last, at most ``max_points``), one per yarn with two points or more."""
     blocks = []
     for k in np.flatnonzero(np.asarray(yarns.group) == group):
         yarn = yarns.yarn(k)
         if len(yarn) < 2:
             continue
-        stride = max(1, int(np.ceil(len(yarn) / MAX_POINTS_PER_YARN)))
+        stride = max(1, int(np.ceil(len(yarn) / max_points)))
         blocks.append(np.vstack([yarn[::stride], yarn[-1:]]))
     return blocks
 
@@ -147,17 +138,21 @@ def _sunk(mandrel, result):
     return V - depth * np.divide(normals, norm, out=np.zeros_like(V), where=norm > 0)
 
 
-def _camera(plotter, centre, view, up, half_width, half_height, aspect):
-    """Parallel projection looking at ``centre`` along ``-view``, fitting the given half extents."""
+def _camera(plotter, centre, view, up, half_width, half_height, aspect, margin):
+    """Parallel projection looking at ``centre`` along ``-view``, fitting the given half extents
+    times ``margin``."""
     plotter.camera_position = [tuple(centre + 10.0 * max(half_width, half_height) * view),
                                tuple(centre), tuple(up)]
     plotter.enable_parallel_projection()
-    plotter.camera.parallel_scale = _VIEW_MARGIN * max(half_height, half_width / aspect)
+    plotter.camera.parallel_scale = margin * max(half_height, half_width / aspect)
     plotter.reset_camera_clipping_range()
 
 
-def render_braided_mandrel(result, path, title: str) -> None:
-    """Render ``result`` (mandrel + yarns, mandrel frame) into the PNG ``path``.
+def render_braided_mandrel(result, path, title: str, pictures=PICTURE_SETTINGS, frame=None) -> None:
+    """Render ``result`` (mandrel + yarns, mandrel frame) into the PNG ``path``; ``pictures``:
+    ``preform.settings.PictureSettings``; ``frame``: the centerline the views put the tip of on
+    the left and measure the ruler along (the mandrel's: a layer braided backward has its own
+    from the far end), None for the result's.
 
     Top: the whole braided part from the front (where the braid lies on the mandrel), tip on the
     left, with a ruler of arc length from the tip, drawing every k-th yarn where the pixels
@@ -184,23 +179,24 @@ def render_braided_mandrel(result, path, title: str) -> None:
     whole_up = np.cross(whole_view, axis)
     whole_centre = centre + 0.5 * (lo + hi) * axis
     mid, tangent, up, front, radius = _close_up(result, laid, centre, axis, across, third)
-    cl = result.centerline
+    cl = result.centerline if frame is None else frame
     tip = np.asarray(cl.frames_at(np.array([0.0]))[0])[0] if cl is not None else None
     # the tip on the left in every view, as in the other pictures and the unrolled map
     whole_up = tip_left(whole_centre, whole_view, whole_up, tip)
     up = tip_left(mid, front, up, tip)
-    w, h = WINDOW_SIZE
-    plotter = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(2, 2),
+    w, h = pictures.mandrel_window_px
+    margin = pictures.view_margin
+    plotter = pv.Plotter(off_screen=True, window_size=(w, h), shape=(2, 2),
                          groups=[(0, np.s_[:])], border=True, border_color="black", border_width=2)
-    plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
-    blocks = [_yarn_polylines(yarns, group) for group in (0, 1)]
+    plotter.render_window.SetMultiSamples(pictures.multi_samples)
+    blocks = [_yarn_polylines(yarns, group, pictures.mandrel_points_per_yarn) for group in (0, 1)]
     whole_half_w = 0.5 * (hi - lo) + 0.1 * spread
     whole_half_h = max(spread, depth)
-    stride = whole_stride(result, radius, whole_half_w, w)
+    stride = whole_stride(result, radius, whole_half_w, w, pictures)
     # the close-ups show a box 3 section radii wide around the middle: their lines are cut to it
     # (llvmpipe draws every line sent, visible or not)
-    scale = _VIEW_MARGIN * max(1.5 * radius, 3.0 * radius / (w / h))
-    close_stride = whole_stride(result, radius, 3.0 * radius, w // 2)
+    scale = margin * max(1.5 * radius, 3.0 * radius / (w / h))
+    close_stride = whole_stride(result, radius, 3.0 * radius, w // 2, pictures)
     cut = [_clipped(b[::close_stride], mid, np.cross(front, up), up, scale * w / h, scale) for b in blocks]
     whole = [_lines(b[::stride]) for b in blocks]
     close = [_lines(b) for b in cut]
@@ -223,30 +219,27 @@ def render_braided_mandrel(result, path, title: str) -> None:
                     plotter.add_mesh(poly, color=COLOURS[group], line_width=1.5 if row else 1.0)
             plotter.add_text(label, font_size=10 if row else 11, color="black", position="upper_left")
             if row == 0 and cl is not None:
-                add_ruler(plotter, cl, whole_centre, view, view_up, whole_half_w, whole_half_h)
-            _camera(plotter, look_at, view, view_up, half_w, half_h, aspect)
+                add_ruler(plotter, cl, whole_centre, view, view_up, whole_half_w, whole_half_h,
+                          margin=margin)
+            _camera(plotter, look_at, view, view_up, half_w, half_h, aspect, margin)
         plotter.screenshot(str(path))
     finally:
         plotter.close()
 
 
-#: the least distance (pixels) between neighbouring yarns of a family in the whole part's view:
-#: closer lines alias into a moire; every k-th yarn is drawn to keep them this far apart
-MIN_YARN_SPACING_PX = 5.0
-
-
-def whole_stride(result, radius, half_w, width_px) -> int:
-    """k: draw every k-th yarn of a family in the whole part's view (see MIN_YARN_SPACING_PX).
-    Neighbouring yarns of a family lie ``2 pi r cos(alpha) / n`` apart on a section of radius r
-    (n yarns a family, alpha the braid angle at the end of the run)."""
+def whole_stride(result, radius, half_w, width_px, pictures=PICTURE_SETTINGS) -> int:
+    """k: draw every k-th yarn of a family in the whole part's view, so that neighbouring lines
+    stay ``pictures.min_yarn_spacing_px`` apart (closer ones alias into a moire). Neighbouring
+    yarns of a family lie ``2 pi r cos(alpha) / n`` apart on a section of radius r (n yarns a
+    family, alpha the braid angle at the end of the run)."""
     n = max(1, int(result.yarns.n_yarns) // 2)
     alpha = 0.0
     if result.steps:
         alpha = np.radians(float(np.nanmean([result.history["braid_angle_warp_deg"][-1],
                                              result.history["braid_angle_weft_deg"][-1]])))
     spacing = 2.0 * np.pi * radius * max(np.cos(alpha), 0.05) / n
-    px = spacing * width_px / (2.0 * _VIEW_MARGIN * max(half_w, 1e-9))
-    return max(1, int(np.ceil(MIN_YARN_SPACING_PX / max(px, 1e-9))))
+    px = spacing * width_px / (2.0 * pictures.view_margin * max(half_w, 1e-9))
+    return max(1, int(np.ceil(pictures.min_yarn_spacing_px / max(px, 1e-9))))
 
 
 def _ordinal(k: int) -> str:
@@ -275,10 +268,18 @@ def tip_left(centre, view, up, tip):
     return up
 
 
-def add_ruler(plotter, centerline, centre, view, up, half_w, half_h, s_range=None):
+#: pixels from the part's lowest point down to the ruler, and the ruler's ticks' height, where
+#: the view gives its scale (``add_ruler``'s ``pixel``)
+RULER_GAP_PX, RULER_TICK_PX = 14, 12
+
+
+def add_ruler(plotter, centerline, centre, view, up, half_w, half_h, s_range=None, pixel=None,
+              margin=1.08):
     """Arc-length marks under the part: a ruler along the screen's horizontal below the part,
     a tick and a label ``s (m)`` where the centerline reaches each round arc length, and the tip
-    labelled (in TIP_COLOUR). ``half_w``, ``half_h``: the part's half extents across the screen."""
+    labelled (in TIP_COLOUR). ``half_w``, ``half_h``: the part's half extents across the screen;
+    ``pixel``: metres a pixel of the view (the ruler then sits RULER_GAP_PX under the part), or
+    None (a share of ``half_h`` under it); ``margin``: the view's half width over ``half_w``."""
     import pyvista as pv
 
     right = np.cross(up, view)
@@ -288,19 +289,21 @@ def add_ruler(plotter, centerline, centre, view, up, half_w, half_h, s_range=Non
     s = np.arange(np.ceil(lo / step - 1e-9) * step, hi + 1e-9, step)
     points = np.asarray(centerline.frames_at(s)[0]) if len(s) else np.zeros((0, 3))
     x = (points - centre) @ right
-    keep = np.abs(x) <= _VIEW_MARGIN * half_w   # what the view shows
+    keep = np.abs(x) <= margin * half_w   # what the view shows
     s, x = s[keep], x[keep]
-    base = centre - 1.15 * half_h * up
+    gap, tick, drop = ((0.15 * half_h, 0.18 * half_h, 0.12 * half_h) if pixel is None else
+                       (RULER_GAP_PX * pixel, RULER_TICK_PX * pixel, 0.8 * RULER_TICK_PX * pixel))
+    base = centre - (half_h + gap) * up
     if len(s) >= 2:
         ends = [base + x.min() * right, base + x.max() * right]
-        ticks = [p for xi in x for p in (base + xi * right, base + xi * right + 0.18 * half_h * up)]
+        ticks = [p for xi in x for p in (base + xi * right, base + xi * right + tick * up)]
         pts = np.array(ends + ticks)
         n = len(pts)
         lines = np.concatenate([[2, 0, 1], *([2, k, k + 1] for k in range(2, n, 2))])
         plotter.add_mesh(pv.PolyData(pts, lines=lines), color="black", line_width=2)
         digits = max(0, -int(np.floor(np.log10(step))))
         labels = [f"{abs(v) if abs(v) < 0.5 * step else v:.{digits}f} m" for v in s]
-        plotter.add_point_labels(base[None, :] + x[:, None] * right[None, :] - 0.12 * half_h * up,
+        plotter.add_point_labels(base[None, :] + x[:, None] * right[None, :] - drop * up,
                                  labels, font_size=14, text_color="black", shape=None,
                                  show_points=False, always_visible=True, justification_horizontal="center",
                                  justification_vertical="top")

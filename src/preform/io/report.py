@@ -219,7 +219,28 @@ def _pictures(folder: Path) -> list[Path]:
         return []
     found = [p for p in sorted(plots.glob("*.png")) if p.is_file() and not p.is_symlink()]
     order = list(CAPTIONS)
-    return sorted(found, key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name))
+
+    def rank(p):
+        base = _layer_picture(p.name)[0]
+        return order.index(base) if base in order else len(order), p.name
+    return sorted(found, key=rank)
+
+
+def _layer_picture(name: str) -> tuple[str, int | None]:
+    """(the picture's name without a stack's ``_layer<k>``, k or None)."""
+    stem, dot, ext = name.rpartition(".")
+    head, sep, k = stem.rpartition("_layer")
+    if sep and k.isdigit():
+        return f"{head}{dot}{ext}", int(k)
+    return name, None
+
+
+def caption(name: str) -> str:
+    """What a picture shows (CAPTIONS; a stack's ``<name>_layer<k>.png``: of layer k)."""
+    base, k = _layer_picture(name)
+    if base in CAPTIONS:
+        return CAPTIONS[base] + ("" if k is None else f", layer {k}")
+    return Path(name).stem.replace("_", " ")
 
 
 def _inputs_text(folder: Path, summary: dict) -> tuple[str, str]:
@@ -294,9 +315,9 @@ def report_html(folder) -> str:
     if not pictures:
         parts.append("<p>no pictures in plots/</p>")
     for p in pictures:
-        caption = CAPTIONS.get(p.name, p.stem.replace("_", " "))
-        parts.append(f'<figure><img src="{_png_uri(p)}" alt="{_e(caption)}">'
-                     f"<figcaption>{_e(caption)} (<code>plots/{_e(p.name)}</code>)</figcaption></figure>")
+        said = caption(p.name)
+        parts.append(f'<figure><img src="{_png_uri(p)}" alt="{_e(said)}">'
+                     f"<figcaption>{_e(said)} (<code>plots/{_e(p.name)}</code>)</figcaption></figure>")
     heading, text = _inputs_text(folder, summary)
     parts.append(f"<h2>Inputs</h2><p>{_e(heading)}</p><pre>{_e(text)}</pre>")
     parts.append("<h2>Every number of the summary</h2><details><summary>show</summary>"

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..drawing import PICTURES as PICTURE_SETTINGS
 from .atomic import atomic_path
 
 VTU = "surface.vtu"
@@ -28,25 +29,37 @@ INPUT_VTU = "surface_input.vtu"
 XDMF = "surface.xdmf"
 H5 = "surface.h5"
 PLOTS = "plots"
-#: picture width, pixels; the height follows the part (two views stacked, each as tall as the
-#: part's outline and its ruler need at this width, between VIEW_HEIGHT_PX) and the colour bar
-WIDTH_PX = 1400
-VIEW_HEIGHT_PX = (240, 520)
-BAR_HEIGHT_PX = 110
-#: a view's half height is the part's times this: the ruler and its labels below, the title above
-VIEW_ROOM = (1.9, 1.45)
-#: (file name, cell array, scalar-bar title with units, scale to the shown unit)
+#: (file name, cell array, scalar-bar title with units, scale to the shown unit); the sizes and
+#: the framing are ``preform.settings.PictureSettings``
 PICTURES = (
     ("surface_braid_angle.png", "braid_angle_deg", "braid angle (deg)", 1.0),
     ("surface_cover_factor.png", "cover_factor", "cover factor (-)", 1.0),
     ("surface_thickness.png", "thickness_m", "thickness (mm)", 1e3),
 )
 BACKGROUND = "white"
-#: multisampling of the render window: none. With 2 or 4 samples Mesa's software rasteriser
-#: (llvmpipe, the usual off-screen EGL) takes about 0.19 s a frame against 0.02 s; without, the
-#: part's outline is not smoothed (one-pixel notches where the faces' corners fall inside it)
-MULTI_SAMPLES = 0
 UNREACHED_COLOR = "lightgray"
+
+
+def layer_pictures(n_layers: int) -> tuple:
+    """The surface pictures of a run of ``n_layers`` (0 or 1: a single layer): PICTURES; for a
+    stack, the braid angle of every layer (``surface_braid_angle_layer<k>.png`` of
+    ``layer<k>_braid_angle_deg``, layer 1's the unprefixed array) and the stack's cover factor
+    and thickness under the single-layer names, as the unrolled map's panels
+    (``maps.layer_panels``)."""
+    if n_layers < 2:
+        return PICTURES
+    angles = tuple((f"surface_braid_angle_layer{k}.png", "braid_angle_deg" if k == 1 else f"layer{k}_braid_angle_deg",
+                    f"braid angle of layer {k} (deg)", 1.0) for k in range(1, n_layers + 1))
+    return (*angles, ("surface_cover_factor.png", "cover_factor", "cover factor of the stack (-)", 1.0),
+            ("surface_thickness.png", "thickness_m", "thickness of the stack (mm)", 1e3))
+
+
+def fields_layers(fields) -> int:
+    """The layers whose arrays ``fields`` holds (``layer<k>_braid_angle_deg``; 1 for none)."""
+    k = 1
+    while f"layer{k + 1}_braid_angle_deg" in fields.cell_data:
+        k += 1
+    return k
 
 
 def surface_mesh(fields):
@@ -97,8 +110,11 @@ def write_input_mesh_fields(input_fields, out_dir) -> Path:
     return path
 
 
-def write_surface_pictures(fields, plots_dir, title: str = "", centerline=None) -> list[Path]:
-    """Off-screen renders of the braid angle, the cover factor and the thickness on the mandrel.
+def write_surface_pictures(fields, plots_dir, title: str = "", centerline=None,
+                           pictures=PICTURE_SETTINGS) -> list[Path]:
+    """Off-screen renders of the braid angle, the cover factor and the thickness on the mandrel
+    (:func:`layer_pictures`: for a stack, the braid angle of each layer and the stack's cover
+    factor and thickness); ``pictures``: ``preform.settings.PictureSettings``.
 
     Each picture shows the braided part from the front and, turned over about its axis, from
     the back (all four sides of a square section), tip on the left in both (and in the unrolled
@@ -114,8 +130,8 @@ def write_surface_pictures(fields, plots_dir, title: str = "", centerline=None) 
     written = []
     scene = None
     try:
-        scene = _SurfaceScene(fields, centerline)
-        for file_name, array, label, scale in PICTURES:
+        scene = _SurfaceScene(fields, centerline, pictures)
+        for file_name, array, label, scale in layer_pictures(fields_layers(fields)):
             path = plots_dir / file_name
             # atomic_path leaves the temporary name free, so the renderer creates the file with
             # the user's umask (mkstemp's own file is 0600, and writing into it kept that mode)
@@ -141,13 +157,14 @@ class _SurfaceScene:
     are drawn in the grey ``UNREACHED_COLOR``, the others through the colour map. The cameras
     frame the braided faces (``fields.reached()``), the same for every picture."""
 
-    def __init__(self, fields, centerline=None):
+    def __init__(self, fields, centerline=None, pictures=PICTURE_SETTINGS):
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
         import pyvista as pv
 
         from .render3d import add_ruler, part_axes, tip_left
 
         self.fields = fields
+        self.pictures = pictures
         self.vertices = np.asarray(fields.vertices, dtype=np.float64)
         self.faces = np.asarray(fields.faces, dtype=np.int64)
         reached = fields.reached()
@@ -157,19 +174,35 @@ class _SurfaceScene:
         tip = np.asarray(centerline.frames_at(np.array([0.0]))[0])[0] if centerline is not None else None
         up = tip_left(centre, front, (third - across) / np.sqrt(2.0), tip)
         right = np.cross(up, front)
+        # the middle of the part's extents on the screen (its vertices' mean lies towards the
+        # wide end of a cone), and its half extents from there
         rel = focus - centre
-        half_w = max(float(np.max(np.abs(rel @ right))), 1e-9)
-        half_h = max(float(np.max(np.abs(rel @ up))), 1e-9)
-        below, above = VIEW_ROOM
-        scale = 1.04 * half_w / WIDTH_PX            # metres per pixel across the frame
-        h = int(np.clip(round((below + above) * half_h / scale), *VIEW_HEIGHT_PX))
-        self.window_size = (WIDTH_PX, 2 * h + BAR_HEIGHT_PX)
+        x, y = rel @ right, rel @ up
+        centre = centre + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * up
+        half_w = max(0.5 * float(x.max() - x.min()), 1e-9)
+        half_h = max(0.5 * float(y.max() - y.min()), 1e-9)
+        # the part spans fill_width of the width; the view is as tall as the part at that scale
+        # plus the rows of pixels its title and its ruler take, within the height's bounds. A
+        # part too short for that (a short braid on a thick part) gets a narrower picture, down
+        # to the least width, so that it still fills the width rather than a band in the middle
+        least_w, width = (int(v) for v in pictures.surface_width_px)
+        above, below = pictures.surface_view_room_px
+        lo_h, hi_h = pictures.surface_view_height_px
+        part_h = hi_h - above - below                                 # the tallest a part is drawn
+        if 2.0 * half_h * pictures.fill_width * width / (2.0 * half_w) > part_h:
+            width = int(np.clip(round(part_h * 2.0 * half_w / (2.0 * half_h * pictures.fill_width)),
+                                least_w, width))
+        per_px = 2.0 * half_w / (pictures.fill_width * width)        # metres a pixel
+        h = int(np.clip(round(2.0 * half_h / per_px) + above + below, lo_h, hi_h))
+        per_px = max(per_px, 2.0 * half_h / max(h - above - below, 1))   # the height caps it
+        bar = int(pictures.surface_bar_height_px)
+        self.window_size = (width, 2 * h + bar)
         cells = np.column_stack([np.full(len(self.faces), 3), self.faces]).ravel()
         self.surface = pv.PolyData(self.vertices, cells)
         self.surface.cell_data[SHOWN] = np.zeros(len(self.faces))
         self.plotter = pv.Plotter(off_screen=True, window_size=self.window_size, shape=(3, 1),
-                                  row_weights=[h, h, BAR_HEIGHT_PX], border=False)
-        self.plotter.render_window.SetMultiSamples(MULTI_SAMPLES)
+                                  row_weights=[h, h, bar], border=False)
+        self.plotter.render_window.SetMultiSamples(pictures.multi_samples)
         self.actors, self.texts = [], [None, None]
         # the back view is the part turned over about its axis: view and up both reversed, so
         # the screen's right (up x view) and with it the tip's side stay
@@ -181,12 +214,15 @@ class _SurfaceScene:
                 self.surface, scalars=SHOWN, cmap="viridis", nan_color=UNREACHED_COLOR,
                 show_scalar_bar=False, ambient=0.5, diffuse=0.5))   # colours readable on shaded faces
             if centerline is not None:
-                add_ruler(self.plotter, centerline, centre, view, view_up, half_w, half_h)
-            look_at = centre - 0.5 * (below - above) * half_h * view_up
+                # marks over the part's extent only: the frame's margin is too narrow for a label
+                add_ruler(self.plotter, centerline, centre, view, view_up, half_w, half_h,
+                          pixel=per_px, margin=1.0)
+            # the view's middle: the title's rows above the part, the ruler's below
+            look_at = centre + 0.5 * (above - below) * per_px * view_up
             self.plotter.camera_position = [tuple(look_at + 10.0 * max(half_w, half_h) * view),
                                             tuple(look_at), tuple(view_up)]
             self.plotter.enable_parallel_projection()
-            self.plotter.camera.parallel_scale = max(0.5 * (below + above) * half_h, 1.04 * half_w * h / WIDTH_PX)
+            self.plotter.camera.parallel_scale = 0.5 * h * per_px
             self.plotter.reset_camera_clipping_range()
         self.plotter.subplot(2, 0)
         self.plotter.set_background(BACKGROUND)
@@ -205,24 +241,21 @@ def _render(scene, array, label, path, title="", scale=1.0):
     fields, plotter = scene.fields, scene.plotter
     values = np.asarray(fields.cell_data[array], dtype=np.float64) * scale
     reached = fields.reached()
-    if array == "braid_angle_deg":  # 0 there means "undefined" (end caps): grey, not a colour
+    if array.endswith("braid_angle_deg"):  # 0 there means "undefined" (end caps): grey, not a colour
         reached &= values > 0
-        if "layer2_braid_angle_deg" in fields.cell_data:
-            label = "braid angle of layer 1 (deg)"
     scene.surface.cell_data[SHOWN] = np.where(reached, values, np.nan)
     if reached.any():
         from .maps import NON_NEGATIVE, rounded_limits
 
         lo, hi = rounded_limits(float(values[reached].min()), float(values[reached].max()),
-                                zero=array in NON_NEGATIVE)
+                                zero=array in NON_NEGATIVE, ticks=scene.pictures.bar_ticks)
     else:
         lo, hi = 0.0, 1.0
     for actor in scene.actors:
         actor.mapper.scalar_range = (lo, hi)
-    from .maps import BAR_TICKS
     from .render3d import nice_length
 
-    ticks = int(round((hi - lo) / nice_length(hi - lo, BAR_TICKS))) + 1
+    ticks = int(round((hi - lo) / nice_length(hi - lo, scene.pictures.bar_ticks))) + 1
     for row in range(2):
         plotter.subplot(row, 0)
         side = "front" if row == 0 else "back (turned over about its axis); grey: no yarn"
