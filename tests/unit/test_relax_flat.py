@@ -313,7 +313,7 @@ def step16():
 def test_fused_sweep_forces_and_block_step_match_the_separate_calls(step16):
     """``sweep`` (``segment_vectors``, ``material_sweep`` with and without the predicted
     start, the lengths kept), ``forces_residual`` (``forces``, ``wall_residual``) and
-    ``block_step`` (``tangent_part``, ``ldl_solve``, ``cap_moves``) give what the calls they
+    ``block_step`` (``tangent_part``, ``ldl_solve3``, ``cap_moves``) give what the calls they
     fold together give: bit for bit, the solve (fastmath) to its round-off."""
     from preform.interaction import relax as R
     from preform.interaction import preconditioners as PC

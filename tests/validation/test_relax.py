@@ -371,8 +371,8 @@ def _block_inputs(captured):
 
 def test_block_preconditioner_matches_its_twin_and_solves_it(captured):
     """``block_values`` in the band-dissection order against the dense twin
-    (``naive_relax.block_stiffness``), entry by entry; the block LDL^T (``ldl_numeric``,
-    ``ldl_solve``) against a dense solve of it; a matrix that is not positive definite is
+    (``naive_relax.block_stiffness``), entry by entry; the block LDL^T (``ldl_numeric3``,
+    ``ldl_solve3``) against a dense solve of it; a matrix that is not positive definite is
     refused."""
     st, h, lat, fell, top, d_below, l_below, d_top, l_top, ten, f_top, l_jam, active, plane = \
         _block_inputs(captured)

@@ -1,9 +1,11 @@
 """Numba kernels of the relaxation's block LDL^T (``preform/interaction/relax.py``): the pattern of
 a matrix of blocks per pair of crossings linked by a segment, its elimination orders (the band
-dissection), its symbolic analysis, and the factorisation and solves with 3 x 3 blocks (the
-crossings' positions) and 5 x 5 blocks (with their materials, the ``"full"`` preconditioner).
-QDLDL's up-looking algorithm (Davis 2005; QDLDL, Apache-2.0) with every scalar a block. The slow
-twins are in ``tests/support/naive_relax.py`` and the dense solves of ``tests/validation/test_relax.py`` and
+dissection), its symbolic analysis, and one factorisation and one solve kernel generic in the
+block size (``_block_ldl``), compiled for 3 x 3 blocks (the crossings' positions,
+``ldl_numeric3`` / ``ldl_solve3``) and 5 x 5 blocks (with their materials, the ``"full"``
+preconditioner, ``ldl_numeric5`` / ``ldl_solve5``). QDLDL's up-looking algorithm (Davis 2005;
+QDLDL, Apache-2.0) with every scalar a block. The slow twins are in
+``tests/support/naive_relax.py`` and the dense solves of ``tests/validation/test_relax.py`` and
 ``tests/validation/test_relax_ring.py``.
 """
 
@@ -12,7 +14,30 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+
+@intrinsic
+def _flat_tuple(typingctx, arr, start, size):
+    """The tuple (arr.flat[start], ..., arr.flat[start + size - 1]) of a C-contiguous array, size
+    a compile-time constant: a block held in locals (registers), which loads from the array
+    would not be, as stores to another array may alias it."""
+    if not (isinstance(arr, types.Array) and arr.layout == "C"
+            and isinstance(size, types.IntegerLiteral)):
+        return None
+    n = size.literal_value
+    tup = types.UniTuple(arr.dtype, n)
+
+    def codegen(context, builder, sig, args):
+        data = context.make_array(sig.args[0])(context, builder, args[0]).data
+        first = args[1]
+        vals = [builder.load(builder.gep(data, [builder.add(first, ir.Constant(first.type, i))]))
+                for i in range(n)]
+        return context.make_tuple(builder, tup, vals)
+
+    return tup(arr, start, size), codegen
 
 
 @njit(cache=True)
@@ -133,136 +158,6 @@ def _inverse3(A, out):
     return True
 
 
-@njit(cache=True, inline="always")
-def _reach(i, k, etree, marker, elim, y_idx, nnz_y):
-    """Append to y_idx[nnz_y:] the rows of row k's pattern reached from i up the elimination tree
-    (unmarked rows below k, marked on the way), in topological order (QDLDL's ``QDLDL_factor``);
-    returns the new count."""
-    marker[i] = True
-    elim[0] = i
-    ne = 1
-    j = etree[i]
-    while j != -1 and j < k:
-        if marker[j]:
-            break
-        marker[j] = True
-        elim[ne] = j
-        ne += 1
-        j = etree[j]
-    while ne:
-        ne -= 1
-        y_idx[nnz_y] = elim[ne]
-        nnz_y += 1
-    return nnz_y
-
-
-@njit(cache=True, fastmath=True)
-def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
-                y, D):
-    """Block LDL^T factorisation A = L D L^T of a symmetric positive definite matrix of 3 x 3
-    blocks: QDLDL's up-looking ``QDLDL_factor`` with every scalar a block (for each row k of L,
-    its pattern from the elimination tree, then a sparse triangular solve: y_j -= L_ji y_i,
-    L_ki = y_i^T D_i^-1, D_k -= L_ki y_i). A: upper triangle, CSC of blocks (Ap, Ai, Ax (nnz,
-    3, 3), Ax[p] the block (Ai[p], column)); out: Lp (n+1,), Li, Lx (nnz_L, 3, 3) the strictly
-    lower blocks by column, Dinv (n, 3, 3) the inverses of the diagonal blocks of D. etree, Lnz
-    from ``ldl_symbolic``; marker (n,) bool, y_idx, elim, next_space (n,) int64, y (n, 3, 3),
-    D (3, 3) scratch. Returns False if a pivot block is not positive definite."""
-    T = np.empty((3, 3))
-    Lp[0] = 0
-    for i in range(n):
-        marker[i] = False
-        for a in range(3):
-            for b in range(3):
-                y[i, a, b] = 0.0
-        Lp[i + 1] = Lp[i] + Lnz[i]
-        next_space[i] = Lp[i]
-    for k in range(n):
-        nnz_y = 0
-        for a in range(3):
-            for b in range(3):
-                D[a, b] = 0.0
-        for p in range(Ap[k], Ap[k + 1]):
-            i = Ai[p]
-            if i == k:
-                for a in range(3):
-                    for b in range(3):
-                        D[a, b] = Ax[p, a, b]
-                continue
-            for a in range(3):
-                for b in range(3):
-                    y[i, a, b] = Ax[p, a, b]
-            if not marker[i]:
-                nnz_y = _reach(i, k, etree, marker, elim, y_idx, nnz_y)
-        for t in range(nnz_y - 1, -1, -1):
-            ci = y_idx[t]
-            end = next_space[ci]
-            y00, y01, y02 = y[ci, 0, 0], y[ci, 0, 1], y[ci, 0, 2]
-            y10, y11, y12 = y[ci, 1, 0], y[ci, 1, 1], y[ci, 1, 2]
-            y20, y21, y22 = y[ci, 2, 0], y[ci, 2, 1], y[ci, 2, 2]
-            for q in range(Lp[ci], end):
-                r = Li[q]
-                # y_r -= L_{r, ci} y_ci
-                for a in range(3):
-                    l0, l1, l2 = Lx[q, a, 0], Lx[q, a, 1], Lx[q, a, 2]
-                    y[r, a, 0] -= l0 * y00 + l1 * y10 + l2 * y20
-                    y[r, a, 1] -= l0 * y01 + l1 * y11 + l2 * y21
-                    y[r, a, 2] -= l0 * y02 + l1 * y12 + l2 * y22
-            Li[end] = k
-            # L_{k, ci} = y_ci^T Dinv_ci ; D_k -= L_{k, ci} y_ci
-            for a in range(3):
-                for b in range(3):
-                    Lx[end, a, b] = (y[ci, 0, a] * Dinv[ci, 0, b] + y[ci, 1, a] * Dinv[ci, 1, b]
-                                     + y[ci, 2, a] * Dinv[ci, 2, b])
-            for a in range(3):
-                l0, l1, l2 = Lx[end, a, 0], Lx[end, a, 1], Lx[end, a, 2]
-                D[a, 0] -= l0 * y00 + l1 * y10 + l2 * y20
-                D[a, 1] -= l0 * y01 + l1 * y11 + l2 * y21
-                D[a, 2] -= l0 * y02 + l1 * y12 + l2 * y22
-            next_space[ci] = end + 1
-            for a in range(3):
-                for b in range(3):
-                    y[ci, a, b] = 0.0
-            marker[ci] = False
-        # symmetrise the pivot against round-off before inverting it
-        for a in range(3):
-            for b in range(a + 1, 3):
-                D[a, b] = D[b, a] = 0.5 * (D[a, b] + D[b, a])
-        if not _inverse3(D, T):
-            return False
-        for a in range(3):
-            for b in range(3):
-                Dinv[k, a, b] = T[a, b]
-    return True
-
-
-@njit(cache=True, fastmath=True)
-def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
-    """out (n, 3) = A^-1 rhs (n, 3) for the factor of ``ldl_numeric``, A in the order perm
-    (perm[i]: the crossing at position i): L z = P rhs, then D^-1 in the same pass, then L^T
-    y = D^-1 z, each row written back to out as it is final; x (n, 3) is scratch."""
-    for i in range(n):
-        for a in range(3):
-            x[i, a] = rhs[perm[i], a]
-    for i in range(n):
-        # x_i is final here: L's column i updates the rows below, then D_i^-1 scales x_i (the
-        # forward solve and the diagonal in one pass)
-        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
-        for q in range(Lp[i], Lp[i + 1]):
-            r = Li[q]
-            for a in range(3):
-                x[r, a] -= Lx[q, a, 0] * x0 + Lx[q, a, 1] * x1 + Lx[q, a, 2] * x2
-        for a in range(3):
-            x[i, a] = Dinv[i, a, 0] * x0 + Dinv[i, a, 1] * x1 + Dinv[i, a, 2] * x2
-    for i in range(n - 1, -1, -1):
-        for q in range(Lp[i], Lp[i + 1]):
-            r = Li[q]
-            for a in range(3):
-                x[i, a] -= Lx[q, 0, a] * x[r, 0] + Lx[q, 1, a] * x[r, 1] + Lx[q, 2, a] * x[r, 2]
-        c = perm[i]
-        for a in range(3):
-            out[c, a] = x[i, a]
-
-
 @njit(cache=True)
 def _inverse_spd(A, nb, out, L):
     """out = A^-1 of a symmetric nb x nb block by its Cholesky factor (L (nb, nb) scratch);
@@ -295,136 +190,173 @@ def _inverse_spd(A, nb, out, L):
     return True
 
 
-#: the block size of the full preconditioner (positions and the two materials)
-_NB5 = 5
+@njit(cache=True, inline="always")
+def _reach(i, k, etree, marker, elim, y_idx, nnz_y):
+    """Append to y_idx[nnz_y:] the rows of row k's pattern reached from i up the elimination tree
+    (unmarked rows below k, marked on the way), in topological order (QDLDL's ``QDLDL_factor``);
+    returns the new count."""
+    marker[i] = True
+    elim[0] = i
+    ne = 1
+    j = etree[i]
+    while j != -1 and j < k:
+        if marker[j]:
+            break
+        marker[j] = True
+        elim[ne] = j
+        ne += 1
+        j = etree[j]
+    while ne:
+        ne -= 1
+        y_idx[nnz_y] = elim[ne]
+        nnz_y += 1
+    return nnz_y
 
 
-@njit(cache=True, fastmath=True)
-def ldl_numeric5(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
-                  y, D):
-    """``ldl_numeric`` for 5 x 5 blocks (the ``"full"`` preconditioner): the same up-looking
-    block LDL^T, the block products as loops of a fixed length (the compiler unrolls them),
-    the pivots inverted by their Cholesky factors. Returns False if a pivot block is not
-    positive definite."""
-    nb = _NB5
-    T = np.empty((nb, nb))
-    Lc = np.empty((nb, nb))
-    Lp[0] = 0
-    for i in range(n):
-        marker[i] = False
-        for a in range(nb):
-            for b in range(nb):
-                y[i, a, b] = 0.0
-        Lp[i + 1] = Lp[i] + Lnz[i]
-        next_space[i] = Lp[i]
-    for k in range(n):
-        nnz_y = 0
-        for a in range(nb):
-            for b in range(nb):
-                D[a, b] = 0.0
-        for p in range(Ap[k], Ap[k + 1]):
-            i = Ai[p]
-            if i == k:
+def _block_ldl(nb):
+    """The factorisation and solve kernels of a block LDL^T with nb x nb blocks (``ldl_numeric``,
+    ``ldl_solve``), compiled for that nb: nb is a constant of the closure, so every block loop
+    has a fixed trip count that LLVM unrolls, and the numba cache keys each size apart (the
+    closure's contents are part of its index key)."""
+    nb2 = nb * nb
+
+    @njit(cache=True, fastmath=True)
+    def ldl_numeric(n, Ap, Ai, Ax, Lp, Li, Lx, Dinv, etree, Lnz, marker, y_idx, elim, next_space,
+                    y, D):
+        """Block LDL^T factorisation A = L D L^T of a symmetric positive definite matrix of
+        nb x nb blocks: QDLDL's up-looking ``QDLDL_factor`` with every scalar a block (for each
+        row k of L, its pattern from the elimination tree, then a sparse triangular solve:
+        y_j -= L_ji y_i, L_ki = y_i^T D_i^-1, D_k -= L_ki y_i). A: upper triangle, CSC of blocks
+        (Ap, Ai, Ax (nnz, nb, nb), Ax[p] the block (Ai[p], column)); out: Lp (n+1,), Li, Lx
+        (nnz_L, nb, nb) the strictly lower blocks by column, Dinv (n, nb, nb) the inverses of
+        the diagonal blocks of D (3 x 3: in closed form, ``_inverse3``; larger: by their
+        Cholesky factors, ``_inverse_spd``). etree, Lnz from ``ldl_symbolic``; marker (n,) bool,
+        y_idx, elim, next_space (n,) int64, y (n, nb, nb), D (nb, nb) scratch; Lx and y
+        C-contiguous (their blocks are read as tuples, ``_flat_tuple``). Returns False if a
+        pivot block is not positive definite."""
+        T = np.empty((nb, nb))
+        Lc = np.empty((nb, nb))
+        Lp[0] = 0
+        for i in range(n):
+            marker[i] = False
+            for a in range(nb):
+                for b in range(nb):
+                    y[i, a, b] = 0.0
+            Lp[i + 1] = Lp[i] + Lnz[i]
+            next_space[i] = Lp[i]
+        for k in range(n):
+            nnz_y = 0
+            for a in range(nb):
+                for b in range(nb):
+                    D[a, b] = 0.0
+            for p in range(Ap[k], Ap[k + 1]):
+                i = Ai[p]
+                if i == k:
+                    for a in range(nb):
+                        for b in range(nb):
+                            D[a, b] = Ax[p, a, b]
+                    continue
                 for a in range(nb):
                     for b in range(nb):
-                        D[a, b] = Ax[p, a, b]
-                continue
+                        y[i, a, b] = Ax[p, a, b]
+                if not marker[i]:
+                    nnz_y = _reach(i, k, etree, marker, elim, y_idx, nnz_y)
+            for t in range(nnz_y - 1, -1, -1):
+                ci = y_idx[t]
+                end = next_space[ci]
+                # y_ci as a tuple of locals: kept in registers across the stores to y_r
+                yc = _flat_tuple(y, ci * nb2, nb2)
+                for q in range(Lp[ci], end):
+                    r = Li[q]
+                    # y_r -= L_{r, ci} y_ci
+                    for a in range(nb):
+                        la = _flat_tuple(Lx, (q * nb + a) * nb, nb)
+                        for b in range(nb):
+                            v = la[0] * yc[b]
+                            for c in range(1, nb):
+                                v += la[c] * yc[c * nb + b]
+                            y[r, a, b] -= v
+                Li[end] = k
+                # L_{k, ci} = y_ci^T Dinv_ci ; D_k -= L_{k, ci} y_ci
+                for a in range(nb):
+                    for b in range(nb):
+                        v = yc[a] * Dinv[ci, 0, b]
+                        for c in range(1, nb):
+                            v += yc[c * nb + a] * Dinv[ci, c, b]
+                        Lx[end, a, b] = v
+                for a in range(nb):
+                    la = _flat_tuple(Lx, (end * nb + a) * nb, nb)
+                    for b in range(nb):
+                        v = la[0] * yc[b]
+                        for c in range(1, nb):
+                            v += la[c] * yc[c * nb + b]
+                        D[a, b] -= v
+                next_space[ci] = end + 1
+                for a in range(nb):
+                    for b in range(nb):
+                        y[ci, a, b] = 0.0
+                marker[ci] = False
+            # symmetrise the pivot against round-off before inverting it
+            for a in range(nb):
+                for b in range(a + 1, nb):
+                    D[a, b] = D[b, a] = 0.5 * (D[a, b] + D[b, a])
+            if nb == 3:
+                ok = _inverse3(D, T)
+            else:
+                ok = _inverse_spd(D, nb, T, Lc)
+            if not ok:
+                return False
             for a in range(nb):
                 for b in range(nb):
-                    y[i, a, b] = Ax[p, a, b]
-            if not marker[i]:
-                nnz_y = _reach(i, k, etree, marker, elim, y_idx, nnz_y)
-        for t in range(nnz_y - 1, -1, -1):
-            ci = y_idx[t]
-            end = next_space[ci]
-            # y_ci in locals (written out as in ``ldl_numeric``: kept in registers)
-            y00, y01, y02 = y[ci, 0, 0], y[ci, 0, 1], y[ci, 0, 2]
-            y03, y04 = y[ci, 0, 3], y[ci, 0, 4]
-            y10, y11, y12 = y[ci, 1, 0], y[ci, 1, 1], y[ci, 1, 2]
-            y13, y14 = y[ci, 1, 3], y[ci, 1, 4]
-            y20, y21, y22 = y[ci, 2, 0], y[ci, 2, 1], y[ci, 2, 2]
-            y23, y24 = y[ci, 2, 3], y[ci, 2, 4]
-            y30, y31, y32 = y[ci, 3, 0], y[ci, 3, 1], y[ci, 3, 2]
-            y33, y34 = y[ci, 3, 3], y[ci, 3, 4]
-            y40, y41, y42 = y[ci, 4, 0], y[ci, 4, 1], y[ci, 4, 2]
-            y43, y44 = y[ci, 4, 3], y[ci, 4, 4]
-            for q in range(Lp[ci], end):
+                    Dinv[k, a, b] = T[a, b]
+        return True
+
+    @njit(cache=True, fastmath=True)
+    def ldl_solve(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
+        """out (n, nb) = A^-1 rhs (n, nb) for the factor of ``ldl_numeric``, A in the order perm
+        (perm[i]: the crossing at position i): L z = P rhs, then D^-1 in the same pass, then
+        L^T y = D^-1 z, each row written back to out as it is final; x (n, nb) is scratch,
+        C-contiguous."""
+        for i in range(n):
+            for a in range(nb):
+                x[i, a] = rhs[perm[i], a]
+        for i in range(n):
+            # x_i is final here: L's column i updates the rows below, then D_i^-1 scales x_i
+            # (the forward solve and the diagonal in one pass)
+            xi = _flat_tuple(x, i * nb, nb)
+            for q in range(Lp[i], Lp[i + 1]):
                 r = Li[q]
-                # y_r -= L_{r, ci} y_ci
-                for a in range(5):
-                    l0, l1, l2 = Lx[q, a, 0], Lx[q, a, 1], Lx[q, a, 2]
-                    l3, l4 = Lx[q, a, 3], Lx[q, a, 4]
-                    y[r, a, 0] -= l0 * y00 + l1 * y10 + l2 * y20 + l3 * y30 + l4 * y40
-                    y[r, a, 1] -= l0 * y01 + l1 * y11 + l2 * y21 + l3 * y31 + l4 * y41
-                    y[r, a, 2] -= l0 * y02 + l1 * y12 + l2 * y22 + l3 * y32 + l4 * y42
-                    y[r, a, 3] -= l0 * y03 + l1 * y13 + l2 * y23 + l3 * y33 + l4 * y43
-                    y[r, a, 4] -= l0 * y04 + l1 * y14 + l2 * y24 + l3 * y34 + l4 * y44
-            Li[end] = k
-            # L_{k, ci} = y_ci^T Dinv_ci ; D_k -= L_{k, ci} y_ci
-            for a in range(5):
-                for b in range(5):
-                    Lx[end, a, b] = (y[ci, 0, a] * Dinv[ci, 0, b] + y[ci, 1, a] * Dinv[ci, 1, b]
-                                     + y[ci, 2, a] * Dinv[ci, 2, b] + y[ci, 3, a] * Dinv[ci, 3, b]
-                                     + y[ci, 4, a] * Dinv[ci, 4, b])
-            for a in range(5):
-                l0, l1, l2 = Lx[end, a, 0], Lx[end, a, 1], Lx[end, a, 2]
-                l3, l4 = Lx[end, a, 3], Lx[end, a, 4]
-                D[a, 0] -= l0 * y00 + l1 * y10 + l2 * y20 + l3 * y30 + l4 * y40
-                D[a, 1] -= l0 * y01 + l1 * y11 + l2 * y21 + l3 * y31 + l4 * y41
-                D[a, 2] -= l0 * y02 + l1 * y12 + l2 * y22 + l3 * y32 + l4 * y42
-                D[a, 3] -= l0 * y03 + l1 * y13 + l2 * y23 + l3 * y33 + l4 * y43
-                D[a, 4] -= l0 * y04 + l1 * y14 + l2 * y24 + l3 * y34 + l4 * y44
-            next_space[ci] = end + 1
+                for a in range(nb):
+                    v = Lx[q, a, 0] * xi[0]
+                    for b in range(1, nb):
+                        v += Lx[q, a, b] * xi[b]
+                    x[r, a] -= v
             for a in range(nb):
-                for b in range(nb):
-                    y[ci, a, b] = 0.0
-            marker[ci] = False
-        for a in range(nb):
-            for b in range(a + 1, nb):
-                D[a, b] = D[b, a] = 0.5 * (D[a, b] + D[b, a])
-        if not _inverse_spd(D, nb, T, Lc):
-            return False
-        for a in range(nb):
-            for b in range(nb):
-                Dinv[k, a, b] = T[a, b]
-    return True
+                v = Dinv[i, a, 0] * xi[0]
+                for b in range(1, nb):
+                    v += Dinv[i, a, b] * xi[b]
+                x[i, a] = v
+        for i in range(n - 1, -1, -1):
+            for q in range(Lp[i], Lp[i + 1]):
+                r = Li[q]
+                for a in range(nb):
+                    v = Lx[q, 0, a] * x[r, 0]
+                    for b in range(1, nb):
+                        v += Lx[q, b, a] * x[r, b]
+                    x[i, a] -= v
+            c = perm[i]
+            for a in range(nb):
+                out[c, a] = x[i, a]
+
+    return ldl_numeric, ldl_solve
 
 
-@njit(cache=True, fastmath=True)
-def ldl_solve5(n, Lp, Li, Lx, Dinv, perm, rhs, out, x):
-    """``ldl_solve`` for 5 x 5 blocks: out (n, 5) = A^-1 rhs (n, 5); x (n, 5) scratch."""
-    nb = _NB5
-    tmp = np.empty(nb)
-    for i in range(n):
-        for a in range(nb):
-            x[i, a] = rhs[perm[i], a]
-    for i in range(n):
-        for q in range(Lp[i], Lp[i + 1]):
-            r = Li[q]
-            for a in range(nb):
-                v = 0.0
-                for b in range(nb):
-                    v += Lx[q, a, b] * x[i, b]
-                x[r, a] -= v
-    for i in range(n):
-        for a in range(nb):
-            tmp[a] = x[i, a]
-        for a in range(nb):
-            v = 0.0
-            for b in range(nb):
-                v += Dinv[i, a, b] * tmp[b]
-            x[i, a] = v
-    for i in range(n - 1, -1, -1):
-        for q in range(Lp[i], Lp[i + 1]):
-            r = Li[q]
-            for a in range(nb):
-                v = 0.0
-                for b in range(nb):
-                    v += Lx[q, b, a] * x[r, b]
-                x[i, a] -= v
-    for i in range(n):
-        for a in range(nb):
-            out[perm[i], a] = x[i, a]
+#: the block LDL^T of the block preconditioner (3 x 3 blocks: the crossings' positions)
+ldl_numeric3, ldl_solve3 = _block_ldl(3)
+#: of the full preconditioner (5 x 5 blocks: the positions and the two materials)
+ldl_numeric5, ldl_solve5 = _block_ldl(5)
+#: the kernels by block size
+LDL_KERNELS = {3: (ldl_numeric3, ldl_solve3), 5: (ldl_numeric5, ldl_solve5)}
 
 
 @njit(cache=True)

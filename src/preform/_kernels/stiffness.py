@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .ldl import ldl_solve
+from .ldl import ldl_solve3
 from .relax import _jam_push, cap_moves, tangent_part
 
 
@@ -262,11 +262,11 @@ def block_values(lat, law, prob, seg, tension, reg, plane, active, slots, vals, 
 @njit(cache=True)
 def block_step(m, force, plane, active, low, l_below, cap, Lp, Li, Lx, Dinv, perm, rhs, x,
                lmin, delta):
-    """The block update in one call: delta = K^-1 P force (``tangent_part``, ``ldl_solve``;
+    """The block update in one call: delta = K^-1 P force (``tangent_part``, ``ldl_solve3``;
     rhs, x (m, 3) scratch), scaled down to ``cap`` times each crossing's shortest segment
     (``cap_moves``, lmin (m,) scratch). Returns the scale."""
     tangent_part(m, force, plane, active, rhs)
-    ldl_solve(m, Lp, Li, Lx, Dinv, perm, rhs, delta, x)
+    ldl_solve3(m, Lp, Li, Lx, Dinv, perm, rhs, delta, x)
     return cap_moves(m, low, l_below, cap, lmin, delta)
 
 

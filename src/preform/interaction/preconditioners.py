@@ -105,8 +105,7 @@ class BlockStiffness:
     with ``leaf`` and ``window``, ``RelaxSettings.order_leaf``, ``order_window``: the factor's
     fill grows as log m, 6-7 blocks a column at 288 crossings, 11.5-11.8 at 2900) or of the
     lattice's graph ("metis", ``metis_order``), the symbolic analysis of its block LDL^T once
-    per solve, the factorisation (``ldl_numeric``, ``ldl_numeric5``) and solves (``ldl_solve``,
-    ``ldl_solve5``)."""
+    per solve, the factorisation and solves of its block size (``_kernels.ldl.LDL_KERNELS``)."""
 
     def __init__(self, lat: Lattice, pos, nb=3, order="band", leaf=4, window=0.15):
         m = lat.m
@@ -172,11 +171,11 @@ class BlockStiffness:
     def factor(self):
         """Factorise the current ``vals``; False if a pivot is not positive definite. Each
         call counts in ``factored`` (which factor ``Lx``, ``Dinv`` hold: ``FactorCarry``)."""
-        f = LDL.ldl_numeric if self.nb == 3 else LDL.ldl_numeric5
+        numeric = LDL.LDL_KERNELS[self.nb][0]
         self.factored += 1
-        return f(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
-                 self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
-                 self._y, self._D)
+        return numeric(self.m, self.Ap, self.Ai, self.vals, self.Lp, self.Li, self.Lx, self.Dinv,
+                       self.etree, self.Lnz, self._marker, self._iw[0], self._iw[1], self._iw[2],
+                       self._y, self._D)
 
     def update(self, force, plane, active, low, l_below, cap, lmin, rhs, delta):
         """delta (m, 3) = K^-1 P force, the force's tangent part at the crossings resting on
@@ -196,8 +195,8 @@ class BlockStiffness:
         unknowns (nb 5), their right-hand side is 0 (the material equations hold after every
         sweep)."""
         if self.nb == 3:
-            LDL.ldl_solve(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
-                         self._x)
+            LDL.ldl_solve3(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, rhs, out,
+                           self._x)
             return
         self._rhs[:, :3] = rhs
         LDL.ldl_solve5(self.m, self.Lp, self.Li, self.Lx, self.Dinv, self.perm, self._rhs,

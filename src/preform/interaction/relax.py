@@ -28,7 +28,7 @@ How (one iteration)
      crossings, ``sum_seg (f/l) (I - d d^T)`` (a taut yarn resists a crossing moving across
      it, not along it) plus jamming's ``k d d^T`` and ``block_reg f / l I`` that keeps ``K``
      definite (``block_values``). It is factorised once per solve at the start tensions (block
-     LDL^T, ``ldl_numeric``, in a nested-dissection order of the band of crossings around the
+     LDL^T, ``ldl_numeric3``, in a nested-dissection order of the band of crossings around the
      axis, ``band_dissection``; O(m^1.5) work for the factor, O(m log m) fill, so per
      iteration the solve is nearly linear), and anew, with Anderson's history cleared, where
      the set of jammed segments changed (the jamming stiffness enters or leaves ``K``). A
