@@ -43,49 +43,18 @@ def file_digest(path) -> str:
 
 
 def rotation_to_quaternion(R) -> np.ndarray:
-    """(4,) unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (3, 3) (Shepperd's method:
-    the largest of the four squared components first, stable for every rotation)."""
-    R = np.asarray(R, dtype=float)
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    squares = np.array([1.0 + trace, 1.0 + 2.0 * R[0, 0] - trace, 1.0 + 2.0 * R[1, 1] - trace,
-                        1.0 + 2.0 * R[2, 2] - trace])
-    k = int(np.argmax(squares))
-    big = 0.5 * math.sqrt(squares[k])
-    f = 0.25 / big
-    if k == 0:
-        q = [big, (R[2, 1] - R[1, 2]) * f, (R[0, 2] - R[2, 0]) * f, (R[1, 0] - R[0, 1]) * f]
-    elif k == 1:
-        q = [(R[2, 1] - R[1, 2]) * f, big, (R[0, 1] + R[1, 0]) * f, (R[0, 2] + R[2, 0]) * f]
-    elif k == 2:
-        q = [(R[0, 2] - R[2, 0]) * f, (R[0, 1] + R[1, 0]) * f, big, (R[1, 2] + R[2, 1]) * f]
-    else:
-        q = [(R[1, 0] - R[0, 1]) * f, (R[0, 2] + R[2, 0]) * f, (R[1, 2] + R[2, 1]) * f, big]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
+    """(4,) unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (3, 3) (scipy's
+    ``Rotation``, which stores them scalar last)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.roll(Rotation.from_matrix(R).as_quat(canonical=True), 1)
 
 
 def quaternion_to_rotation(q) -> np.ndarray:
     """(3, 3) rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    from scipy.spatial.transform import Rotation
 
-
-def slerp(q0, q1, u: float) -> np.ndarray:
-    """The unit quaternion a fraction ``u`` in [0, 1] of the way from ``q0`` to ``q1`` along the
-    shorter great arc (``q1`` taken with the sign nearer ``q0``: the same rotation)."""
-    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
-    dot = float(q0 @ q1)
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 1.0 - 1e-12:        # (nearly) the same rotation: the chord is the arc
-        q = q0 + u * (q1 - q0)
-        return q / np.linalg.norm(q)
-    angle = math.acos(min(dot, 1.0))
-    s = math.sin(angle)
-    return (math.sin((1.0 - u) * angle) / s) * q0 + (math.sin(u * angle) / s) * q1
+    return Rotation.from_quat(np.roll(np.asarray(q, dtype=float), -1)).as_matrix()
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,6 +207,7 @@ class PathInterpolant:
 
     def __init__(self, trajectory: Trajectory):
         from scipy.interpolate import PchipInterpolator
+        from scipy.spatial.transform import Rotation, Slerp
 
         self.trajectory = trajectory
         self.time = trajectory.time - trajectory.time[0]
@@ -247,16 +217,8 @@ class PathInterpolant:
         angular = PchipInterpolator(self.time, trajectory.angular)
         self._angular = angular
         self._turn = angular.antiderivative()
-        q = trajectory.quaternion.copy()
-        for k in range(1, len(q)):      # consecutive rows on the same side: the shorter arcs
-            if q[k] @ q[k - 1] < 0.0:
-                q[k] = -q[k]
-        self._q = q
-
-    def quaternion(self, t: float) -> np.ndarray:
-        k = int(np.clip(np.searchsorted(self.time, t, side="right") - 1, 0, len(self.time) - 2))
-        u = (t - self.time[k]) / (self.time[k + 1] - self.time[k])
-        return slerp(self._q[k], self._q[k + 1], float(np.clip(u, 0.0, 1.0)))
+        # SLERP between consecutive rows, each arc the shorter one (scipy's ``Slerp``)
+        self._slerp = Slerp(self.time, Rotation.from_quat(np.roll(trajectory.quaternion, -1, axis=1)))
 
     def pose(self, t: float):
         k = int(np.searchsorted(self.time, t))
@@ -264,7 +226,7 @@ class PathInterpolant:
             origin = self.trajectory.position[k].copy()
         else:
             origin = np.asarray(self._position(t), dtype=float)
-        return quaternion_to_rotation(self.quaternion(t)), origin
+        return self._slerp(float(np.clip(t, 0.0, self.end))).as_matrix(), origin
 
     def speeds(self, t: float) -> tuple[float, float]:
         return float(self._take_up(t)), float(self._angular(t))

@@ -16,8 +16,8 @@ import tomli_w
 from preform.config import dump_config, load_config
 from preform.errors import ConfigError
 from preform.stepping import setting_at
-from preform.trajectory import (COLUMNS, PathInterpolant, quaternion_to_rotation, read_trajectory,
-                                rotation_to_quaternion, slerp)
+from preform.trajectory import (COLUMNS, PathInterpolant, Trajectory, quaternion_to_rotation,
+                                read_trajectory, rotation_to_quaternion)
 
 BASE = {
     "mandrel": {"stl": "m.stl"},
@@ -217,16 +217,21 @@ def test_quaternions_round_trip_and_agree_with_scipy():
         np.testing.assert_allclose(quaternion_to_rotation(q), R, atol=1e-14)
 
 
-def test_slerp_agrees_with_scipy():
-    from scipy.spatial.transform import Rotation, Slerp
-
-    rng = np.random.default_rng(4)
-    ends = Rotation.random(2, random_state=rng)
-    u = np.linspace(0.0, 1.0, 7)
-    expected = Slerp([0.0, 1.0], ends)(u).as_matrix()
-    q0, q1 = (rotation_to_quaternion(m) for m in ends.as_matrix())
-    for k, uk in enumerate(u):
-        np.testing.assert_allclose(quaternion_to_rotation(slerp(q0, q1, uk)), expected[k], atol=1e-13)
+def test_the_orientation_turns_at_a_constant_rate_along_the_shorter_arc():
+    """Two rows 2 s apart, the second turned 120 deg about z and given with the sign that makes
+    the long way round (w < 0): in between the pose is the rotation about z by 120 deg x the
+    fraction of the time (SLERP on the shorter arc, closed form)."""
+    half = np.radians(60.0)
+    q = np.array([[1.0, 0.0, 0.0, 0.0], [-np.cos(half), 0.0, 0.0, -np.sin(half)]])
+    zeros = np.zeros(2)
+    path = PathInterpolant(Trajectory(path=Path("p.csv"), time=np.array([1.0, 3.0]), braided=zeros,
+                                      take_up=np.ones(2), angular=np.ones(2),
+                                      position=np.zeros((2, 3)), quaternion=q))
+    for u in (0.0, 0.25, 0.5, 1.0):
+        R, _ = path.pose(2.0 * u)
+        a = np.radians(120.0) * u
+        expected = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1]])
+        np.testing.assert_allclose(R, expected, atol=1e-13)
 
 
 def test_the_interpolant_passes_through_the_rows_and_integrates_the_turn(tmp_path):
