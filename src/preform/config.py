@@ -793,17 +793,23 @@ RESERVED_TYPE_NAMES = ("warp", "weft", "axial")
 TYPE_NAME_CHARS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_"
 
 
+def _array_of_tables(raw, name: str, once: str, each: str = "", non_empty: bool = False) -> None:
+    """A ``[[name]]`` array of tables as TOML reads it (a list of dicts; ``non_empty``: at least
+    one), else an error naming what was written instead: "[name]" (one bracket) or a value."""
+    if isinstance(raw, dict):
+        raise ConfigError(f"[{name}] must be an array of tables: write [[{name}]] (two brackets) "
+                          f"once per {once}")
+    if not isinstance(raw, list) or (non_empty and not raw) or not all(isinstance(t, dict) for t in raw):
+        raise ConfigError(f"{name} = {_fmt(raw)}: expected [[{name}]] tables{each}")
+
+
 def _yarn_types(raw, data: dict) -> tuple[YarnTypeConfig, ...]:
     """``[[yarn_type]]`` tables -> YarnTypeConfigs: each is [yarn] with its keys laid over it,
     read by the [yarn] reader, so a bad value names its type (``[[yarn_type]] "polyester"
     width = ...``)."""
     if raw is None:
         return ()
-    if isinstance(raw, dict):
-        raise ConfigError("[yarn_type] must be an array of tables: write [[yarn_type]] (two "
-                          "brackets) once per named yarn")
-    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
-        raise ConfigError(f"yarn_type = {_fmt(raw)}: expected [[yarn_type]] tables, one per named yarn")
+    _array_of_tables(raw, "yarn_type", "named yarn", ", one per named yarn")
     types, seen = [], {BASE_TYPE: "[yarn]"}
     for k, table in enumerate(raw, start=1):
         prefix = f"[[yarn_type]] {k} "
@@ -850,11 +856,7 @@ def _friction_pairs(raw, names) -> tuple[FrictionPair, ...]:
     ``friction``; a pair listed twice (in either order) is an error."""
     if raw is None:
         return ()
-    if isinstance(raw, dict):
-        raise ConfigError("[friction_pair] must be an array of tables: write [[friction_pair]] "
-                          "(two brackets) once per pair of yarn types")
-    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
-        raise ConfigError(f"friction_pair = {_fmt(raw)}: expected [[friction_pair]] tables")
+    _array_of_tables(raw, "friction_pair", "pair of yarn types")
     known = ", ".join(f'"{n}"' for n in names)
     pairs, seen = [], {}
     for k, table in enumerate(raw, start=1):
@@ -1018,11 +1020,8 @@ def _layers(raw, data: dict, config: Config) -> tuple[LayerConfig, ...]:
     """``[[layer]]`` tables -> LayerConfigs: each layer's sections are the top-level ones with the
     layer's keys laid over them (a layer's ``guide_ring`` replaces the top-level one), read by
     the same readers, so a bad value names its layer (``[[layer]] 2 [yarn] thickness = ...``)."""
-    if isinstance(raw, dict):
-        raise ConfigError("[layer] must be an array of tables: write [[layer]] (two brackets) once "
-                          "per braided layer, from the mandrel outwards")
-    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
-        raise ConfigError(f"layer = {_fmt(raw)}: expected [[layer]] tables, one per braided layer")
+    _array_of_tables(raw, "layer", "braided layer, from the mandrel outwards",
+                     ", one per braided layer", non_empty=True)
     layers = [_layer(k, table, data) for k, table in enumerate(raw, start=1)]
     whole = dataclasses.replace(config, layers=tuple(layers))
     if config.yarn_types or config.friction_pairs or any(
