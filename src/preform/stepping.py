@@ -51,17 +51,15 @@ class Clock:
 
 
 def take_up_speed(table, braided_length):
-    """Take-up speed (m/s) from the config table ((length, speed), ...) at a braided length."""
-    table = np.asarray(table, dtype=float)
-    if len(table) == 1:
-        return float(table[0, 1])
-    return float(np.interp(braided_length, table[:, 0], table[:, 1]))
+    """Take-up speed (m/s) from the config table ((length, speed), ...) at a braided length
+    (:func:`setting_at`)."""
+    return float(setting_at(table, braided_length)[0])
 
 
 def setting_at(table, braided_length) -> np.ndarray:
     """A setting's values (the table's columns after the first) at a braided length, from a
     table ((length, value, ...), ...) over the braided length: linear between rows, the end rows'
-    values beyond them (as :func:`take_up_speed`)."""
+    values beyond them."""
     table = np.asarray(table, dtype=float)
     if len(table) == 1:
         return table[0, 1:].copy()
