@@ -18,7 +18,7 @@ import numpy as np
 
 from . import analytic
 from .errors import ConfigError, MandrelError
-from .stepping import end_message, end_passed
+from .stepping import end_message, end_passed, setting_at
 from .tolerances import tol
 
 #: a mandrel that does not fit the spool circle and whose bounding-box diagonal exceeds this many
@@ -326,9 +326,7 @@ def _over_run(table, end: float) -> tuple[np.ndarray, np.ndarray]:
     on [0, end]: its rows inside, and both ends (linear between rows, constant beyond)."""
     table = np.asarray(table, dtype=float)
     L = np.unique(np.concatenate([[0.0, end], table[(table[:, 0] > 0.0) & (table[:, 0] < end), 0]]))
-    if len(table) == 1:
-        return L, np.repeat(table[:, 1:], len(L), axis=0)
-    return L, np.column_stack([np.interp(L, table[:, 0], table[:, j]) for j in range(1, table.shape[1])])
+    return L, np.array([setting_at(table, length) for length in L])
 
 
 def _range_line(name, unit, L, values, scale, digits=3):
